@@ -1,0 +1,257 @@
+"""The ``workbench`` command.
+
+One entry point with subcommands (DESIGN.md 4.2). Every subcommand accepts ``--json`` to print
+one JSON object on stdout instead of human text, and writes files only under ``--out``.
+Problems the user can fix are reported as one sentence on stderr with exit status 2; an
+unexpected internal failure prints one sentence too (exit 3) and shows the traceback only when
+``WORKBENCH_DEBUG=1`` is set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from workbench.errors import WorkbenchError
+
+__all__ = ["build_parser", "main"]
+
+EXIT_USER_ERROR = 2
+EXIT_INTERNAL_ERROR = 3
+
+
+# ---------------------------------------------------------------------------------------------
+# shared options
+# ---------------------------------------------------------------------------------------------
+def _output_options() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    return p
+
+
+def _record_options() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(add_help=False)
+    g = p.add_argument_group("record")
+    g.add_argument("--mass", type=float, metavar="KG", help="body mass [kg] (overrides sidecar)")
+    g.add_argument("--pacing", type=float, metavar="HZ", help="stated pacing frequency [Hz]")
+    g.add_argument("--subject", help="subject identifier")
+    g.add_argument(
+        "--format",
+        dest="fmt",
+        choices=["csv", "mot", "insole", "c3d"],
+        help="file format (detected from the file when omitted)",
+    )
+    g.add_argument(
+        "--force-unit",
+        choices=["N", "kN", "kgf"],
+        default="N",
+        help="unit of the force columns in the file; converted to N on loading (default N)",
+    )
+    g.add_argument(
+        "--resample",
+        action="store_true",
+        help="interpolate irregularly sampled records onto a uniform grid at the median rate",
+    )
+    g.add_argument(
+        "--rescale-to-mass",
+        action="store_true",
+        help="scale the GRF so its mean over whole steps equals M g (assumes a sensor gain error)",
+    )
+    g.add_argument(
+        "--highpass-hz",
+        type=float,
+        default=0.15,
+        metavar="F",
+        help="high-pass cut-off for the COM response [Hz]; 0 switches it off (default 0.15)",
+    )
+    return p
+
+
+def _load(args: argparse.Namespace) -> Any:
+    from workbench.records.io import load_record
+
+    return load_record(
+        args.record,
+        fmt=args.fmt,
+        mass_kg=args.mass,
+        pacing_hz=args.pacing,
+        subject=args.subject,
+        resample=args.resample,
+        force_unit=args.force_unit,
+    )
+
+
+def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
+    if getattr(args, "json", False):
+        print(json.dumps(obj, indent=2, default=_json_default))
+    else:
+        print(text)
+
+
+def _json_default(obj: Any) -> Any:
+    import numpy as np
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+# ---------------------------------------------------------------------------------------------
+# inspect
+# ---------------------------------------------------------------------------------------------
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from workbench.records.inspection import inspect_record
+
+    record = _load(args)
+    insp = inspect_record(record, highpass_hz=args.highpass_hz, rescale=args.rescale_to_mass)
+    result = insp.to_json()
+    if args.out:
+        from workbench.reporting.document import Report
+        from workbench.reporting.inspection_report import (
+            inspection_section,
+            inspection_summary_table,
+        )
+
+        report = Report(f"Inspection of {insp.record.name}")
+        summary = report.add(_section("Summary"))
+        summary.table(inspection_summary_table([(insp.record.name, insp)]))
+        report.add(inspection_section(insp, args.out, _safe_key(insp.record.name)))
+        result["report"] = str(report.write(args.out))
+    _emit(args, result, _inspect_text(result))
+    return 0
+
+
+def _section(title: str) -> Any:
+    from workbench.reporting.document import Section
+
+    return Section(title)
+
+
+def _safe_key(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name) or "record"
+
+
+def _inspect_text(r: dict[str, Any]) -> str:
+    p = r["pacing"]
+    lines = [
+        f"record          {r['source']} ({r['format']})",
+        f"duration        {r['duration_s']:.2f} s at {r['sample_rate_hz']:.4g} Hz",
+        f"body mass       {r['mass_kg']:.1f} kg",
+        f"pacing          {r['pacing_hz']:.3f} Hz from footfalls "
+        f"(spectral {p['spectral_hz']}, per-step p10-p90 {p['instantaneous_p10_hz']}-"
+        f"{p['instantaneous_p90_hz']} Hz{', varies' if p['varies'] else ''})",
+        f"steps           {r['steps']} whole steps",
+        f"mean GRF        {r['mean_grf_n']:.1f} N over whole steps",
+        f"static balance  {r['static_balance']:.3f} (mean GRF / M g)",
+    ]
+    if r.get("grf_scale_factor"):
+        lines.append(f"GRF rescaled    x {r['grf_scale_factor']:.4f}")
+    for w in r["warnings"]:
+        lines.append(f"warning: {w}")
+    if r.get("report"):
+        lines.append(f"report          {r['report']}")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# demo
+# ---------------------------------------------------------------------------------------------
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from workbench.demo import run_demo
+
+    summary = run_demo(out_dir=args.out, seed=args.seed, progress=not args.json)
+    text = summary["text"]
+    _emit(args, {k: v for k, v in summary.items() if k != "text"}, text)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# parser and entry point
+# ---------------------------------------------------------------------------------------------
+Handler = Callable[[argparse.Namespace], int]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser of the ``workbench`` command."""
+    parser = argparse.ArgumentParser(
+        prog="workbench",
+        description="Identify, criticise and simulate spring-mass-damper pedestrian models "
+        "from vertical ground reaction force records.",
+    )
+    from workbench import __version__
+
+    parser.add_argument("--version", action="version", version=f"workbench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    out_opts, rec_opts = _output_options(), _record_options()
+
+    p = sub.add_parser(
+        "inspect",
+        parents=[out_opts, rec_opts],
+        help="validate a record, count steps, estimate pacing, check static balance",
+        description="Validate a GRF record, preprocess it, split it into steps and report "
+        "duration, sample rate, pacing, steps, mean GRF and static balance.",
+    )
+    p.add_argument("record", help="CSV (+ JSON sidecar), OpenSim .mot, PhysioNet insole text, C3D")
+    p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report with figures")
+    p.set_defaults(handler=_cmd_inspect)
+
+    from workbench.simulate_cli import add_simulate_parser
+
+    add_simulate_parser(sub, out_opts)
+
+    p = sub.add_parser(
+        "demo",
+        parents=[out_opts],
+        help="run the main job on the embedded records and write a report",
+        description="Run the workbench end to end on the embedded real and synthetic records "
+        "and write an HTML and Markdown report.",
+    )
+    p.add_argument("--out", metavar="DIR", default="reports/demo", help="report folder")
+    p.add_argument("--seed", type=int, default=20261122, help="seed for everything random")
+    p.set_defaults(handler=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``workbench`` command and return its exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except WorkbenchError as err:
+        _report_error(args, str(err))
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("workbench: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # the user must never see a bare traceback
+        if os.environ.get("WORKBENCH_DEBUG"):
+            traceback.print_exc()
+        _report_error(
+            args,
+            f"internal error ({type(err).__name__}: {err}); this is a bug in the workbench, "
+            "please report it with the command you ran (set WORKBENCH_DEBUG=1 to see the "
+            "traceback).",
+        )
+        return EXIT_INTERNAL_ERROR
+
+
+def _report_error(args: argparse.Namespace, message: str) -> None:
+    print(f"workbench: error: {message}", file=sys.stderr)
+    if getattr(args, "json", False):
+        print(json.dumps({"error": message}))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

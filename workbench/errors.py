@@ -1,0 +1,44 @@
+"""Errors the workbench reports to its users.
+
+Every problem a user can cause (a bad file, a wrong flag, a record that cannot hold steps)
+is raised as a :class:`WorkbenchError` whose message is one plain sentence naming the file,
+the place in it and the fix. The command line prints that sentence and exits non-zero; it
+never shows a traceback for these.
+"""
+
+from __future__ import annotations
+
+from os import PathLike
+
+
+class WorkbenchError(Exception):
+    """A problem the user can fix; ``str(err)`` is the one sentence to show them."""
+
+    exit_code: int = 2
+
+
+class InputError(WorkbenchError):
+    """Bad input data: a file, a column, a row or a value that the workbench cannot use.
+
+    Parameters
+    ----------
+    source : str or path-like
+        The file (or other origin, for example ``"--mass"``) the problem is in.
+    where : str
+        The place inside it: ``"column 'grf'"``, ``"row 17"``, ``"whole file"``.
+    problem : str
+        What is wrong, in plain words, without a trailing full stop.
+    fix : str
+        What the user should do about it, without a trailing full stop.
+    """
+
+    def __init__(self, source: str | PathLike[str], where: str, problem: str, fix: str):
+        self.source = str(source)
+        self.where = where
+        self.problem = problem
+        self.fix = fix
+        super().__init__(f"{self.source}, {where}: {problem}; {fix}.")
+
+
+class UsageError(WorkbenchError):
+    """A command-line or API argument that does not make sense (not tied to a data file)."""

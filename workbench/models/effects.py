@@ -1,0 +1,674 @@
+"""Effects: extra physical terms in the SMD force balance, and how to write your own.
+
+The base model is ``M u'' + C u' + K u = F_bio``. An *effect* adds one term to the left-hand
+side::
+
+    M u'' + C u' + K u + sum_e effect_e(u, u', t; theta_e) = F_bio
+
+so a positive term pushes the body down (like the spring). Each effect is a small class with
+
+``name``
+    A snake_case string; it is a contract (command line ``--effects NAME``, JSON reports).
+``parameters``
+    A tuple of :class:`Parameter` (name with unit suffix, unit, default, description).
+``regressors(u, v, t_s, context)``
+    For effects *linear in their parameters*: an array of shape ``shape + (n_params,)``
+    whose product with the parameter vector is the term (``regressors @ theta``). Linear
+    effects let the identification treat their parameters like ``C`` and ``K``.
+``force(u, v, t_s, theta, context)``
+    The term itself. The default is ``regressors @ theta``; a nonlinear effect sets
+    ``linear = False`` and overrides ``force`` instead.
+
+``u``, ``v`` and ``t_s`` broadcast together (one time and many particles, or one particle
+and many times); ``theta`` may carry leading axes too (one parameter vector per particle).
+``context`` is an :class:`EffectContext` with what an effect may need beyond the state:
+body mass, pacing, the model's ``K`` and ``C``, step starts (for step phase and odd/even
+steps) and measured ground motion.
+
+Effect instances hold parameter values (the truth when simulating, a start or an estimate
+when identifying): ``CubicStiffness(k3_n_per_m3=2e5)``; omitted values take the default.
+Effects combine with ``+`` into an ordered, immutable :class:`Effects`, and an
+:class:`~workbench.models.smd.SMDModel` takes them the same way::
+
+    model = SMDModel(mass_kg=70) + CubicStiffness() + MyEffect(gain=0.1)
+
+Writing a new effect
+--------------------
+A user-written effect is a few lines; registering it makes it available by name
+everywhere (``effect_from_name``, the command line)::
+
+    import numpy as np
+    from workbench.models.effects import Effect, Parameter, register_effect
+
+    @register_effect
+    class ExtraDamping(Effect):
+        '''Viscous damping added to the model's C: term ``c_extra u'``.'''
+
+        name = "extra_damping"
+        parameters = (Parameter("c_extra_ns_per_m", "N s/m", 0.0, "added damping"),)
+
+        def regressors(self, u, v, t_s, context):
+            u, v, t_s = self.broadcast(u, v, t_s)
+            return v[..., None]
+
+A nonlinear one overrides ``force`` and declares ``linear = False``::
+
+    @register_effect
+    class SoftContact(Effect):
+        name = "soft_contact"
+        linear = False
+        parameters = (
+            Parameter("k_contact_n_per_m", "N/m", 0.0, "contact stiffness"),
+            Parameter("gap_m", "m", 0.01, "free travel before contact"),
+        )
+
+        def force(self, u, v, t_s, theta=None, context=None):
+            u, v, t_s = self.broadcast(u, v, t_s)
+            k, gap = self.split_theta(theta)
+            return k * np.maximum(-u - gap, 0.0)
+
+The effects planned for the catalogue fit the same mould: ``gait_asymmetry`` (half-harmonic
+force terms, regressors ``cos(i phi / 2)`` from ``context.step_phase_rad(t)``),
+``quadratic_damping`` (regressor ``|v| v``), ``stiffness_drift`` (regressor ``t u``),
+``heel_impact`` (regressors localised after ``context.step_start_s``), ``pacing_drift``
+(nonlinear, ``force`` overridden) and ``base_motion`` (``-(K u_g + C v_g)`` from
+``context.ground_at(t)`` and ``context.stiffness_n_per_m``).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from workbench.errors import UsageError
+from workbench.models.force import step_index, step_phase_rad
+
+__all__ = [
+    "CubicStiffness",
+    "Effect",
+    "EffectContext",
+    "Effects",
+    "Parameter",
+    "available_effects",
+    "effect_class",
+    "effect_from_name",
+    "register_effect",
+    "unregister_effect",
+]
+
+FloatArray = NDArray[np.float64]
+_SNAKE = re.compile(r"^[a-z][a-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter of an effect.
+
+    Parameters
+    ----------
+    name : str
+        Identifier in the field's words with a unit suffix, e.g. ``"k3_n_per_m3"``.
+    unit : str
+        Unit in plain text, e.g. ``"N/m^3"``.
+    default : float
+        Value used when the effect is created without one (usually "effect absent").
+    description : str
+        One line saying what it is.
+    typical : float, optional
+        A clearly visible but realistic value, for simulations and demonstrations
+        (``Effect.typical()``, the command line's ``simulate --effect NAME``); None means
+        use ``default``.
+    """
+
+    name: str
+    unit: str
+    default: float = 0.0
+    description: str = ""
+    typical: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class EffectContext:
+    """What an effect may need besides the state ``(u, u', t)``.
+
+    All fields are optional; an effect that needs a missing one raises a ``UsageError``
+    saying which. :meth:`SMDModel.acceleration <workbench.models.smd.SMDModel.acceleration>`
+    fills ``mass_kg``, ``stiffness_n_per_m`` and ``damping_ns_per_m`` from the model.
+
+    Parameters
+    ----------
+    mass_kg : float, optional
+        Body mass [kg].
+    pacing_hz : float, optional
+        Pacing (step) frequency [Hz].
+    stiffness_n_per_m, damping_ns_per_m : float or ndarray, optional
+        The model's K [N/m] and C [N s/m] (arrays when evaluated per particle).
+    step_start_s : ndarray, optional
+        Step start (footfall) times [s], strictly increasing.
+    ground_time_s, ground_disp_m, ground_vel_m_s, ground_acc_m_s2 : ndarray, optional
+        Measured or prescribed motion of the walking surface on a time grid.
+    ground_motion : callable, optional
+        ``t_s -> (disp_m, vel_m_s, acc_m_s2)``; when given, :meth:`ground_at` uses it instead
+        of interpolating the arrays (the simulator passes its exact ground motion).
+    extra : mapping, optional
+        Anything else a user-written effect needs.
+    """
+
+    mass_kg: float | None = None
+    pacing_hz: float | None = None
+    stiffness_n_per_m: float | FloatArray | None = None
+    damping_ns_per_m: float | FloatArray | None = None
+    step_start_s: FloatArray | None = None
+    ground_time_s: FloatArray | None = None
+    ground_disp_m: FloatArray | None = None
+    ground_vel_m_s: FloatArray | None = None
+    ground_acc_m_s2: FloatArray | None = None
+    ground_motion: Callable[[ArrayLike], tuple[Any, Any, Any]] | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def _require(self, attribute: str, who: str) -> Any:
+        value = getattr(self, attribute)
+        if value is None:
+            raise UsageError(
+                f"{who}: the effect context has no '{attribute}'; pass an EffectContext "
+                f"with '{attribute}' set"
+            )
+        return value
+
+    def step_index(self, t_s: ArrayLike) -> NDArray[np.int64]:
+        """Return the index of the step containing each time (see ``force.step_index``)."""
+        return step_index(t_s, self._require("step_start_s", "EffectContext.step_index"))
+
+    def step_phase_rad(self, t_s: ArrayLike) -> FloatArray:
+        """Return the continuous step phase, ``2 pi`` per step (see ``force.step_phase_rad``)."""
+        return step_phase_rad(t_s, self._require("step_start_s", "EffectContext.step_phase_rad"))
+
+    def ground_at(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Return ground displacement [m], velocity [m/s] and acceleration [m/s^2] at the times.
+
+        Uses ``ground_motion`` when set, otherwise linear interpolation of the arrays
+        (exact at their samples).
+        """
+        if self.ground_motion is not None:
+            d, v, a = self.ground_motion(t_s)
+            return (np.asarray(d, float), np.asarray(v, float), np.asarray(a, float))
+        tg = self._require("ground_time_s", "EffectContext.ground_at")
+        t = np.asarray(t_s, dtype=np.float64)
+        out = []
+        for attribute in ("ground_disp_m", "ground_vel_m_s", "ground_acc_m_s2"):
+            out.append(np.interp(t, tg, self._require(attribute, "EffectContext.ground_at")))
+        return out[0], out[1], out[2]
+
+
+class Effect:
+    """Base class of an effect: one extra term in ``M u'' + C u' + K u + term = F_bio``.
+
+    Subclasses set the class attributes ``name`` and ``parameters`` and implement
+    :meth:`regressors` (linear effects) or :meth:`force` with ``linear = False``. See the
+    module docstring for a worked example.
+
+    Parameters
+    ----------
+    **values : float
+        Parameter values by parameter name; omitted ones take their default.
+    """
+
+    name: ClassVar[str] = ""
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+    linear: ClassVar[bool] = True
+
+    def __init__(self, **values: float) -> None:
+        cls = type(self)
+        _validate_effect_class(cls)
+        known = [p.name for p in cls.parameters]
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise UsageError(
+                f"{cls.__name__}: unknown parameter '{unknown[0]}'; valid parameters are "
+                f"{', '.join(known) if known else '(none)'}"
+            )
+        resolved: dict[str, float] = {}
+        for p in cls.parameters:
+            raw = values.get(p.name, p.default)
+            try:
+                value = float(raw)
+            except (TypeError, ValueError):
+                raise UsageError(
+                    f"{cls.__name__}: parameter '{p.name}' must be a number in {p.unit}, "
+                    f"got {raw!r}; pass a finite number"
+                ) from None
+            if not np.isfinite(value):
+                raise UsageError(
+                    f"{cls.__name__}: parameter '{p.name}' must be finite, got {value!r}; "
+                    "pass a finite number"
+                )
+            resolved[p.name] = value
+        self._values = MappingProxyType(resolved)
+
+    # -- values -------------------------------------------------------------------------
+    @property
+    def values(self) -> Mapping[str, float]:
+        """Parameter values by name (read-only)."""
+        return self._values
+
+    @property
+    def theta(self) -> FloatArray:
+        """Parameter values as a vector, in the order of ``parameters``."""
+        return np.array([self._values[p.name] for p in self.parameters], dtype=np.float64)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of the parameters, in order."""
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def qualified_parameter_names(self) -> tuple[str, ...]:
+        """Parameter names prefixed with the effect name: ``"cubic_stiffness.k3_n_per_m3"``."""
+        return tuple(f"{self.name}.{p.name}" for p in self.parameters)
+
+    @classmethod
+    def typical(cls, **values: float) -> Effect:
+        """Create the effect with each parameter's ``typical`` value (overridable).
+
+        Parameters
+        ----------
+        **values : float
+            Values that replace the typical ones.
+
+        Returns
+        -------
+        Effect
+        """
+        base = {p.name: p.default if p.typical is None else p.typical for p in cls.parameters}
+        return cls(**{**base, **values})
+
+    def with_values(self, **values: float) -> Effect:
+        """Return a new effect of the same kind with some parameter values changed."""
+        merged = {**self._values, **values}
+        return type(self)(**merged)
+
+    # -- helpers for subclasses ---------------------------------------------------------
+    @staticmethod
+    def broadcast(u: ArrayLike, v: ArrayLike, t_s: ArrayLike) -> tuple[FloatArray, ...]:
+        """Broadcast ``u, v, t_s`` to one common float shape."""
+        arrays = np.broadcast_arrays(
+            np.asarray(u, dtype=np.float64),
+            np.asarray(v, dtype=np.float64),
+            np.asarray(t_s, dtype=np.float64),
+        )
+        return tuple(arrays)
+
+    def split_theta(self, theta: ArrayLike | None) -> list[FloatArray]:
+        """Split a parameter vector (``(..., n_params)``) into one array per parameter."""
+        th = self.theta if theta is None else np.asarray(theta, dtype=np.float64)
+        if th.ndim == 0 or th.shape[-1] != len(self.parameters):
+            raise UsageError(
+                f"{type(self).__name__}: 'theta' must have {len(self.parameters)} entries in "
+                f"its last axis ({', '.join(self.parameter_names)}), got shape {th.shape}; "
+                "pass one value per parameter"
+            )
+        return [th[..., i] for i in range(th.shape[-1])]
+
+    # -- physics ------------------------------------------------------------------------
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Columns whose combination with ``theta`` is the term (linear effects only).
+
+        Parameters
+        ----------
+        u : array_like
+            COM displacement [m].
+        v : array_like
+            COM velocity [m/s].
+        t_s : array_like
+            Time [s].
+        context : EffectContext, optional
+            Extra information (pacing, steps, ground motion, ...).
+
+        Returns
+        -------
+        ndarray
+            Shape ``broadcast(u, v, t).shape + (n_params,)``.
+        """
+        raise UsageError(
+            f"{type(self).__name__}: effect '{self.name}' is not linear in its parameters and "
+            "has no regressors; call its force() method instead"
+        )
+
+    def force(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        theta: ArrayLike | None = None,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Return the term this effect adds to the left-hand side of the force balance [N].
+
+        Parameters
+        ----------
+        u, v, t_s, context
+            As in :meth:`regressors`.
+        theta : array_like, optional
+            Parameter vector(s), shape ``(..., n_params)``; default: this instance's values.
+
+        Returns
+        -------
+        ndarray
+            Force [N], broadcast shape of the state and of ``theta``'s leading axes.
+        """
+        regressors = self.regressors(u, v, t_s, context)
+        th = self.theta if theta is None else np.asarray(theta, dtype=np.float64)
+        self.split_theta(th)  # shape check with a clear message
+        return np.sum(regressors * th, axis=-1)
+
+    # -- composition and display ----------------------------------------------------------
+    def __add__(self, other: object) -> Effects:
+        if isinstance(other, Effect | Effects):
+            return Effects([self]) + other
+        return NotImplemented
+
+    def __repr__(self) -> str:
+        changed = [
+            f"{p.name}={self._values[p.name]:.6g}"
+            for p in self.parameters
+            if self._values[p.name] != p.default
+        ]
+        return f"{type(self).__name__}({', '.join(changed)})"
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Effect):
+            return NotImplemented
+        return type(self) is type(other) and dict(self._values) == dict(other._values)
+
+    def __hash__(self) -> int:
+        return hash((type(self), tuple(self._values.items())))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able description: ``{"name": ..., "parameters": {...}}``."""
+        return {"name": self.name, "parameters": dict(self._values)}
+
+
+class Effects:
+    """An ordered, immutable collection of effects with distinct names.
+
+    Parameters
+    ----------
+    effects : iterable of Effect, optional
+        The effects, in order. Two effects with the same ``name`` are a ``UsageError``.
+
+    Examples
+    --------
+    >>> effects = Effects([CubicStiffness(k3_n_per_m3=1e5)])
+    >>> effects.names
+    ('cubic_stiffness',)
+    """
+
+    __slots__ = ("_items",)
+
+    def __init__(self, effects: Iterable[Effect] = ()) -> None:
+        items: list[Effect] = []
+        seen: set[str] = set()
+        for effect in effects:
+            if not isinstance(effect, Effect):
+                raise UsageError(
+                    f"Effects: {effect!r} is not an Effect; pass effect instances such as "
+                    "CubicStiffness() or use effect_from_name(NAME)"
+                )
+            if effect.name in seen:
+                raise UsageError(
+                    f"Effects: effect '{effect.name}' is added twice; add each effect once and "
+                    "set its parameters in that one instance"
+                )
+            seen.add(effect.name)
+            items.append(effect)
+        self._items: tuple[Effect, ...] = tuple(items)
+
+    def __add__(self, other: object) -> Effects:
+        if isinstance(other, Effect):
+            return Effects([*self._items, other])
+        if isinstance(other, Effects):
+            return Effects([*self._items, *other._items])
+        return NotImplemented
+
+    def __iter__(self) -> Iterator[Effect]:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __bool__(self) -> bool:
+        return bool(self._items)
+
+    def __contains__(self, name_or_effect: object) -> bool:
+        if isinstance(name_or_effect, Effect):
+            return name_or_effect in self._items
+        return name_or_effect in self.names
+
+    def __getitem__(self, key: int | str) -> Effect:
+        if isinstance(key, str):
+            for effect in self._items:
+                if effect.name == key:
+                    return effect
+            raise UsageError(
+                f"Effects: no effect named '{key}' in {self!r}; use one of "
+                f"{', '.join(self.names) or '(none)'}"
+            )
+        return self._items[key]
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Effects):
+            return NotImplemented
+        return self._items == other._items
+
+    def __hash__(self) -> int:
+        return hash(self._items)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Effect names, in order."""
+        return tuple(e.name for e in self._items)
+
+    def __repr__(self) -> str:
+        return " + ".join(repr(e) for e in self._items) if self._items else "Effects()"
+
+
+def as_effects(effects: Effect | Effects | Iterable[Effect | str] | None) -> Effects:
+    """Normalise an effect, a collection, names or ``None`` to :class:`Effects`.
+
+    Parameters
+    ----------
+    effects : Effect, Effects, iterable of Effect or str, or None
+        Strings are looked up in the registry with default parameter values.
+
+    Returns
+    -------
+    Effects
+    """
+    if effects is None:
+        return Effects()
+    if isinstance(effects, Effects):
+        return effects
+    if isinstance(effects, Effect):
+        return Effects([effects])
+    if isinstance(effects, str):
+        return Effects([effect_from_name(effects)])
+    return Effects(effect_from_name(e) if isinstance(e, str) else e for e in effects)
+
+
+# -- registry ----------------------------------------------------------------------------
+_REGISTRY: dict[str, type[Effect]] = {}
+
+
+def _validate_effect_class(cls: type[Effect]) -> None:
+    where = f"effect class {cls.__name__}"
+    if not isinstance(cls.name, str) or not _SNAKE.match(cls.name):
+        raise UsageError(
+            f"{where}: class attribute 'name' must be a snake_case string, got {cls.name!r}; "
+            'set for example name = "my_effect"'
+        )
+    params = cls.parameters
+    if not isinstance(params, tuple) or not all(isinstance(p, Parameter) for p in params):
+        raise UsageError(
+            f"{where}: class attribute 'parameters' must be a tuple of Parameter; declare "
+            "parameters = (Parameter(name, unit, default, description), ...)"
+        )
+    names = [p.name for p in params]
+    if len(set(names)) != len(names) or not all(_SNAKE.match(n) for n in names):
+        raise UsageError(
+            f"{where}: parameter names {names} must be distinct snake_case identifiers; rename them"
+        )
+    if cls.linear and cls.regressors is Effect.regressors:
+        raise UsageError(
+            f"{where}: a linear effect must implement regressors(u, v, t_s, context); "
+            "implement it, or set linear = False and override force()"
+        )
+    if not cls.linear and cls.force is Effect.force:
+        raise UsageError(
+            f"{where}: a nonlinear effect (linear = False) must override force(u, v, t_s, "
+            "theta, context); implement it"
+        )
+
+
+def register_effect(cls: type[Effect]) -> type[Effect]:
+    """Class decorator: make an effect available by its ``name``.
+
+    Re-registering the same class (same module and qualified name, e.g. after a reload)
+    replaces the entry; a different class with a taken name is a ``UsageError``.
+
+    Parameters
+    ----------
+    cls : type
+        A subclass of :class:`Effect`.
+
+    Returns
+    -------
+    type
+        ``cls`` itself, so it works as a decorator.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Effect)):
+        raise UsageError(
+            f"register_effect: {cls!r} is not a subclass of Effect; derive your effect from "
+            "workbench.models.effects.Effect"
+        )
+    _validate_effect_class(cls)
+    existing = _REGISTRY.get(cls.name)
+    if existing is not None and (existing.__module__, existing.__qualname__) != (
+        cls.__module__,
+        cls.__qualname__,
+    ):
+        raise UsageError(
+            f"register_effect: effect name '{cls.name}' is already registered by "
+            f"{existing.__module__}.{existing.__qualname__}; choose another name"
+        )
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def unregister_effect(name: str) -> None:
+    """Remove an effect from the registry (for tests and interactive sessions).
+
+    Parameters
+    ----------
+    name : str
+        Registered effect name; unknown names are a ``UsageError``.
+    """
+    effect_class(name)
+    del _REGISTRY[name]
+
+
+def available_effects() -> tuple[str, ...]:
+    """Names of all registered effects, sorted.
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(sorted(_REGISTRY))
+
+
+def effect_class(name: str) -> type[Effect]:
+    """Return the registered class for an effect name.
+
+    Parameters
+    ----------
+    name : str
+        Effect name, e.g. ``"cubic_stiffness"``.
+
+    Returns
+    -------
+    type
+        The :class:`Effect` subclass.
+    """
+    try:
+        return _REGISTRY[name]
+    except (KeyError, TypeError):
+        raise UsageError(
+            f"effect '{name}' is not known; use one of {', '.join(available_effects())} or "
+            "register your own with @register_effect"
+        ) from None
+
+
+def effect_from_name(name: str, **kwargs: float) -> Effect:
+    """Create a registered effect by name.
+
+    Parameters
+    ----------
+    name : str
+        Effect name, e.g. ``"cubic_stiffness"``.
+    **kwargs : float
+        Parameter values.
+
+    Returns
+    -------
+    Effect
+    """
+    return effect_class(name)(**kwargs)
+
+
+# -- catalogue ---------------------------------------------------------------------------
+@register_effect
+class CubicStiffness(Effect):
+    """Hardening (``k3 > 0``) or softening (``k3 < 0``) leg spring: term ``k3 u^3``.
+
+    Parameters
+    ----------
+    k3_n_per_m3 : float, optional
+        Cubic stiffness [N/m^3], default 0 (no effect).
+
+    Notes
+    -----
+    Typical signature: model error that grows with amplitude and correlates with ``u^3``.
+    ``u`` is the COM displacement from the model's reference (the static equilibrium of the
+    linear spring), so ``k3`` is relative to that point.
+    """
+
+    name = "cubic_stiffness"
+    # Typical: k3 u^2 is about 5 % of K = 1e4 N/m at u = 3 cm.
+    parameters = (
+        Parameter(
+            "k3_n_per_m3", "N/m^3", 0.0, "cubic spring coefficient (term k3 u^3)", typical=5e5
+        ),
+    )
+
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Single column ``u^3`` [m^3]."""
+        u_b, _, _ = self.broadcast(u, v, t_s)
+        return (u_b**3)[..., None]

@@ -1,0 +1,178 @@
+"""Inspect a record: validate, preprocess, segment steps, estimate pacing, check static balance.
+
+This is the first thing a user runs on a new record (``workbench inspect``) and the front half
+of every later job. It collects the derived objects in one :class:`Inspection` so that
+reports and identification reuse them instead of recomputing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from workbench.records.preprocess import COMResponse, preprocess
+from workbench.records.record import G_M_S2, Record
+from workbench.records.steps import (
+    PacingEstimate,
+    Steps,
+    estimate_pacing,
+    rescale_to_mass,
+    segment_steps,
+    static_balance,
+    static_balance_warning,
+)
+
+__all__ = ["Inspection", "inspect_record"]
+
+#: Relative disagreement between a stated and an estimated pacing frequency that earns a warning.
+PACING_MISMATCH_TOLERANCE = 0.05
+
+
+@dataclass(frozen=True)
+class Inspection:
+    """Everything ``workbench inspect`` derives from one record.
+
+    Attributes
+    ----------
+    record : Record
+        The record as analysed (after ``--rescale-to-mass`` when that was asked for).
+    com : COMResponse
+        COM acceleration, velocity and displacement after preprocessing.
+    steps : Steps
+        Footfall steps, peak to peak of the COM acceleration.
+    pacing : PacingEstimate
+        Global and instantaneous pacing frequency.
+    static_balance : float
+        Mean GRF over whole steps divided by M g, of the record as analysed.
+    static_balance_raw : float
+        The same ratio before any rescaling (equal to ``static_balance`` without rescaling).
+    warnings : list of str
+        Plain sentences about anything suspicious.
+    """
+
+    record: Record
+    com: COMResponse
+    steps: Steps
+    pacing: PacingEstimate
+    static_balance: float
+    static_balance_raw: float
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def mean_grf_n(self) -> float:
+        """Mean GRF over whole steps [N]."""
+        return self.static_balance * self.record.require_mass() * G_M_S2
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the JSON object of ``workbench inspect --json`` (DESIGN.md 4.2) and details."""
+        rec = self.record
+        inst = np.asarray(self.pacing.instantaneous_hz, dtype=float)
+        return {
+            "source": rec.source,
+            "format": rec.metadata.get("format"),
+            "duration_s": round(rec.duration_s, 4),
+            "sample_rate_hz": round(rec.sample_rate_hz, 4),
+            "mass_kg": rec.mass_kg,
+            "pacing_hz": round(float(self.pacing.pacing_hz), 4),
+            "steps": int(self.steps.n_steps),
+            "mean_grf_n": round(self.mean_grf_n, 2),
+            "static_balance": round(float(self.static_balance), 4),
+            "warnings": list(self.warnings),
+            "pacing": {
+                "method": self.pacing.method,
+                "spectral_hz": _round_or_none(self.pacing.spectral_pacing_hz),
+                "footfall_hz": _round_or_none(self.pacing.footfall_pacing_hz),
+                "varies": bool(self.pacing.varies),
+                "instantaneous_p10_hz": _round_or_none(np.percentile(inst, 10)),
+                "instantaneous_p90_hz": _round_or_none(np.percentile(inst, 90)),
+            },
+            "static_balance_raw": round(float(self.static_balance_raw), 4),
+            "grf_scale_factor": rec.metadata.get("grf_scale_factor"),
+            "highpass_hz": self.com.highpass_hz,
+        }
+
+
+def _round_or_none(value: float | None, digits: int = 4) -> float | None:
+    if value is None or not np.isfinite(value):
+        return None
+    return round(float(value), digits)
+
+
+def inspect_record(
+    record: Record,
+    *,
+    highpass_hz: float = 0.15,
+    rescale: bool = False,
+    balance_tolerance: float = 0.05,
+) -> Inspection:
+    """Preprocess and segment a record and collect warnings about it.
+
+    Parameters
+    ----------
+    record : Record
+        A validated record with its body mass.
+    highpass_hz : float, default 0.15
+        Cut-off of the zero-phase high-pass filter (0 switches it off).
+    rescale : bool, default False
+        Apply :func:`~workbench.records.steps.rescale_to_mass` when the static balance is off
+        (the ``--rescale-to-mass`` flag); the returned record carries the scale factor.
+    balance_tolerance : float, default 0.05
+        Relative deviation of the static balance from 1 that earns a warning.
+
+    Returns
+    -------
+    Inspection
+
+    Raises
+    ------
+    InputError
+        If the record has no mass or holds fewer than three whole steps.
+    """
+    record.require_mass()
+    warnings = [str(w) for w in record.metadata.get("warnings", [])]
+    com = preprocess(record, highpass_hz=highpass_hz)
+    steps = segment_steps(com, pacing_hz=record.pacing_hz)
+    balance_raw = static_balance(record, steps)
+    balance = balance_raw
+    message = static_balance_warning(balance_raw, record.source, tolerance=balance_tolerance)
+    if rescale and message is not None:
+        record = rescale_to_mass(record, steps)
+        com = preprocess(record, highpass_hz=highpass_hz)
+        steps = segment_steps(com, pacing_hz=record.pacing_hz)
+        balance = static_balance(record, steps)
+        warnings.append(
+            f"{record.source}: GRF was rescaled by {1.0 / balance_raw:.4f} so that its mean over "
+            f"whole steps equals M g (static balance was {balance_raw:.3f}); this assumes a pure "
+            "gain error of the sensor and a correct body mass."
+        )
+    elif message is not None:
+        warnings.append(message)
+    pacing = estimate_pacing(com, steps)
+    if record.pacing_hz is not None:
+        rel = abs(pacing.pacing_hz - record.pacing_hz) / record.pacing_hz
+        if rel > PACING_MISMATCH_TOLERANCE:
+            warnings.append(
+                f"{record.source}: the stated pacing {record.pacing_hz:.3f} Hz differs from the "
+                f"{pacing.pacing_hz:.3f} Hz measured from footfalls by {100 * rel:.0f} %; check "
+                "the metadata or drop --pacing to use the measured value."
+            )
+    if pacing.varies:
+        inst = np.asarray(pacing.instantaneous_hz, dtype=float)
+        warnings.append(
+            f"{record.source}: the pacing frequency changes along the record "
+            f"(10th-90th percentile {np.percentile(inst, 10):.2f}-"
+            f"{np.percentile(inst, 90):.2f} Hz); "
+            "a single fixed pacing frequency will not describe the whole record, so identify "
+            "per step or per steady segment."
+        )
+    return Inspection(
+        record=record,
+        com=com,
+        steps=steps,
+        pacing=pacing,
+        static_balance=float(balance),
+        static_balance_raw=float(balance_raw),
+        warnings=warnings,
+    )
