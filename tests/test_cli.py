@@ -81,9 +81,9 @@ def test_inspect_treadmill_contract_and_values(treadmill_json):
     assert r["sample_rate_hz"] == pytest.approx(200.0, rel=1e-6)
     assert r["duration_s"] == pytest.approx(143.05, abs=0.1)
     # Independent count: heel strikes on the two belts (see tests/test_steps.py).
-    from tests.test_steps import TREADMILL_STEPS_BY_EYE
+    from tests.test_steps import TREADMILL_HEEL_STRIKES
 
-    assert abs(r["steps"] - TREADMILL_STEPS_BY_EYE) <= 0.05 * TREADMILL_STEPS_BY_EYE
+    assert abs(r["steps"] - TREADMILL_HEEL_STRIKES) <= 0.05 * TREADMILL_HEEL_STRIKES
     assert 1.3 < r["pacing_hz"] < 2.3
     assert r["static_balance"] == pytest.approx(1.0, abs=0.02)
     # The trial changes speed: the per-step series must show it and a warning must say so.
@@ -96,9 +96,9 @@ def test_inspect_insole_warns_about_static_balance(capsys):
     code, out, err = run_cli(["inspect", embedded_path("insole"), "--mass", "83", "--json"], capsys)
     assert code == 0, err
     r = json.loads(out)
-    from tests.test_steps import INSOLE_STEPS_BY_EYE
+    from tests.test_steps import INSOLE_HEEL_STRIKES
 
-    assert abs(r["steps"] - INSOLE_STEPS_BY_EYE) <= 0.05 * INSOLE_STEPS_BY_EYE
+    assert abs(r["steps"] - INSOLE_HEEL_STRIKES) <= 0.05 * INSOLE_HEEL_STRIKES
     assert r["static_balance"] == pytest.approx(1.33, abs=0.03)
     assert any("rescale-to-mass" in w and "mass" in w for w in r["warnings"])
     assert 0.8 < r["pacing_hz"] < 2.5

@@ -62,15 +62,21 @@ def read_insole_feet(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return table[:, 0], table[:, 17], table[:, 18]
 
 
-def heel_strikes(force_n: np.ndarray, on_n: float = 50.0, off_n: float = 20.0) -> int:
-    """Number of rises through ``on_n`` after the force has been below ``off_n``."""
-    count, loaded = 0, bool(force_n[0] > on_n)
-    for value in force_n:
+def heel_strike_indices(force_n: np.ndarray, on_n: float = 50.0, off_n: float = 20.0) -> list[int]:
+    """Samples where the force rises through ``on_n`` after having been below ``off_n``."""
+    strikes, loaded = [], bool(force_n[0] > on_n)
+    for i, value in enumerate(force_n):
         if not loaded and value > on_n:
-            count, loaded = count + 1, True
+            strikes.append(i)
+            loaded = True
         elif loaded and value < off_n:
             loaded = False
-    return count
+    return strikes
+
+
+def heel_strikes(force_n: np.ndarray, on_n: float = 50.0, off_n: float = 20.0) -> int:
+    """Number of heel strikes (see :func:`heel_strike_indices`)."""
+    return len(heel_strike_indices(force_n, on_n, off_n))
 
 
 def load_embedded(key: str, mass_kg: float) -> Record:
@@ -182,15 +188,7 @@ def test_treadmill_step_count_matches_heel_strikes(treadmill) -> None:
     # Stronger: the footfall peaks pair one-to-one with the heel strikes of either belt,
     # each peak within 0.1 s before to 0.25 s after its heel strike.
     t, left, right = read_treadmill_plates(embedded_path("treadmill"))
-    strikes = []
-    for force in (left, right):
-        loaded = bool(force[0] > 50)
-        for i, value in enumerate(force):
-            if not loaded and value > 50:
-                strikes.append(t[i])
-                loaded = True
-            elif loaded and value < 20:
-                loaded = False
+    strikes = [t[i] for force in (left, right) for i in heel_strike_indices(force)]
     found = steps.footfall_times_s
     matched = sum(np.any((found >= s - 0.1) & (found <= s + 0.25)) for s in strikes)
     assert matched >= 0.97 * len(strikes)
