@@ -186,6 +186,25 @@ def _bad_inputs(tmp: Path):
     t_short, grf_short = walking_grf(duration_s=2.4, pacing=1.0)
     write_csv(tmp / "short.csv", t_short, grf_short)
     cases["too short for three steps"] = ([tmp / "short.csv"], ["step"])
+    rng = np.random.default_rng(0)
+    write_csv(tmp / "standing.csv", t, 70 * G + rng.normal(0, 5.0, t.size))
+    cases["no walking (sensor noise only)"] = ([tmp / "standing.csv"], ["walking"])
+    write_csv(tmp / "slow_sine.csv", t, 70 * G * (1 + 0.3 * np.sin(2 * np.pi * 0.6 * t)))
+    cases["periodic but not walking"] = ([tmp / "slow_sine.csv"], ["0.6", "walking"])
+    write_csv(tmp / "uplift.csv", t, 70 * G * (1 + 1.5 * np.sin(2 * np.pi * 1.8 * t)))
+    cases["force pulls the person down"] = ([tmp / "uplift.csv"], ["push"])
+    off = grf.copy()
+    off[-400:] = 0.0
+    write_csv(tmp / "stepped_off.csv", t, off)
+    cases["stepped off the plate"] = ([tmp / "stepped_off.csv"], ["cut the record"])
+    write_csv(tmp / "fine.csv", t, grf)
+    cases["absurd high-pass"] = ([tmp / "fine.csv", "--highpass-hz", "1e-9"], ["--highpass-hz"])
+    cases["high-pass eating the pacing"] = ([tmp / "fine.csv", "--highpass-hz", "1.5"], ["0.6"])
+    (tmp / "folder.csv").mkdir()
+    cases["a folder, not a file"] = ([tmp / "folder.csv"], ["folder.csv"])
+    write_csv(tmp / "badside.csv", t, grf)
+    (tmp / "badside.json").write_text("{mass_kg: 70")
+    cases["invalid JSON sidecar"] = ([tmp / "badside.csv"], ["badside.json", "line 1"])
     return cases
 
 
@@ -205,6 +224,14 @@ BAD_CASES = [
     "force in kg",
     "force in kN",
     "too short for three steps",
+    "no walking (sensor noise only)",
+    "periodic but not walking",
+    "force pulls the person down",
+    "stepped off the plate",
+    "absurd high-pass",
+    "high-pass eating the pacing",
+    "a folder, not a file",
+    "invalid JSON sidecar",
 ]
 
 
@@ -219,7 +246,8 @@ def test_bad_input_gives_one_sentence_and_exit_2(case, tmp_path, capsys):
     assert len(lines) == 1, err
     message = lines[0]
     assert message.startswith("workbench: error: ")
-    assert Path(argv[0]).name in message
+    if "high-pass" not in case and "sidecar" not in case:
+        assert Path(argv[0]).name in message
     for word in must_mention:
         assert word.lower() in message.lower(), message
     assert "Traceback" not in err
@@ -263,3 +291,57 @@ def test_unknown_format_is_a_usage_error(tmp_path):
     )
     assert proc.returncode == 2
     assert "invalid choice" in proc.stderr
+
+
+def test_argument_errors_honour_json(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["inspect", "x.csv", "--mass", "70kg", "--json"])
+    assert exc.value.code == 2
+    out, _ = capsys.readouterr()
+    assert "70kg" in json.loads(out)["error"]
+
+
+def test_unwritable_output_is_a_user_error(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code = main(["simulate", "--out", str(blocker / "walk.csv")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "--out" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_written_files_have_ordinary_permissions(tmp_path, capsys):
+    assert main(["simulate", "--out", str(tmp_path / "walk.csv")]) == 0
+    capsys.readouterr()
+    for name in ("walk.csv", "walk.json", "walk.truth.json"):
+        assert (tmp_path / name).stat().st_mode & 0o044 == 0o044, name
+
+
+def test_inspect_json_carries_the_instantaneous_pacing_series():
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "workbench",
+            "inspect",
+            str(embedded_path("treadmill")),
+            "--mass",
+            "77.3",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    r = json.loads(out.stdout)
+    t = np.asarray(r["pacing"]["times_s"])
+    f = np.asarray(r["pacing"]["instantaneous_hz"])
+    assert t.size == f.size == r["steps"]
+    # The trial speeds up and slows down: slow start, fast middle, medium end.
+    start, middle, end = (
+        np.median(f[t < 30]),
+        np.median(f[(t > 75) & (t < 100)]),
+        np.median(f[t > 115]),
+    )
+    assert start < 1.45 and middle > 2.05 and 1.45 < end < 1.8

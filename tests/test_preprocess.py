@@ -300,4 +300,13 @@ def test_preprocess_rejects_a_one_sample_record() -> None:
 def test_preprocess_rejects_cutoff_above_nyquist() -> None:
     t = np.arange(200) / 20.0
     with pytest.raises(UsageError, match="Nyquist"):
-        preprocess(Record(t, np.full(t.size, 700.0), mass_kg=70.0), highpass_hz=12.0)
+        highpass(np.full(t.size, 700.0), 20.0, cutoff_hz=12.0)
+
+
+@pytest.mark.parametrize("cutoff_hz", [1e-9, 0.01, 0.7, 5.0])
+def test_preprocess_refuses_cutoffs_that_break_walking(cutoff_hz) -> None:
+    """Tiny cut-offs need absurd padding; large ones eat the walking fundamental."""
+    t = np.arange(2000) / 100.0
+    rec = Record(t, 700.0 + 100.0 * np.sin(2 * np.pi * 1.8 * t), mass_kg=70.0)
+    with pytest.raises(UsageError, match="--highpass-hz"):
+        preprocess(rec, highpass_hz=cutoff_hz)

@@ -16,7 +16,7 @@ import sys
 import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from workbench.errors import WorkbenchError
 
@@ -29,14 +29,14 @@ EXIT_INTERNAL_ERROR = 3
 # ---------------------------------------------------------------------------------------------
 # shared options
 # ---------------------------------------------------------------------------------------------
-def _output_options() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(add_help=False)
+def _output_options() -> _Parser:
+    p = _Parser(add_help=False)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     return p
 
 
-def _record_options() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(add_help=False)
+def _record_options() -> _Parser:
+    p = _Parser(add_help=False)
     g = p.add_argument_group("record")
     g.add_argument("--mass", type=float, metavar="KG", help="body mass [kg] (overrides sidecar)")
     g.add_argument("--pacing", type=float, metavar="HZ", help="stated pacing frequency [Hz]")
@@ -181,9 +181,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 Handler = Callable[[argparse.Namespace], int]
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors honour ``--json`` (one JSON object on stdout)."""
+
+    def error(self, message: str) -> NoReturn:  # argparse's hook for usage errors
+        if "--json" in sys.argv[1:] or "--json" in _CURRENT_ARGV:
+            print(json.dumps({"error": f"{self.prog}: {message}"}))
+        super().error(message)
+
+
+_CURRENT_ARGV: list[str] = []
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser of the ``workbench`` command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="workbench",
         description="Identify, criticise and simulate spring-mass-damper pedestrian models "
         "from vertical ground reaction force records.",
@@ -225,6 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``workbench`` command and return its exit status."""
     parser = build_parser()
+    _CURRENT_ARGV[:] = list(argv) if argv is not None else []
     args = parser.parse_args(argv)
     handler: Handler = args.handler
     try:
@@ -232,6 +245,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WorkbenchError as err:
         _report_error(args, str(err))
         return err.exit_code
+    except OSError as err:
+        target = err.filename or "the output"
+        _report_error(
+            args,
+            f"could not write or read {target} ({err.strerror or err}); choose a folder you "
+            "can write to with --out, or check the path",
+        )
+        return EXIT_USER_ERROR
+    except MemoryError:
+        _report_error(
+            args,
+            "ran out of memory; the record or the requested output is too large for this "
+            "machine, so cut the record or lower the sample rate or duration",
+        )
+        return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("workbench: interrupted", file=sys.stderr)
         return 130

@@ -22,10 +22,24 @@ from workbench.reporting.inspection_report import inspection_section, inspection
 __all__ = ["run_demo"]
 
 
-def _jobs() -> list[tuple[str, str, Path, float | None, str]]:
-    """(key, label, path, mass_kg or None to use the sidecar, attribution) for every record."""
-    jobs = [
-        (key, key, embedded_path(key), item.mass_kg, item.attribution)
+Job = tuple[str, str, Path, float | None, str, str]
+
+
+def _jobs() -> list[Job]:
+    """(key, label, path, mass or None for the sidecar's, attribution, display name) per record.
+
+    The display name is the path inside the package, so reports never show where the
+    package happens to be installed.
+    """
+    jobs: list[Job] = [
+        (
+            key,
+            key,
+            embedded_path(key),
+            item.mass_kg,
+            item.attribution,
+            f"workbench/datasets/{item.filename}",
+        )
         for key, item in EMBEDDED.items()
     ]
     for path in synthetic_paths():
@@ -36,6 +50,7 @@ def _jobs() -> list[tuple[str, str, Path, float | None, str]]:
                 path,
                 None,
                 "simulated by the workbench (truth in the JSON sidecar)",
+                f"workbench/datasets/synthetic/{path.name}",
             )
         )
     return jobs
@@ -76,10 +91,10 @@ def run_demo(
     inspected: list[tuple[str, Inspection]] = []
     sections: list[Section] = []
     jobs = _jobs()
-    for key, label, path, mass, attribution in tqdm(
+    for key, label, path, mass, attribution, display in tqdm(
         jobs, desc="demo", unit="record", disable=not progress
     ):
-        record = load_record(path, mass_kg=mass, subject=label)
+        record = load_record(path, mass_kg=mass, subject=label).replace(source=display)
         insp = inspect_record(record)
         inspected.append((label, insp))
         sections.append(inspection_section(insp, out_dir, key, attribution=attribution))

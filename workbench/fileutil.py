@@ -1,8 +1,9 @@
 """Atomic file output: a result is either fully written or not there at all.
 
-Batch and report jobs may be interrupted; writing to a temporary file in the same folder and
-renaming it over the target (``os.replace`` is atomic on POSIX and Windows) means a crash never
-leaves a half-written file that a later ``--resume`` would mistake for a finished one.
+Batch and report jobs may be interrupted; writing to a temporary file in the same folder,
+flushing it to disk and renaming it over the target (``os.replace`` is atomic on POSIX and
+Windows) means a crash never leaves a half-written file that a later ``--resume`` would
+mistake for a finished one.
 """
 
 from __future__ import annotations
@@ -18,9 +19,18 @@ from typing import Any
 __all__ = ["atomic_path", "atomic_write_json", "atomic_write_text"]
 
 
+def _default_mode(target: Path) -> int:
+    """Mode a plain ``open(..., "w")`` would give: the existing file's, else 0666 & ~umask."""
+    if target.exists():
+        return target.stat().st_mode & 0o777
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path beside ``target``; on success rename it over ``target``.
+    """Yield a temporary path beside ``target``; on success move it over ``target``.
 
     Parameters
     ----------
@@ -39,19 +49,24 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        # mkstemp creates 0600 files; give the result the mode a normal write would have.
+        os.chmod(tmp_path, _default_mode(target))
+        with open(tmp_path, "rb") as handle:
+            os.fsync(handle.fileno())
         os.replace(tmp_path, target)
     finally:
-        if tmp_path.exists():
+        with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
 
 
 def atomic_write_text(target: str | os.PathLike[str], text: str) -> Path:
-    """Write text (UTF-8) to ``target`` atomically and return the path."""
+    """Write UTF-8 text with Unix line ends to ``target`` atomically; return the path."""
     with atomic_path(target) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+        with open(tmp, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
     return Path(target)
 
 
 def atomic_write_json(target: str | os.PathLike[str], obj: Any) -> Path:
-    """Write ``obj`` as indented JSON to ``target`` atomically and return the path."""
-    return atomic_write_text(target, json.dumps(obj, indent=2, sort_keys=False) + "\n")
+    """Write ``obj`` as indented, strictly valid JSON (no NaN) to ``target`` atomically."""
+    return atomic_write_text(target, json.dumps(obj, indent=2, allow_nan=False) + "\n")

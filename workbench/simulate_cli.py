@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.errors import UsageError
+from workbench.errors import InputError, UsageError
 
 __all__ = ["add_simulate_parser", "parse_effect"]
 
@@ -52,8 +53,8 @@ def _floats(text: str) -> tuple[float, ...]:
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from workbench.records.export import write_mot
     from workbench.records.io import save_record
-    from workbench.synth.simulate import simulate_walking
 
+    _check_simulate_args(args)
     out = Path(args.out)
     if out.suffix.lower() not in (".csv", ".mot"):
         raise UsageError(
@@ -68,23 +69,26 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         def ground(t: np.ndarray) -> np.ndarray:
             return amp * np.sin(2 * np.pi * freq * np.asarray(t))
 
-    sim = simulate_walking(
-        mass_kg=args.mass,
-        pacing_hz=args.pacing,
-        duration_s=args.duration,
-        natural_frequency_hz=args.natural_frequency_hz,
-        damping_ratio=args.damping_ratio,
-        blf=args.blf,
-        step_duration_sd=args.step_duration_sd,
-        amplitude_sd=args.amplitude_sd,
-        phase_sd_rad=args.phase_sd_rad,
-        noise_sd_n=args.noise_n,
-        sample_rate_hz=args.sample_rate_hz,
-        ground_acc_m_s2=ground,
-        effects=effects,
-        start=args.start,
-        seed=args.seed,
-    )
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        # A diverging simulation (huge effect parameters) is reported below in one sentence.
+        warnings.simplefilter("ignore", RuntimeWarning)
+        sim = _simulate(args, effects, ground)
+    if not all(np.all(np.isfinite(x)) for x in (sim.record.grf_n, sim.disp_m, sim.vel_m_s)):
+        raise UsageError(
+            "the simulation diverged (non-finite response); lower the effect parameters or "
+            "the load factors"
+        )
+    from workbench.records.validation import validate_record
+
+    # The written record must load: the same checks as for measured data (a load factor so
+    # large that the force pulls the person down, for example, is refused here).
+    try:
+        validate_record(sim.record.replace(source="the simulated record"))
+    except InputError as err:
+        raise UsageError(
+            f"the simulated record is not a physical walking record ({err.problem}); lower "
+            "the effect parameters or the load factors"
+        ) from None
     truth = dict(sim.truth)
     if ground is not None:
         truth["ground_motion"] = {
@@ -118,6 +122,15 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "effects": [e.name for e in effects],
         "seed": args.seed,
     }
+    lo, hi = LAW_PACING_HZ
+    if (args.natural_frequency_hz is None or args.damping_ratio is None) and not (
+        lo <= args.pacing <= hi
+    ):
+        result["warnings"] = [
+            f"f_n or the damping ratio came from the seed's population laws, fitted for "
+            f"{lo:g}-{hi:g} Hz; at {args.pacing:g} Hz they are extrapolated, so pass "
+            "--natural-frequency-hz and --damping-ratio to choose them yourself."
+        ]
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -128,7 +141,95 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             + (f", effects {', '.join(result['effects'])}" if effects else "")
             + f")\nrecord  {record_path}\nsidecar {sidecar_path}\ntruth   {truth_path}"
         )
+        for w in result.get("warnings", []):
+            print(f"warning: {w}")
     return 0
+
+
+#: Largest record the command writes (samples): an hour at 1 kHz.
+MAX_SAMPLES = 3_600_000
+#: Pacing range of the seed's population laws, used when f_n or zeta are not given.
+LAW_PACING_HZ = (1.5, 2.25)
+
+
+def _check_simulate_args(args: argparse.Namespace) -> None:
+    from workbench.records.validation import (
+        MIN_DURATION_S,
+        MIN_SAMPLE_RATE_HZ,
+        mass_problem,
+        pacing_problem,
+    )
+
+    problem = mass_problem(args.mass)
+    if problem is not None:
+        raise UsageError(f"--mass {args.mass:g}: {problem}")
+    found = pacing_problem(args.pacing)
+    if found is not None:
+        raise UsageError(f"--pacing {args.pacing:g}: {found[0]}; {found[1]}")
+    if not (np.isfinite(args.sample_rate_hz) and args.sample_rate_hz >= MIN_SAMPLE_RATE_HZ):
+        raise UsageError(
+            f"--sample-rate-hz {args.sample_rate_hz:g} is below {MIN_SAMPLE_RATE_HZ:g} Hz, too "
+            "coarse for the force harmonics; use 100 or 200"
+        )
+    if not (np.isfinite(args.duration) and args.duration >= MIN_DURATION_S):
+        raise UsageError(
+            f"--duration {args.duration:g} s is shorter than {MIN_DURATION_S:g} s; walking "
+            "records need several steps"
+        )
+    if args.duration * args.sample_rate_hz > MAX_SAMPLES:
+        raise UsageError(
+            f"--duration {args.duration:g} s at {args.sample_rate_hz:g} Hz is more than "
+            f"{MAX_SAMPLES:,} samples; shorten the record or lower the rate"
+        )
+    blf = np.asarray(args.blf, dtype=float)
+    if blf.size == 0 or not np.all(np.isfinite(blf)) or np.any(blf < 0) or np.any(blf >= 1):
+        raise UsageError(
+            f"--blf {','.join(map(str, args.blf)) or '(empty)'}: give one or more load factors "
+            "between 0 and 1, BLF1 first, e.g. 0.4,0.1,0.06"
+        )
+    for flag, value in (
+        ("--natural-frequency-hz", args.natural_frequency_hz),
+        ("--damping-ratio", args.damping_ratio),
+    ):
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise UsageError(f"{flag} must be a positive number, got {value:g}")
+    for flag, value in (
+        ("--noise-n", args.noise_n),
+        ("--step-duration-sd", args.step_duration_sd),
+        ("--amplitude-sd", args.amplitude_sd),
+        ("--phase-sd-rad", args.phase_sd_rad),
+        ("--ground-acc-amplitude", args.ground_acc_amplitude),
+    ):
+        if not (np.isfinite(value) and value >= 0):
+            raise UsageError(f"{flag} must be zero or a positive number, got {value:g}")
+    if args.ground_acc_amplitude and not (
+        np.isfinite(args.ground_acc_hz) and args.ground_acc_hz > 0
+    ):
+        raise UsageError(
+            f"--ground-acc-hz must be a positive frequency, got {args.ground_acc_hz:g}"
+        )
+
+
+def _simulate(args: argparse.Namespace, effects: list[Any], ground: Any) -> Any:
+    from workbench.synth.simulate import simulate_walking
+
+    return simulate_walking(
+        mass_kg=args.mass,
+        pacing_hz=args.pacing,
+        duration_s=args.duration,
+        natural_frequency_hz=args.natural_frequency_hz,
+        damping_ratio=args.damping_ratio,
+        blf=args.blf,
+        step_duration_sd=args.step_duration_sd,
+        amplitude_sd=args.amplitude_sd,
+        phase_sd_rad=args.phase_sd_rad,
+        noise_sd_n=args.noise_n,
+        sample_rate_hz=args.sample_rate_hz,
+        ground_acc_m_s2=ground,
+        effects=effects,
+        start=args.start,
+        seed=args.seed,
+    )
 
 
 def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:

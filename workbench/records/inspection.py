@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.errors import InputError
 from workbench.records.preprocess import COMResponse, preprocess
 from workbench.records.record import G_M_S2, Record
 from workbench.records.steps import (
@@ -28,6 +29,14 @@ __all__ = ["Inspection", "inspect_record"]
 
 #: Relative disagreement between a stated and an estimated pacing frequency that earns a warning.
 PACING_MISMATCH_TOLERANCE = 0.05
+#: Standard deviation of the GRF over whole steps, as a fraction of body weight, below which a
+#: record holds no walking (walking varies by about 10-40 %; a standing person by 1 %).
+MIN_WALKING_VARIATION = 0.04
+#: Pacing frequencies that can be walking [Hz] (DESIGN.md 6: 1.5-2.25 Hz in the seed study;
+#: slow shuffling and fast walking widen it).
+WALKING_PACING_HZ = (0.8, 3.5)
+#: Without the high-pass, a static balance further than this from 1 makes the integrals drift.
+DRIFT_BALANCE_TOLERANCE = 0.002
 
 
 @dataclass(frozen=True)
@@ -87,6 +96,8 @@ class Inspection:
                 "varies": bool(self.pacing.varies),
                 "instantaneous_p10_hz": _round_or_none(np.percentile(inst, 10)),
                 "instantaneous_p90_hz": _round_or_none(np.percentile(inst, 90)),
+                "times_s": [round(float(x), 4) for x in self.pacing.times_s],
+                "instantaneous_hz": [round(float(x), 4) for x in inst],
             },
             "static_balance_raw": round(float(self.static_balance_raw), 4),
             "grf_scale_factor": rec.metadata.get("grf_scale_factor"),
@@ -98,6 +109,31 @@ def _round_or_none(value: float | None, digits: int = 4) -> float | None:
     if value is None or not np.isfinite(value):
         return None
     return round(float(value), digits)
+
+
+def _check_walking(record: Record, steps: Steps, pacing: PacingEstimate) -> None:
+    """Refuse records in which the step detector found periodicity but nobody walks."""
+    lo, hi = int(steps.boundaries[0]), int(steps.boundaries[-1])
+    variation = float(np.std(record.grf_n[lo:hi]) / record.weight_n)
+    if variation < MIN_WALKING_VARIATION:
+        raise InputError(
+            record.source,
+            "whole record",
+            f"the force varies by only {100 * variation:.2g} % of body weight (standard "
+            f"deviation), far less than walking does (about 10-40 %), so there are no steps "
+            "to analyse",
+            "check that the file holds a walking trial and that the force column is the "
+            "total vertical force",
+        )
+    lo_hz, hi_hz = WALKING_PACING_HZ
+    if not (lo_hz <= pacing.pacing_hz <= hi_hz):
+        raise InputError(
+            record.source,
+            "whole record",
+            f"the force repeats at {pacing.pacing_hz:.3g} Hz, outside the {lo_hz:g}-{hi_hz:g} "
+            "Hz of walking, so these are not footfalls",
+            "check that the record is walking; if the pacing is known, pass --pacing HZ",
+        )
 
 
 def inspect_record(
@@ -136,32 +172,40 @@ def inspect_record(
     steps = segment_steps(com, pacing_hz=record.pacing_hz)
     balance_raw = static_balance(record, steps)
     balance = balance_raw
-    message = static_balance_warning(balance_raw, record.source, tolerance=balance_tolerance)
+    message = static_balance_warning(balance_raw, record.name, tolerance=balance_tolerance)
     if rescale and message is not None:
         record = rescale_to_mass(record, steps)
         com = preprocess(record, highpass_hz=highpass_hz)
         steps = segment_steps(com, pacing_hz=record.pacing_hz)
         balance = static_balance(record, steps)
         warnings.append(
-            f"{record.source}: GRF was rescaled by {1.0 / balance_raw:.4f} so that its mean over "
+            f"{record.name}: GRF was rescaled by {1.0 / balance_raw:.4f} so that its mean over "
             f"whole steps equals M g (static balance was {balance_raw:.3f}); this assumes a pure "
             "gain error of the sensor and a correct body mass."
         )
     elif message is not None:
         warnings.append(message)
     pacing = estimate_pacing(com, steps)
+    _check_walking(record, steps, pacing)
+    if not highpass_hz and abs(balance - 1.0) > DRIFT_BALANCE_TOLERANCE:
+        warnings.append(
+            f"{record.name}: with the high-pass off, the static offset of "
+            f"{100 * (balance - 1):+.1f} % of body weight integrates into a displacement that "
+            "drifts quadratically; switch the filter on (--highpass-hz 0.15) unless the "
+            "record starts at rest and is exactly balanced."
+        )
     if record.pacing_hz is not None:
         rel = abs(pacing.pacing_hz - record.pacing_hz) / record.pacing_hz
         if rel > PACING_MISMATCH_TOLERANCE:
             warnings.append(
-                f"{record.source}: the stated pacing {record.pacing_hz:.3f} Hz differs from the "
+                f"{record.name}: the stated pacing {record.pacing_hz:.3f} Hz differs from the "
                 f"{pacing.pacing_hz:.3f} Hz measured from footfalls by {100 * rel:.0f} %; check "
                 "the metadata or drop --pacing to use the measured value."
             )
     if pacing.varies:
         inst = np.asarray(pacing.instantaneous_hz, dtype=float)
         warnings.append(
-            f"{record.source}: the pacing frequency changes along the record "
+            f"{record.name}: the pacing frequency changes along the record "
             f"(10th-90th percentile {np.percentile(inst, 10):.2f}-"
             f"{np.percentile(inst, 90):.2f} Hz); "
             "a single fixed pacing frequency will not describe the whole record, so identify "

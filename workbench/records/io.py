@@ -45,14 +45,12 @@ shortest exact text form so that reading back gives identical arrays.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import json
 import math
 import numbers
 import os
 import re
-import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import InputError, UsageError
+from workbench.fileutil import atomic_write_text
 from workbench.records.record import G_M_S2, FloatArray, Record
 from workbench.records.validation import mass_problem, pacing_problem, validate_record
 
@@ -421,8 +420,8 @@ def save_record(
     csv_text = ",".join(names) + "\n" + "".join(f"{row}\n" for row in rows)
 
     csv_path.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write_text(json_path, json_text)
-    _atomic_write_text(csv_path, csv_text)
+    atomic_write_text(json_path, json_text)
+    atomic_write_text(csv_path, csv_text)
     return csv_path, json_path
 
 
@@ -1314,20 +1313,3 @@ def _jsonable(value: Any, name: str) -> Any:
         f"{name} is a {type(value).__name__}, which cannot be written to the JSON sidecar; "
         "convert it to numbers, text, lists or dicts"
     )
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    mode = path.stat().st_mode & 0o777 if path.exists() else 0o644
-    fd, tmp_name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        # mkstemp creates 0600 files; give the result the mode a normal write would have.
-        os.chmod(tmp_name, mode)
-        os.replace(tmp_name, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp_name)
-        raise

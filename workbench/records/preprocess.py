@@ -3,8 +3,9 @@
 This is DESIGN.md section 2.2, steps 1-3 (the seed study's section 5.2):
 
 1. COM acceleration from the measured force, ``u'' = (GRF - M g) / M`` (DESIGN.md 2.1).
-2. A zero-phase Butterworth high-pass at 0.15 Hz removes the static offset (a wrong mass
-   or a mis-calibrated sensor) and slow drift.
+2. A zero-phase Butterworth high-pass at 0.15 Hz removes the static offset and slow drift.
+   (A wrong mass or a sensor gain error shows as an offset, which the filter removes, but
+   it also scales u, u' and u''; only ``--rescale-to-mass`` corrects a gain error.)
 3. Velocity and displacement by cumulative trapezoidal integration, high-passed again after
    each integration so the unknown integration constants and integrated noise do not drift.
 
@@ -42,6 +43,11 @@ FloatArray = NDArray[np.float64]
 DEFAULT_HIGHPASS_HZ = 0.15
 #: Butterworth order of each pass of :func:`highpass` (the zero-phase filter is twice this).
 DEFAULT_FILTER_ORDER = 4
+#: Cut-offs :func:`preprocess` accepts (0 aside) [Hz]: below the lower one the padding of
+#: :func:`highpass` grows to minutes and integrated drift survives; above the upper one the
+#: filter starts to cut into the slowest walking fundamental (about 1 Hz).
+MIN_HIGHPASS_HZ = 0.02
+MAX_HIGHPASS_HZ = 0.6
 
 # Range of self-similarity lags searched when extending a record at its ends [s]. It spans
 # one step at the fastest pacing (3.2 Hz, 0.31 s) to one stride at the slowest (1 Hz, 2 s),
@@ -401,7 +407,8 @@ class COMResponse:
     def edge_s(self) -> float:
         """Length at each end of the record where the high-pass's end effects may remain [s].
 
-        Five time constants ``5 / (2 pi f_c)`` (5.3 s at 0.15 Hz); 0 without a filter. The
+        ``5 / (2 pi f_c)`` (5.3 s at 0.15 Hz, about two time constants of the filter's
+        slowest pole), chosen from measurements on simulated walking; 0 without a filter. The
         padding of :func:`highpass` keeps the ends usable, but on a record whose last steps
         are irregular the displacement there can be a few per cent off, against a fraction
         of a per cent inside (measured by ``tests/test_pipeline.py``). Identification and
@@ -441,8 +448,10 @@ def preprocess(
     its own steps and its own slow trend before filtering, the responses are reliable up to
     the ends of a record of steady walking: on simulated walking (four harmonics with slow
     amplitude and timing variability, 20-120 s at 100-200 Hz, with a static offset and a
-    linear drift) u and u' match the true ones through the same filter within 1.5 % RMS
-    over the whole record. The first and last few seconds are less reliable (the filter's
+    linear drift) u and u' match the true ones through the same filter within 2 % RMS
+    away from the ends (:attr:`COMResponse.edge_s`, 5.3 s at 0.15 Hz), u' within 2 % over
+    the whole record, and u within 5 % over the whole record (``tests/test_pipeline.py``,
+    ``tests/test_preprocess.py``). The ends are less reliable (the filter's
     memory at 0.15 Hz is about 3 s per time constant) where the gait changes abruptly
     there, where the record starts from standing or where the sensor wanders; records
     shorter than about 15 s are less reliable throughout (several per cent).
@@ -479,6 +488,13 @@ def preprocess(
             "whole record",
             f"the record has {record.n_samples} sample(s), too few to integrate",
             "load a record of several seconds of walking",
+        )
+    if highpass_hz and not (MIN_HIGHPASS_HZ <= highpass_hz <= MAX_HIGHPASS_HZ):
+        raise UsageError(
+            f"--highpass-hz {highpass_hz:g} is outside {MIN_HIGHPASS_HZ:g}-{MAX_HIGHPASS_HZ:g} "
+            "Hz: lower cut-offs need minutes of padding and let the integrals drift, higher "
+            "ones remove part of the walking fundamental (1-3 Hz); use 0.15 (the seed's) or "
+            "0 to switch the filter off"
         )
     acc = com_acceleration(record)
     fs = record.sample_rate_hz

@@ -153,6 +153,7 @@ def validate_record(
         _check_pacing(record)
         _check_force_sign(record)
         _check_force_level(record)
+        _check_force_samples(record)
         _check_ground_acc(record)
         _check_side_sum(record, warnings)
     metadata = dict(record.metadata)
@@ -453,6 +454,49 @@ def _check_force_sign(record: Record) -> None:
                 f"the mean force under this foot is {mean_side:.6g} N, negative, so this "
                 "channel has the wrong sign or zero offset",
                 "multiply this column by -1 or re-zero the sensor",
+            )
+
+
+#: A walking person loads the ground all the time (one foot at least): a total force below
+#: this fraction of body weight for longer than ``OFF_PLATE_S`` means the person left the
+#: plate, a sensor dropped out, or the record is running (flight phases), which the SMD
+#: walking model does not describe.
+OFF_PLATE_FRACTION = 0.05
+OFF_PLATE_S = 0.15
+#: The total force cannot pull the person down: samples below this fraction of body weight
+#: are a zeroing, sign or clipping error, not walking.
+MIN_FORCE_FRACTION = -0.05
+
+
+def _check_force_samples(record: Record) -> None:
+    if record.mass_kg is None:
+        return
+    weight_n = record.mass_kg * G_M_S2
+    grf = record.grf_n
+    low = int(np.argmin(grf))
+    if grf[low] < MIN_FORCE_FRACTION * weight_n:
+        raise InputError(
+            record.source,
+            _where(record, low, "grf_n"),
+            f"the vertical force is {grf[low]:.6g} N, below zero by more than "
+            f"{-MIN_FORCE_FRACTION:.0%} of body weight; a person on the ground can only push",
+            "check the zero offset and sign of the force channels",
+        )
+    off = grf < OFF_PLATE_FRACTION * weight_n
+    if np.any(off):
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], off.astype(np.int8), [0]))))
+        starts, stops = edges[::2], edges[1::2]
+        longest = int(np.argmax(stops - starts))
+        run_s = (stops[longest] - starts[longest]) * record.dt_s
+        if run_s > OFF_PLATE_S:
+            t0 = float(record.time_s[starts[longest]])
+            raise InputError(
+                record.source,
+                _where(record, int(starts[longest]), "grf_n"),
+                f"the force stays below {OFF_PLATE_FRACTION:.0%} of body weight for "
+                f"{run_s:.2f} s from t = {t0:.3f} s, so nobody is walking on the sensor then "
+                "(stepped off, sensor drop-out, or running)",
+                "cut the record to the walking part",
             )
 
 

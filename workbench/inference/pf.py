@@ -1,0 +1,528 @@
+"""Seed-faithful bootstrap particle filter (method ``"pf"``), seed eqs. 15-23.
+
+Every particle carries the seed's full state (eq. 15)
+
+    X = (u, u', C, K, a0, a1, b1, ..., an, bn),
+
+moved by the Euler-discretised state equation ``X_{k+1} = (I + A_k dt) X_k + w_k`` (eqs. 17-20)
+with the force row of ``A`` (eq. 18) taken from the problem's basis row ``b_k`` (the problem
+hides whether the basis runs on absolute time, as in the seed, or on the step phase):
+
+    u_{k+1}  = u_k + dt u'_k                                     + w_u
+    u'_{k+1} = u'_k + dt (-K_k u_k - C_k u'_k + b_k theta) / M     + w_u'
+    C_{k+1}  = C_k + w_C,   K_{k+1} = K_k + w_K                 (artificial random walk)
+    theta    constant within a piece (no process noise)
+
+with ``w_u, w_u' ~ N(0, problem.noise.state_sd^2)`` and ``w_C, w_K`` of standard deviations
+``problem.noise.damping_rw_sd_ns_per_m`` / ``stiffness_rw_sd_n_per_m`` (seed: 5 N s/m and
+100 N/m per sample, "to prevent C and K from getting frozen"). Each sample ``y_k = (u, u', u'')``
+weights the particles through the Gaussian likelihood of eq. 22 with ``R = diag(obs_sd^2)`` and
+the third row of eq. 23, ``u'' = (-K u - C u' + b_k theta) / M``.
+
+Pieces (seed section 5.2). C, K, u and u' carry over from piece to piece; the force
+coefficients theta are drawn afresh from ``problem.force_prior`` at the first sample of every
+piece, before that sample is weighted. The Euler step that lands on a piece's first sample is
+still driven by the force of the sample it starts from, ``b_{k-1} theta_old`` (the state at
+``t_{k-1}``, as eq. 19 reads); this is the convention of the exact Kalman filter
+(:mod:`workbench.inference.kalman`, ``discretisation="euler"``), against which the filter's
+likelihood is tested.
+
+Initialisation. C and K uniform in ``problem.prior`` (the seed's 400-1000 N s/m,
+12000-20000 N/m is :meth:`StiffnessDampingPrior.seed`), ``u, u' ~ N(0, initial_state_sd^2)``
+at the first sample, theta from the force prior; the first sample is weighted without a
+transition.
+
+Resampling. When the effective sample size falls below ``ess_threshold * P`` the particles are
+resampled (:mod:`workbench.inference.resampling`); otherwise the weights carry over. The
+estimate at every sample is the weighted particle mean after assimilating that sample (seed:
+"the mean value of all particles").
+
+Log-likelihood. With normalised weights ``W_{k-1}`` carried into sample ``k`` (equal after a
+resampling) and the incremental likelihoods ``p(y_k | X_k^i)``, the estimate of
+``p(y_k | y_{1:k-1})`` is ``sum_i W_{k-1,i} p(y_k | X_k^i)``: the mean incremental weight
+after a resampling, the weighted mean otherwise. Its product over samples is unbiased for
+``p(y_{1:N})``; the log of it, reported as ``loglik``, is biased low by about half its variance.
+
+Jitter (off by default; not in the seed). The seed's filter moves theta only through
+resampling, so a bootstrap filter fixes the force coefficients to the few prior draws that
+survive the first samples (21 static dimensions for n = 10 cannot be explored by blind prior
+draws) and C, K then wander to compensate -- the failure DESIGN.md 2.4 warns about. With
+``jitter`` the static part of the state (C, K and theta; theta only with
+``fixed_parameters``) gets a Liu-West kernel move after every resampling:
+
+    z <- a z + (1 - a) mean(z) + sqrt(1 - a^2) L eps,   L L^T = cov(z),  eps ~ N(0, I),
+
+which keeps the mean and covariance of the particle cloud but renews its values (Liu & West
+2001). ``jitter=True`` uses ``a = 0.98`` (as the RBPF's default shrinkage); a float sets ``a``.
+It targets a kernel-smoothed posterior, is reported in ``settings``, costs a covariance and a
+Cholesky factor per resampling, and cannot renew a cloud that has already collapsed onto one
+particle (zero spread).
+
+What to expect. On the seed's numerical example (1 kHz, observation noise 1 % of the RMS) the
+first sample alone leaves one surviving particle (u = u' = 0 observed to 0.3 mm and 3 mm/s
+against an initial spread of twice the RMS), so every later particle descends from it, its
+force coefficients stay one prior draw, and C and K wander far from the truth: ESS about 1 and
+one distinct ancestor, which the diagnostics report. That is the seed-faithful behaviour; the
+Rao-Blackwellised filter (``method="rbpf"``) integrates theta, u and u' out exactly instead.
+
+Discretisation. Only the seed's Euler step is offered: exact discretisation with C and K
+different in every particle and at every sample would cost a matrix exponential per particle
+per sample. The Rao-Blackwellised filter (``method="rbpf"``) offers better ones.
+
+Diagnostics per sample (in :class:`~workbench.inference.outputs.ParticleFilterOutput`): ESS
+before resampling, whether it resampled, the number of distinct *initial* particles that still
+have descendants, the number of distinct C and K values among the particles carried to the next
+sample (after resampling and jitter; with a random walk of positive std every value is distinct
+again after the next move, so a count near 1 on a resampling sample means the cloud collapsed
+onto one parent), and the one-step-ahead predictive mean of ``y_k`` (``sum_i W_{k-1,i} h(X_k^i)``
+before weighting with ``y_k``), for model criticism.
+
+Implementation. The per-sample loop works in place on preallocated buffers. The moving part
+of the state, ``(u, u', C, K)``, is a ``(4, P)`` array of contiguous rows (a ``(P, d)`` array
+made every column operation strided and several times slower); theta, constant within a
+piece, lives in a ``(P, m)`` table drawn at the piece start, into which every particle points,
+so resampling gathers four rows and an index instead of ``d`` columns, and
+``F_bio = b_k theta`` is one matrix-vector product over the table plus a gather. The
+acceleration computed for the weights at sample k is reused by the Euler step to k + 1, and
+the process noise is drawn in blocks of samples.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from tqdm.auto import tqdm
+
+from workbench.errors import UsageError
+from workbench.inference.outputs import ParticleFilterOutput
+from workbench.inference.problem import IdentificationProblem
+from workbench.inference.resampling import SCHEMES, draw_ancestors
+
+__all__ = ["DEFAULT_JITTER_SHRINKAGE", "run_pf"]
+
+FloatArray = NDArray[np.float64]
+
+#: Liu-West shrinkage ``a`` used by ``jitter=True`` (the RBPF's default shrinkage too).
+DEFAULT_JITTER_SHRINKAGE = 0.98
+#: Process noise is drawn for several samples per call to the generator (fewer calls in the
+#: hot loop), in blocks of at most this many doubles (512 KiB) and at most 64 samples.
+_NOISE_BLOCK_DOUBLES = 1 << 16
+_NOISE_BLOCK_MAX = 64
+_LOG_2PI = math.log(2.0 * math.pi)
+
+# Columns of the state array.
+_U, _V, _C, _K, _THETA = 0, 1, 2, 3, 4
+
+
+def _check_args(
+    problem: IdentificationProblem,
+    n_particles: int,
+    resampling: str,
+    ess_threshold: float,
+    jitter: bool | float,
+    discretisation: str,
+    fixed_parameters: tuple[float, float] | None,
+) -> tuple[int, float | None, tuple[float, float] | None]:
+    if not isinstance(problem, IdentificationProblem):
+        raise UsageError(f"run_pf needs an IdentificationProblem, got {type(problem).__name__}")
+    if isinstance(n_particles, bool) or int(n_particles) != n_particles or int(n_particles) < 2:
+        raise UsageError(f"--particles must be a whole number of at least 2, got {n_particles!r}")
+    if resampling not in SCHEMES:
+        raise UsageError(
+            f"unknown resampling scheme {resampling!r}; use one of {', '.join(SCHEMES)}"
+        )
+    if not (isinstance(ess_threshold, int | float) and 0.0 <= float(ess_threshold) <= 1.0):
+        raise UsageError(
+            f"ess_threshold must be a fraction between 0 and 1 of the particle count, got "
+            f"{ess_threshold!r}"
+        )
+    if discretisation != "euler":
+        raise UsageError(
+            f"the seed-faithful particle filter discretises with Euler only, got "
+            f"{discretisation!r}; use method 'rbpf' for an exact discretisation"
+        )
+    shrinkage: float | None
+    if jitter is False or jitter is None:
+        shrinkage = None
+    elif jitter is True:
+        shrinkage = DEFAULT_JITTER_SHRINKAGE
+    elif isinstance(jitter, int | float) and 0.0 < float(jitter) < 1.0:
+        shrinkage = float(jitter)
+    else:
+        raise UsageError(
+            f"jitter must be False, True or a Liu-West shrinkage between 0 and 1, got {jitter!r}"
+        )
+    fixed: tuple[float, float] | None = None
+    if fixed_parameters is not None:
+        try:
+            c_fixed, k_fixed = (float(v) for v in fixed_parameters)
+        except (TypeError, ValueError):
+            raise UsageError(
+                f"fixed_parameters must be a pair (damping N s/m, stiffness N/m), got "
+                f"{fixed_parameters!r}"
+            ) from None
+        if not (np.isfinite(c_fixed) and np.isfinite(k_fixed)):
+            raise UsageError(f"fixed_parameters must be finite, got {fixed_parameters!r}")
+        fixed = (c_fixed, k_fixed)
+    return int(n_particles), shrinkage, fixed
+
+
+def _liu_west(
+    state: FloatArray,
+    table: FloatArray,
+    pointer: NDArray[np.int64],
+    move_ck: bool,
+    shrinkage: float,
+    rng: np.random.Generator,
+) -> None:
+    """Liu-West kernel move of the equally weighted static parameters, in place.
+
+    Moves theta (and C, K when ``move_ck``); afterwards row ``i`` of ``table`` holds the
+    theta of particle ``i`` (the caller resets ``pointer`` to the identity).
+    """
+    theta = table[pointer]
+    z = np.concatenate([state[2:4].T, theta], axis=1) if move_ck else theta
+    mean = z.mean(axis=0)
+    cov = np.atleast_2d(np.cov(z, rowvar=False))
+    # A tiny ridge keeps the Cholesky alive when the cloud has fewer distinct particles than
+    # dimensions; a coordinate with no spread at all then gets (next to) no jitter.
+    cov[np.diag_indices_from(cov)] += 1e-12 * np.diag(cov) + 1e-300
+    try:
+        chol = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        chol = np.diag(np.sqrt(np.clip(np.diag(cov), 0.0, None)))
+    noise = rng.standard_normal(z.shape) @ chol.T
+    z *= shrinkage
+    z += (1.0 - shrinkage) * mean
+    z += math.sqrt(1.0 - shrinkage * shrinkage) * noise
+    if move_ck:
+        state[2:4] = z[:, :2].T
+        table[:] = z[:, 2:]
+    else:
+        table[:] = z
+
+
+def _count_unique(values: FloatArray) -> int:
+    s = np.sort(values)
+    return int(np.count_nonzero(s[1:] != s[:-1])) + 1
+
+
+def run_pf(
+    problem: IdentificationProblem,
+    *,
+    n_particles: int = 2000,
+    seed: int | np.random.Generator | None = None,
+    resampling: str = "systematic",
+    ess_threshold: float = 0.5,
+    jitter: bool | float = False,
+    discretisation: str = "euler",
+    fixed_parameters: tuple[float, float] | None = None,
+    progress: bool = False,
+) -> ParticleFilterOutput:
+    """Run the seed-faithful bootstrap particle filter (module docstring).
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        Observations, force basis, pieces, noise and priors.
+    n_particles : int, default 2000
+        Number of particles P.
+    seed : int or numpy.random.Generator, optional
+        Seed of the random generator (the only source of randomness); the same seed gives an
+        identical result.
+    resampling : {"systematic", "stratified", "residual", "multinomial"}
+        Resampling scheme.
+    ess_threshold : float, default 0.5
+        Resample when the effective sample size falls below ``ess_threshold * P``; ``1.0``
+        resamples at (almost) every sample, ``0.0`` never.
+    jitter : bool or float, default False
+        Liu-West kernel move of C, K and theta after every resampling (not in the seed; module
+        docstring). ``True`` means shrinkage 0.98; a float in (0, 1) is the shrinkage.
+    discretisation : {"euler"}
+        Time discretisation; the seed's Euler step (eq. 20) is the only one.
+    fixed_parameters : (float, float), optional
+        ``(C [N s/m], K [N/m])`` held fixed in every particle with no random walk: the model is
+        then linear-Gaussian and ``loglik`` estimates the exact Kalman value.
+    progress : bool, default False
+        Show a progress bar.
+
+    Returns
+    -------
+    ParticleFilterOutput
+        Traces with one row per sample, ``method="pf"``.
+    """
+    n_part, shrinkage, fixed = _check_args(
+        problem, n_particles, resampling, ess_threshold, jitter, discretisation, fixed_parameters
+    )
+    rng = np.random.default_rng(seed)
+    n_samples = problem.n_samples
+    m = problem.n_coefficients
+    mass = float(problem.mass_kg)
+    inv_mass = 1.0 / mass
+    dt = float(problem.dt_s)
+    basis = np.ascontiguousarray(problem.basis, dtype=np.float64)
+    y = np.ascontiguousarray(problem.y, dtype=np.float64)
+    noise = problem.noise
+    obs_sd = np.asarray(noise.obs_sd, dtype=np.float64)
+    half_prec_sd = np.sqrt(0.5) / obs_sd
+    # Constant of the Gaussian log-density of the three observations.
+    log_norm_const = -float(np.sum(np.log(obs_sd))) - 1.5 * _LOG_2PI
+    starts = np.asarray(problem.piece_starts, dtype=np.int64)
+    is_start = problem.piece_start_mask
+    piece_ends = starts[1:] - 1
+    is_end = np.zeros(n_samples, dtype=bool)
+    is_end[piece_ends] = True
+    theta_mean = problem.force_prior.mean_n
+    theta_sd = problem.force_prior.sd_n
+
+    # Process noise of the columns that move: (u, u') always, (C, K) unless fixed.
+    n_moving = 2 if fixed is not None else 4
+    move_sd = np.concatenate(
+        [
+            np.asarray(noise.state_sd, dtype=np.float64),
+            [noise.damping_rw_sd_ns_per_m, noise.stiffness_rw_sd_n_per_m],
+        ]
+    )[:n_moving]
+    rw_positive = (
+        (False, False)
+        if fixed is not None
+        else (noise.damping_rw_sd_ns_per_m > 0, noise.stiffness_rw_sd_n_per_m > 0)
+    )
+
+    # --- buffers (layout: module docstring, "Implementation") ---------------------------
+    state = np.empty((4, n_part))
+    state_spare = np.empty_like(state)
+    table = np.empty((n_part, m))
+    pointer = np.arange(n_part, dtype=np.int64)
+    force_rows = np.empty(n_part)  # table @ b_k
+    acc = np.empty(n_part)  # (-K u - C u' + b theta) / M at the current sample
+    work = np.empty(n_part)
+    ll = np.empty(n_part)
+    resid = np.empty(n_part)
+    lw = np.full(n_part, -math.log(n_part))  # normalised log-weights
+    w = np.full(n_part, 1.0 / n_part)  # normalised weights exp(lw) between samples
+    origin = np.arange(n_part, dtype=np.int64)
+    index_spare = np.empty(n_part, dtype=np.int64)
+    block_len = max(1, min(_NOISE_BLOCK_MAX, _NOISE_BLOCK_DOUBLES // (n_moving * n_part)))
+    noise_block = np.empty((block_len, n_moving, n_part))
+    move_sd_col = move_sd[:, None]
+    block_pos = block_len
+    u, v, c, kk = state  # row views (the buffers are updated in place, never rebound)
+
+    mean_tr = np.empty((n_samples, 2))
+    sd_tr = np.empty((n_samples, 2))
+    ess_tr = np.empty(n_samples)
+    resampled_tr = np.zeros(n_samples, dtype=bool)
+    distinct_tr = np.empty(n_samples, dtype=np.int64)
+    unique_tr = np.empty((n_samples, 2), dtype=np.int64)
+    incr_tr = np.empty(n_samples)
+    pred_tr = np.empty((n_samples, 3))
+    n_pieces = problem.n_pieces
+    piece_coef_mean = np.empty((n_pieces, m))
+    piece_coef_sd = np.empty((n_pieces, m))
+    piece_no = 0
+    log_p = math.log(n_part)
+
+    # --- initial particles (first sample: no transition) ---------------------------------
+    u[:] = noise.initial_state_sd[0] * rng.standard_normal(n_part)
+    v[:] = noise.initial_state_sd[1] * rng.standard_normal(n_part)
+    if fixed is None:
+        c[:], kk[:] = problem.prior.sample(n_part, rng)
+        unique = [n_part, n_part]
+    else:
+        c[:], kk[:] = fixed
+        unique = [1, 1]
+    distinct = n_part
+
+    def draw_theta() -> None:
+        table[:] = theta_mean + theta_sd * rng.standard_normal((n_part, m))
+        pointer[:] = np.arange(n_part)
+
+    def acceleration(row: int) -> None:
+        """``acc = (-K u - C u' + b_row theta) / M`` for the current particles."""
+        np.dot(table, basis[row], out=force_rows)
+        np.take(force_rows, pointer, out=acc)
+        np.multiply(kk, u, out=work)
+        np.subtract(acc, work, out=acc)
+        np.multiply(c, v, out=work)
+        np.subtract(acc, work, out=acc)
+        np.multiply(acc, inv_mass, out=acc)
+
+    draw_theta()
+    acc_valid = False  # whether `acc` holds the acceleration of the current particles
+
+    # Overflow (a diverging Euler step) and the NaN it breeds are handled explicitly below:
+    # such particles get zero weight, and a filter with nothing left raises a clear error.
+    with (
+        np.errstate(over="ignore", invalid="ignore"),
+        tqdm(total=n_samples, disable=not progress, unit="sample", desc="pf") as bar,
+    ):
+        for k in range(n_samples):
+            if k > 0:
+                if not acc_valid:
+                    acceleration(k - 1)
+                # Euler step (eq. 20): u uses the old u', u' the acceleration of the old state.
+                np.multiply(v, dt, out=work)
+                u += work
+                acc *= dt
+                v += acc
+                if block_pos == block_len:
+                    rng.standard_normal(out=noise_block)
+                    noise_block *= move_sd_col
+                    block_pos = 0
+                state[:n_moving] += noise_block[block_pos]
+                block_pos += 1
+                if rw_positive[0]:
+                    unique[0] = n_part
+                if rw_positive[1]:
+                    unique[1] = n_part
+                if is_start[k]:
+                    # Fresh force coefficients for the new piece, after the interval that led
+                    # here was driven by the old piece's force.
+                    draw_theta()
+
+            # Predicted u'' of every particle (row 3 of eq. 23).
+            acceleration(k)
+            acc_valid = True
+
+            # One-step-ahead predictive mean of y_k under the carried weights W_{k-1}
+            # (``w`` holds them: normalised at the end of the previous sample, 1/P after a
+            # resampling).
+            pred_tr[k, 0] = w @ u
+            pred_tr[k, 1] = w @ v
+            pred_tr[k, 2] = w @ acc
+
+            # Minus the log-likelihood of y_k for every particle (eq. 22, R diagonal), up to
+            # its constant, which cancels in the weights and joins log p(y_k | past) below:
+            # sum_j (r_j / (sqrt(2) sd_j))^2.
+            yk = y[k]
+            np.subtract(u, yk[0], out=resid)
+            resid *= half_prec_sd[0]
+            np.multiply(resid, resid, out=ll)
+            np.subtract(v, yk[1], out=resid)
+            resid *= half_prec_sd[1]
+            resid *= resid
+            ll += resid
+            np.subtract(acc, yk[2], out=resid)
+            resid *= half_prec_sd[2]
+            resid *= resid
+            ll += resid
+
+            # Incremental weights: lw (normalised) + log-likelihood; the log-sum-exp gives
+            # log p(y_k | y_{1:k-1}).
+            lw -= ll
+            top = lw.max()
+            if not math.isfinite(top):
+                lw[~np.isfinite(lw)] = -np.inf
+                top = lw.max()
+                if not math.isfinite(top):
+                    raise UsageError(
+                        f"{problem.source}: the particle filter collapsed at t = "
+                        f"{problem.time_s[k]:.4g} s (every particle has zero likelihood, or "
+                        "the Euler step diverged); use more particles, a larger observation "
+                        "noise or method 'rbpf'"
+                    )
+            np.subtract(lw, top, out=w)
+            np.exp(w, out=w)
+            total = float(w.sum())
+            log_incr = top + math.log(total)
+            incr_tr[k] = log_incr + log_norm_const
+            lw -= log_incr
+            ess_k = total * total / float(w @ w)
+            ess_tr[k] = ess_k
+            w *= 1.0 / total  # normalised weights W_k
+
+            # Weighted mean and std of (C, K): the estimate after assimilating y_k.
+            ck = state[2:4]
+            mean_ck = ck @ w
+            dev = ck - mean_ck[:, None]
+            dev *= dev
+            mean_tr[k] = mean_ck
+            sd_tr[k] = np.sqrt(dev @ w)
+            if is_end[k]:
+                # Weight of each table row = sum of the weights of the particles using it.
+                row_w = np.bincount(pointer, weights=w, minlength=n_part)
+                cm = row_w @ table
+                dc = table - cm
+                dc *= dc
+                piece_coef_mean[piece_no] = cm
+                piece_coef_sd[piece_no] = np.sqrt(row_w @ dc)
+                piece_no += 1
+
+            if ess_k < ess_threshold * n_part:
+                idx = draw_ancestors(w, rng, resampling, n_part)
+                # Gather into spare buffers and copy back, so that the row views (u, v, c,
+                # kk) and the closures above keep pointing at live memory.
+                np.take(state, idx, axis=1, out=state_spare)
+                state[...] = state_spare
+                np.take(acc, idx, out=work)
+                acc[:] = work
+                np.take(pointer, idx, out=index_spare)
+                pointer[:] = index_spare
+                np.take(origin, idx, out=index_spare)
+                origin[:] = index_spare
+                lw.fill(-log_p)
+                w.fill(1.0 / n_part)
+                resampled_tr[k] = True
+                distinct = int(np.count_nonzero(np.bincount(origin, minlength=n_part)))
+                if shrinkage is not None:
+                    _liu_west(state, table, pointer, fixed is None, shrinkage, rng)
+                    pointer[:] = np.arange(n_part)
+                    acc_valid = False
+                if fixed is None:
+                    # With a random walk every value was distinct before resampling, so the
+                    # distinct values are the distinct parents; otherwise count them.
+                    parents = int(np.count_nonzero(idx[1:] != idx[:-1])) + 1
+                    for j, row in ((0, c), (1, kk)):
+                        if shrinkage is not None:
+                            unique[j] = _count_unique(row)
+                        elif rw_positive[j] or k == 0:
+                            unique[j] = parents
+                        else:
+                            unique[j] = _count_unique(row)
+            distinct_tr[k] = distinct
+            unique_tr[k] = unique
+            if progress and (k + 1) % 1000 == 0:
+                bar.update(1000)
+        bar.update(n_samples - bar.n)
+
+    piece_mean = mean_tr[piece_ends]
+    piece_sd = sd_tr[piece_ends]
+    settings: dict[str, Any] = {
+        "resampling": resampling,
+        "ess_threshold": float(ess_threshold),
+        "jitter": shrinkage,
+        "discretisation": discretisation,
+        "fixed_parameters": list(fixed) if fixed is not None else None,
+        "n_particles": n_part,
+        "damping_rw_sd_ns_per_m": 0.0 if fixed is not None else noise.damping_rw_sd_ns_per_m,
+        "stiffness_rw_sd_n_per_m": 0.0 if fixed is not None else noise.stiffness_rw_sd_n_per_m,
+        "theta_redraw": "at each piece's first sample, after the transition into it",
+        "prior": problem.prior.label,
+        "resample_count": int(resampled_tr.sum()),
+    }
+    return ParticleFilterOutput(
+        method="pf",
+        trace_time_s=np.array(problem.time_s, dtype=np.float64),
+        mean=mean_tr,
+        sd=sd_tr,
+        ess=ess_tr,
+        resampled=resampled_tr,
+        distinct_ancestors=distinct_tr,
+        unique_values=unique_tr,
+        loglik=float(incr_tr.sum()),
+        loglik_increments=incr_tr,
+        particles=np.ascontiguousarray(state[2:4].T),
+        log_weights=lw.copy(),
+        piece_mean=piece_mean,
+        piece_sd=piece_sd,
+        piece_coefficients_mean=piece_coef_mean,
+        piece_coefficients_sd=piece_coef_sd,
+        predicted_obs=pred_tr,
+        n_particles=n_part,
+        seed=seed if isinstance(seed, int) else None,
+        settings=settings,
+    )

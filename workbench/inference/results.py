@@ -1,0 +1,357 @@
+"""The identification results object (statsmodels-like).
+
+Whatever the method, the posterior over (C, K) is held as weighted draws (particles of a
+filter, or draws from the exact grid posterior); force coefficients per piece as means and
+standard deviations. From these the result derives the quantities engineers report -- natural
+frequency, damping ratio, BLFs -- with posterior standard deviations and 95 % intervals, and
+it carries its own diagnostics: residuals, a Ljung-Box test of their serial correlation,
+particle degeneracy and frozen-parameter flags, and the identifiability report.
+
+Plotting lives in :mod:`workbench.reporting`; this module only computes.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from workbench.fileutil import atomic_path
+from workbench.inference.problem import IdentificationProblem
+from workbench.records.record import G_M_S2
+
+__all__ = ["IdentificationResult", "weighted_quantile"]
+
+FloatArray = NDArray[np.float64]
+
+#: Keys of the scalar estimates, in report order (DESIGN.md 4.2 names).
+SCALAR_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", "damping_ratio")
+
+#: A filter whose smallest ESS fraction falls below this is reported as degenerate.
+DEGENERATE_ESS_FRACTION = 0.01
+#: A parameter with at most this many distinct particle values at the end is "frozen".
+FROZEN_UNIQUE_VALUES = 5
+
+
+def weighted_quantile(values: FloatArray, weights: FloatArray, q: FloatArray) -> FloatArray:
+    """Quantiles of weighted samples (mid-point interpolation of the weighted CDF)."""
+    order = np.argsort(values)
+    v, w = np.asarray(values)[order], np.asarray(weights)[order]
+    cdf = (np.cumsum(w) - 0.5 * w) / np.sum(w)
+    return np.interp(q, cdf, v)
+
+
+def _moments(values: FloatArray, weights: FloatArray) -> tuple[float, float]:
+    mean = float(np.sum(weights * values) / np.sum(weights))
+    var = float(np.sum(weights * (values - mean) ** 2) / np.sum(weights))
+    return mean, float(np.sqrt(max(var, 0.0)))
+
+
+@dataclass(eq=False)
+class IdentificationResult:
+    """Estimates, uncertainty and diagnostics of one identification.
+
+    Attributes
+    ----------
+    method : str
+        ``"rbpf"``, ``"pf"`` or ``"exact"``.
+    problem : IdentificationProblem
+        The problem that was solved (data, basis, noise, priors).
+    draws : ndarray, shape (S, 2)
+        Posterior draws of (C [N s/m], K [N/m]).
+    weights : ndarray, shape (S,)
+        Their normalised weights.
+    piece_coefficients_mean, piece_coefficients_sd : ndarray, shape (P, 2 n + 1)
+        Posterior mean and std of each piece's force coefficients [N].
+    piece_mean, piece_sd : ndarray, shape (P, 2) or None
+        (C, K) estimate after each piece (filters only): the per-step values.
+    trace_time_s, trace_mean, trace_sd : ndarray or None
+        Convergence traces of (C, K) (filters only).
+    ess, distinct_ancestors, unique_values : ndarray or None
+        Filter diagnostics along the trace.
+    loglik : float
+        (Estimated) log marginal likelihood of the data under the model.
+    identifiability : dict
+        The identifiability report (JSON-able), see :mod:`workbench.inference.identifiability`.
+    noise : dict
+        The noise setting used and how it was chosen.
+    settings : dict
+        The run's settings.
+    extra : dict
+        Method-specific results (e.g. the exact grid, Laplace check).
+    """
+
+    method: str
+    problem: IdentificationProblem
+    draws: FloatArray
+    weights: FloatArray
+    piece_coefficients_mean: FloatArray
+    piece_coefficients_sd: FloatArray
+    loglik: float
+    identifiability: dict[str, Any]
+    noise: dict[str, Any]
+    settings: dict[str, Any]
+    piece_mean: FloatArray | None = None
+    piece_sd: FloatArray | None = None
+    trace_time_s: FloatArray | None = None
+    trace_mean: FloatArray | None = None
+    trace_sd: FloatArray | None = None
+    ess: FloatArray | None = None
+    distinct_ancestors: NDArray[np.int64] | None = None
+    unique_values: NDArray[np.int64] | None = None
+    n_particles: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ estimates
+    @property
+    def mass_kg(self) -> float:
+        """Body mass [kg]."""
+        return self.problem.mass_kg
+
+    def _derived_draws(self) -> dict[str, FloatArray]:
+        c, k = self.draws[:, 0], self.draws[:, 1]
+        m = self.mass_kg
+        return {
+            "stiffness_n_per_m": k,
+            "damping_ns_per_m": c,
+            "natural_frequency_hz": np.sqrt(np.maximum(k, 0.0) / m) / (2 * np.pi),
+            "damping_ratio": c / (2 * np.sqrt(np.maximum(k, 1e-12) * m)),
+        }
+
+    @property
+    def estimates(self) -> dict[str, float]:
+        """Posterior means of K, C, natural frequency and damping ratio."""
+        w = self.weights
+        return {k: _moments(v, w)[0] for k, v in self._derived_draws().items()}
+
+    @property
+    def posterior_sd(self) -> dict[str, float]:
+        """Posterior standard deviations of K, C, natural frequency and damping ratio."""
+        w = self.weights
+        return {k: _moments(v, w)[1] for k, v in self._derived_draws().items()}
+
+    def interval(self, level: float = 0.95) -> dict[str, tuple[float, float]]:
+        """Equal-tailed posterior intervals of the scalar parameters."""
+        q = np.array([(1 - level) / 2, (1 + level) / 2])
+        out: dict[str, tuple[float, float]] = {}
+        for k, v in self._derived_draws().items():
+            lo, hi = weighted_quantile(v, self.weights, q)
+            out[k] = (float(lo), float(hi))
+        return out
+
+    @property
+    def piece_blf(self) -> FloatArray:
+        """BLF_i of every piece from its posterior-mean coefficients, shape (P, n)."""
+        coef = self.piece_coefficients_mean
+        a, b = coef[:, 1::2], coef[:, 2::2]
+        return np.sqrt(a**2 + b**2) / (self.mass_kg * G_M_S2)
+
+    @property
+    def blf(self) -> FloatArray:
+        """BLF_1..n: mean over steps of the per-step load factors."""
+        return self.piece_blf.mean(axis=0)
+
+    @property
+    def blf_sd(self) -> FloatArray:
+        """Standard error of :attr:`blf` (step-to-step sd over the square root of the count)."""
+        pb = self.piece_blf
+        if pb.shape[0] < 2:
+            return np.full(pb.shape[1], np.nan)
+        return pb.std(axis=0, ddof=1) / np.sqrt(pb.shape[0])
+
+    @property
+    def blf_step_sd(self) -> FloatArray:
+        """Step-to-step standard deviation of the BLFs (variability, not uncertainty)."""
+        pb = self.piece_blf
+        return pb.std(axis=0, ddof=1) if pb.shape[0] > 1 else np.zeros(pb.shape[1])
+
+    # ------------------------------------------------------------------ reconstruction
+    def biomechanical_force_n(self) -> FloatArray:
+        """Reconstructed biomechanical force at every sample (seed fig. 9) [N]."""
+        p = self.problem
+        return np.einsum("km,km->k", p.basis, self.piece_coefficients_mean[p.piece_index])
+
+    def fourier_amplitudes_n(self) -> FloatArray:
+        """Mean amplitude of each harmonic over the steps (seed fig. 10) [N], shape (n,)."""
+        return self.piece_blf.mean(axis=0) * self.mass_kg * G_M_S2
+
+    def fitted_acceleration(self) -> FloatArray:
+        """Predict u'' from the measured u, u' and the estimated model [m/s^2]."""
+        p = self.problem
+        est = self.estimates
+        u, v = p.y[:, 0], p.y[:, 1]
+        k, c = est["stiffness_n_per_m"], est["damping_ns_per_m"]
+        return (-k * u - c * v + self.biomechanical_force_n()) / p.mass_kg
+
+    @property
+    def resid_grf_n(self) -> FloatArray:
+        """GRF residual ``M (u''_measured - u''_fitted)`` [N]."""
+        return self.mass_kg * (self.problem.y[:, 2] - self.fitted_acceleration())
+
+    def test_serial_correlation(self, lags: int | list[int] | None = None) -> pd.DataFrame:
+        """Ljung-Box test of the GRF residuals (statsmodels ``acorr_ljungbox``).
+
+        Parameters
+        ----------
+        lags : int or list of int, optional
+            Default: one step and two steps worth of samples.
+
+        Returns
+        -------
+        DataFrame
+            ``lb_stat`` and ``lb_pvalue`` per lag.
+        """
+        from statsmodels.stats.diagnostic import acorr_ljungbox
+
+        if lags is None:
+            step = max(1, round(1.0 / (self.problem.pacing_hz * self.problem.dt_s)))
+            lags = [step, 2 * step]
+        return acorr_ljungbox(self.resid_grf_n, lags=lags)
+
+    # ------------------------------------------------------------------ diagnostics
+    @property
+    def min_ess_fraction(self) -> float | None:
+        """Smallest ESS along the run as a fraction of the particle count (filters only)."""
+        if self.ess is None or not self.n_particles:
+            return None
+        return float(np.min(self.ess) / self.n_particles)
+
+    @property
+    def frozen_parameters(self) -> list[str]:
+        """Parameters whose particles collapsed to a handful of distinct values at the end."""
+        if self.unique_values is None:
+            return []
+        final = np.asarray(self.unique_values)[-1]
+        names = ("damping_ns_per_m", "stiffness_n_per_m")
+        return [n for n, u in zip(names, final, strict=True) if u <= FROZEN_UNIQUE_VALUES]
+
+    @property
+    def degenerate(self) -> bool:
+        """Whether the filter's weights collapsed at some point (ESS below 1 % of P)."""
+        frac = self.min_ess_fraction
+        return frac is not None and frac < DEGENERATE_ESS_FRACTION
+
+    @property
+    def warnings(self) -> list[str]:
+        """Plain sentences about anything that makes the estimates less trustworthy."""
+        out = []
+        if self.frozen_parameters:
+            out.append(
+                f"{' and '.join(self.frozen_parameters)} froze: the particles hold at most "
+                f"{FROZEN_UNIQUE_VALUES} distinct values at the end, so the reported sd is not "
+                "a posterior sd; use more particles, jitter, or method rbpf/exact."
+            )
+        if self.degenerate:
+            out.append(
+                f"the particle weights degenerated (smallest ESS {self.min_ess_fraction:.2%} of "
+                "the particles); the estimates rest on very few particles."
+            )
+        sentence = self.identifiability.get("sentence")
+        level = self.identifiability.get("level")
+        if sentence and level and level != "well identified":
+            out.append(sentence)
+        return out
+
+    # ------------------------------------------------------------------ output
+    def to_json(self) -> dict[str, Any]:
+        """Return the JSON object of ``workbench identify --json`` (DESIGN.md 4.2)."""
+        est, sd, ci = self.estimates, self.posterior_sd, self.interval()
+        out: dict[str, Any] = {
+            "mass_kg": self.mass_kg,
+            "pacing_hz": round(self.problem.pacing_hz, 5),
+            "method": self.method,
+        }
+        out.update({k: float(est[k]) for k in SCALAR_KEYS})
+        out["blf"] = [float(x) for x in self.blf]
+        out["posterior_sd"] = {k: float(sd[k]) for k in SCALAR_KEYS}
+        out["posterior_sd"]["blf"] = [float(x) for x in self.blf_sd]
+        out["interval_95"] = {k: list(ci[k]) for k in SCALAR_KEYS}
+        out["identifiability"] = self.identifiability
+        out["steps"] = int(self.problem.n_pieces)
+        out["harmonics"] = int(self.problem.harmonics)
+        out["time_basis"] = self.problem.time_basis
+        out["noise"] = self.noise
+        out["loglik"] = float(self.loglik)
+        out["diagnostics"] = {
+            "n_particles": int(self.n_particles),
+            "min_ess_fraction": self.min_ess_fraction,
+            "frozen_parameters": self.frozen_parameters,
+            "degenerate": self.degenerate,
+        }
+        out["warnings"] = self.warnings
+        out["settings"] = self.settings
+        return out
+
+    def summary(self) -> str:
+        """Return a text table of the estimates with posterior sd and 95 % intervals."""
+        est, sd, ci = self.estimates, self.posterior_sd, self.interval()
+        p = self.problem
+        lines = [
+            f"SMD identification ({self.method}) of {p.source}",
+            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, {p.n_pieces} pieces "
+            f"({p.time_basis} basis, n = {p.harmonics}), noise {self.noise.get('label', '')}",
+            "",
+            f"{'parameter':<24}{'estimate':>12}{'sd':>12}{'95 % interval':>26}",
+        ]
+        fmt = {
+            "stiffness_n_per_m": ("K [N/m]", "{:.0f}"),
+            "damping_ns_per_m": ("C [N s/m]", "{:.1f}"),
+            "natural_frequency_hz": ("natural frequency [Hz]", "{:.3f}"),
+            "damping_ratio": ("damping ratio", "{:.3f}"),
+        }
+        for key in SCALAR_KEYS:
+            label, f = fmt[key]
+            lo, hi = ci[key]
+            lines.append(
+                f"{label:<24}{f.format(est[key]):>12}{f.format(sd[key]):>12}"
+                f"{'[' + f.format(lo) + ', ' + f.format(hi) + ']':>26}"
+            )
+        for i, (b, s) in enumerate(zip(self.blf[:5], self.blf_sd[:5], strict=True), start=1):
+            lines.append(f"{'BLF' + str(i):<24}{b:>12.3f}{s:>12.3f}")
+        lb = self.test_serial_correlation()
+        lines += [
+            "",
+            f"identifiability: {self.identifiability.get('sentence', 'not assessed')}",
+            f"log-likelihood {self.loglik:.2f}; Ljung-Box p of GRF residuals "
+            f"{float(lb['lb_pvalue'].iloc[0]):.3g} at lag {int(lb.index[0])}",
+        ]
+        lines += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    def to_netcdf(self, path: str | Path) -> Path:
+        """Save estimates, draws, traces and per-step coefficients to a netCDF file."""
+        import xarray as xr
+
+        p = self.problem
+        data: dict[str, Any] = {
+            "draws": (("draw", "parameter"), self.draws),
+            "weights": (("draw",), self.weights),
+            "piece_coefficients_mean": (("piece", "coefficient"), self.piece_coefficients_mean),
+            "piece_coefficients_sd": (("piece", "coefficient"), self.piece_coefficients_sd),
+            "biomechanical_force_n": (("time",), self.biomechanical_force_n()),
+            "observations": (("time", "response"), p.y),
+        }
+        coords: dict[str, Any] = {
+            "parameter": ["damping_ns_per_m", "stiffness_n_per_m"],
+            "coefficient": list(p.coefficient_names),
+            "piece": np.arange(p.n_pieces),
+            "time": p.time_s,
+            "response": ["u_m", "u_dot_m_s", "u_ddot_m_s2"],
+        }
+        if self.trace_time_s is not None:
+            coords["trace_time"] = self.trace_time_s
+            data["trace_mean"] = (("trace_time", "parameter"), self.trace_mean)
+            data["trace_sd"] = (("trace_time", "parameter"), self.trace_sd)
+            if self.ess is not None:
+                data["ess"] = (("trace_time",), self.ess)
+        ds = xr.Dataset(data, coords=coords)
+        ds.attrs["workbench_result_json"] = json.dumps(self.to_json(), default=float)
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            ds.to_netcdf(tmp, engine="scipy")
+        return path
