@@ -225,3 +225,31 @@ def test_demo_writes_report(tmp_path, capsys):
     insole = res["records"][1]
     assert insole["static_balance"] == pytest.approx(1.33, abs=0.03)
     assert insole["warnings"]
+
+
+def test_preprocessed_response_from_rest_matches_inside_the_edge_margin():
+    """Records that start from rest (a start-up transient) match away from the ends too."""
+    sim = simulate_walking(mass_kg=70.0, pacing_hz=1.9, duration_s=40.0, start="rest", seed=2)
+    com = preprocess(sim.record, highpass_hz=0.15)
+    vel_in, disp_in = _relative_errors(com, sim.vel_m_s, sim.disp_m, com.interior())
+    assert vel_in < 0.02 and disp_in < 0.02
+
+
+def test_embedded_synthetic_set_regenerates_bit_for_bit(tmp_path):
+    """``analyses/make_demo_data.py`` reproduces the shipped synthetic records exactly."""
+    import subprocess
+    import sys
+
+    from workbench.datasets import synthetic_paths
+
+    script = Path(__file__).resolve().parents[1] / "analyses" / "make_demo_data.py"
+    subprocess.run(
+        [sys.executable, str(script), "--out", str(tmp_path)], check=True, capture_output=True
+    )
+    shipped = synthetic_paths()
+    assert len(shipped) == 3
+    for path in shipped:
+        for suffix in (".csv", ".json"):
+            a = path.with_suffix(suffix).read_bytes()
+            b = (tmp_path / path.with_suffix(suffix).name).read_bytes()
+            assert a == b, path.with_suffix(suffix).name

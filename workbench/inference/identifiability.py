@@ -30,7 +30,10 @@ Levels (per parameter, from the contraction alone; the thresholds are arguments)
     ``identified_damping`` / ``identified_stiffness`` are True unless the level is
     ``"mostly prior"``. The overall ``level`` is the worse of the two. Correlations do not
     change the level (a narrow posterior is informative however correlated it is) but are
-    named in the sentence when ``|rho| >= 0.9``.
+    named in the sentence when ``|rho| >= 0.9`` (the force correlation only for a parameter
+    that is not well identified: given the data, some coefficients -- each piece's ``a0``,
+    set by ``K`` times the mean displacement -- follow a well-determined ``K`` almost
+    exactly, which is no reason for concern).
 """
 
 from __future__ import annotations
@@ -228,10 +231,13 @@ def identifiability_report(
             f"C and K are strongly correlated (rho = {rho:.2f}): the record fixes a "
             "combination of them better than each"
         )
+    # A well-identified parameter's conditional coefficients follow it closely (a0 of
+    # every piece is fixed by K times the mean displacement, say), so a high force
+    # correlation is news only for a parameter the record does not pin down.
     traded = [
         f"{sym} (max |rho| = {abs(r):.2f})"
-        for sym, r in (("C", force[0]), ("K", force[1]))
-        if np.isfinite(r) and abs(r) >= high_correlation
+        for sym, r, lev in (("C", force[0], levels[0]), ("K", force[1], levels[1]))
+        if np.isfinite(r) and abs(r) >= high_correlation and lev != "well identified"
     ]
     if traded:
         clauses.append(

@@ -197,7 +197,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
             f"the file is a table of numbers without a header, with {len(tokens)} columns "
             f"(the PhysioNet insole format has {_INSOLE_COLUMNS})",
             "add a header line naming the columns 'time' and 'grf' to read it as CSV, or pass "
-            "the format (fmt=...)",
+            "the format with --format (fmt=... in Python)",
         )
     return "csv"
 
@@ -640,7 +640,7 @@ def _decode(raw: bytes, source: str) -> str:
             source,
             "whole file",
             "the file contains binary data (NUL bytes), not a text table",
-            "give a text file (CSV, OpenSim .mot or PhysioNet insole text) or pass fmt='c3d' "
+            "give a text file (CSV, OpenSim .mot or PhysioNet insole text) or pass --format c3d "
             "for a C3D file",
         )
     try:
@@ -856,7 +856,7 @@ def _read_csv(p: Path, source: str) -> _Table:
                 f"({_COLUMN_UNITS[canonical][0]})",
                 f"convert the column to {_COLUMN_UNITS[canonical][0]} and name it "
                 f"'{canonical}' (for forces in kN or kgf you may instead name it '{canonical}' "
-                "and pass force_unit)",
+                "and pass --force-unit)",
             )
         if canonical in found:
             raise InputError(
@@ -941,7 +941,7 @@ def _read_mot(p: Path, source: str) -> _Table:
             source,
             "header",
             "there is no 'endheader' line, so this is not an OpenSim .mot file",
-            "check the file or pass the right format (fmt='csv' for a table with a header line)",
+            "check the file or pass the right format (--format csv for a table with a header line)",
         )
     header: dict[str, str] = {}
     for line in lines[:end]:
@@ -1070,8 +1070,8 @@ def _read_insole(p: Path, source: str) -> _Table:
             source,
             f"line {line}",
             f"the row has {n} values but the PhysioNet insole format has {_INSOLE_COLUMNS}",
-            "repair or delete the row, or pass the right format (fmt='csv' for a table with a "
-            "header line)",
+            "repair or delete the row, or pass the right format (--format csv for a table "
+            "with a header line)",
         ),
         decimal_comma_hint=True,
     )

@@ -54,8 +54,8 @@ def inspection_summary_table(items: list[tuple[str, Inspection]]) -> Table:
         ],
         rows=rows,
         caption=(
-            "Pacing: median of 1/step duration; static balance: mean GRF over whole steps / M g "
-            "(before any rescaling)."
+            "Pacing: median over strides of 2 / (sum of two step durations); static balance: "
+            "mean GRF over whole steps / M g (before any rescaling)."
         ),
     )
 

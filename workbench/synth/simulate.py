@@ -792,7 +792,8 @@ def simulate_walking(
         The mean force as ``a0, a1, b1, ..., an, bn`` [N] instead of ``blf``, ``phases_rad``
         and ``a0_n``.
     a0_n : float, optional
-        Constant part of the biomechanical force [N]; 0 keeps the static balance at M g.
+        Constant part of the biomechanical force [N]; it only shifts the equilibrium
+        displacement (a0 / K), since the mean GRF over whole steps is M g whatever a0 is.
     harmonics : int, optional
         Number of harmonics of the model; default the number given (zero-padded if more).
     step_duration_sd : float, optional
