@@ -94,6 +94,18 @@ def test_thresholds_are_arguments_and_to_json_is_plain() -> None:
     }
 
 
+def test_mode_on_the_prior_edge_is_mostly_prior() -> None:
+    r = report_for(0.3, 0.01, on_prior_edge=(False, True))
+    assert r.level_stiffness == "mostly prior" and not r.identified_stiffness
+    assert r.level_damping == "weakly identified"
+    assert "K is mostly prior: its posterior is piled against the edge of the prior box" in (
+        r.sentence
+    )
+    assert r.to_json()["on_prior_edge"] == {"damping": False, "stiffness": True}
+    with pytest.raises(UsageError):
+        report_for(0.3, 0.3, on_prior_edge=(True,))
+
+
 def test_nan_contraction_claims_nothing() -> None:
     r = identifiability_report((np.nan, 10.0), PRIOR_SD)
     assert r.level_damping == "mostly prior" and not r.identified_damping
@@ -167,7 +179,17 @@ def test_seed_example_transient_identifies_and_steady_state_does_not() -> None:
 
     DESIGN.md 2.4: least squares on 0-20 s recovers C and K; after the transient
     ``K u + C u'`` lies in the span of the 0.5 Hz Fourier basis and they cannot be told
-    apart from the force. The exact posterior must say so.
+    apart from the force. The exact posterior must not call the second window well
+    identified.
+
+    What the posterior does there is not "flat = prior box", though: the noise model and
+    the force prior are part of the model. With the seed's process noise (0.5 % of the RMS
+    per sample) the likelihood of the steady window piles (C, K) into the lower corner of
+    the prior box with a narrow posterior; with a hundredth of that process noise K still
+    piles onto the lower face (C about 1100 +- 130). The default ForcePrior (sd 0.5 M g / i)
+    is narrow for eq. 24's force (b3 .. b8 lie 2.4-4.3 prior sd out), so once the data
+    stop informing (C, K), the force prior pulls them. The report catches this through the
+    mode on the prior box's face, which makes a parameter "mostly prior".
     """
     from workbench.inference.exact import exact_posterior
     from workbench.inference.problem import build_problem
@@ -194,9 +216,12 @@ def test_seed_example_transient_identifies_and_steady_state_does_not() -> None:
     post_s, rep_s = reports["steady"]
     msg = (
         f"transient: mean {post_t.mean}, contraction {post_t.contraction}, {rep_t.level}; "
-        f"steady: mean {post_s.mean}, contraction {post_s.contraction}, {rep_s.level}"
+        f"steady: mean {post_s.mean}, contraction {post_s.contraction}, {rep_s.level}, "
+        f"mode on the prior edge {rep_s.on_prior_edge}, notes {post_s.notes}"
     )
+    print(msg)
     assert rep_t.level == "well identified", msg
+    assert not any(rep_t.on_prior_edge), msg
     assert np.all(np.abs(post_t.mean / truth - 1) < 0.02), msg
     assert rep_s.level != "well identified", msg
-    assert np.all(post_s.contraction > 10 * post_t.contraction), msg
+    assert not (rep_s.identified_damping and rep_s.identified_stiffness), msg

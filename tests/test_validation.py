@@ -98,7 +98,7 @@ def test_misnamed_columns_list_found_and_expected(
 def test_wrong_unit_in_column_name(tmp_path: Path) -> None:
     data = table()
     path = write(tmp_path / "r.csv", {"time": data["time"], "GRF [kN]": data["grf"] / 1000})
-    expect(path, "line 1, column 'GRF [kN]'", "unit 'kn'", "force_unit")
+    expect(path, "line 1, column 'GRF [kN]'", "unit 'kn'", "--force-unit")
 
 
 def test_duplicate_meaning_columns(tmp_path: Path) -> None:

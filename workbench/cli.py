@@ -23,6 +23,9 @@ from workbench.errors import WorkbenchError
 __all__ = ["build_parser", "main"]
 
 EXIT_USER_ERROR = 2
+#: The seed's high-pass cut-off [Hz]; ``--highpass-hz`` left out means this (or, for
+#: ``identify``, the value of the ``--config`` file).
+DEFAULT_HIGHPASS_HZ = 0.15
 EXIT_INTERNAL_ERROR = 3
 
 
@@ -66,7 +69,7 @@ def _record_options() -> _Parser:
     g.add_argument(
         "--highpass-hz",
         type=float,
-        default=0.15,
+        default=None,
         metavar="F",
         help="high-pass cut-off for the COM response [Hz]; 0 switches it off (default 0.15)",
     )
@@ -113,7 +116,8 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     from workbench.records.inspection import inspect_record
 
     record = _load(args)
-    insp = inspect_record(record, highpass_hz=args.highpass_hz, rescale=args.rescale_to_mass)
+    highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz
+    insp = inspect_record(record, highpass_hz=highpass_hz, rescale=args.rescale_to_mass)
     result = insp.to_json()
     if args.out:
         from workbench.reporting.document import Report
@@ -161,6 +165,50 @@ def _inspect_text(r: dict[str, Any]) -> str:
     if r.get("report"):
         lines.append(f"report          {r['report']}")
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# identify
+# ---------------------------------------------------------------------------------------------
+def _identify_settings(args: argparse.Namespace) -> Any:
+    from workbench.inference.settings import IdentifySettings
+
+    overrides = {
+        "method": args.method,
+        "particles": args.particles,
+        "harmonics": args.harmonics,
+        "pacing_hz": args.pacing,
+        "highpass_hz": args.highpass_hz,
+        "obs_noise": args.obs_noise,
+        "time_basis": args.time_basis,
+        "pieces": args.pieces,
+        "prior": args.prior,
+        "seed": args.seed,
+    }
+    if args.config:
+        return IdentifySettings.from_toml(args.config, **overrides)
+    return IdentifySettings().replace(**overrides)
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    from workbench.inference.identify import identify
+
+    settings = _identify_settings(args)
+    record = _load(args)
+    result = identify(record, settings, rescale=args.rescale_to_mass, progress=not args.json)
+    out = result.to_json()
+    if args.out:
+        from workbench.reporting.document import Report
+        from workbench.reporting.identification import identification_section
+
+        out_dir = Path(args.out)
+        key = _safe_key(record.name)
+        out["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_{result.method}.nc"))
+        report = Report(f"Identification of {record.name}")
+        report.add(identification_section(result, out_dir, key))
+        out["report"] = str(report.write(out_dir))
+    _emit(args, out, result.summary() + (f"\nreport: {out['report']}" if args.out else ""))
+    return 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -216,6 +264,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", help="CSV (+ JSON sidecar), OpenSim .mot, PhysioNet insole text, C3D")
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report with figures")
     p.set_defaults(handler=_cmd_inspect)
+
+    p = sub.add_parser(
+        "identify",
+        parents=[out_opts, rec_opts],
+        help="identify stiffness, damping and biomechanical force of a record",
+        description="Identify the SMD pedestrian model (K, C, natural frequency, damping ratio, "
+        "BLFs) of a record with the Rao-Blackwellised particle filter (default), the "
+        "seed-faithful particle filter or the exact marginal posterior, with posterior sd and "
+        "an identifiability report. Flags override the --config TOML file.",
+    )
+    p.add_argument("record", help="the record file")
+    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default rbpf)")
+    p.add_argument("--particles", type=int, metavar="N", help="particles (rbpf 256, pf 4000)")
+    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
+    p.add_argument(
+        "--obs-noise",
+        metavar="FRACTION",
+        help="observation noise of u, u', u'' as a fraction of their RMS, 'seed' (0.10) or "
+        "'auto' (estimated from the record; default)",
+    )
+    p.add_argument(
+        "--time-basis",
+        choices=["step_phase", "absolute"],
+        help="force basis clock (default step_phase)",
+    )
+    p.add_argument(
+        "--pieces",
+        choices=["steps", "whole"],
+        help="identify per footfall step (default) or the record as one piece",
+    )
+    p.add_argument(
+        "--prior",
+        choices=["modal", "seed"],
+        help="(C, K) prior box: from f_n 1-4 Hz and damping ratio 0.05-0.9 at the "
+        "body mass (default), or the seed's 400-1000 N s/m, 12-20 kN/m",
+    )
+    p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
+    p.add_argument("--seed", type=int, help="random seed (default 0)")
+    p.add_argument("--out", metavar="DIR", help="write netCDF results and a report here")
+    p.set_defaults(handler=_cmd_identify)
 
     from workbench.simulate_cli import add_simulate_parser
 

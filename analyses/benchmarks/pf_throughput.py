@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.metadata
 import json
 import math
 import platform
@@ -219,6 +220,15 @@ def check_problem(seed: int) -> tuple[IdentificationProblem, tuple[float, float]
     return problem, (c, k)
 
 
+def _particles_version() -> str:
+    if particles is None:
+        return "(absent)"
+    try:  # the package's own __version__ lags its releases (0.4 reports "0.3alpha")
+        return importlib.metadata.version("particles")
+    except importlib.metadata.PackageNotFoundError:
+        return str(getattr(particles, "__version__", "?"))
+
+
 # -- measurement --------------------------------------------------------------------------
 def _best_time(fn: Callable[[], Any], repeats: int) -> float:
     best = math.inf
@@ -314,8 +324,7 @@ def main(argv: list[str] | None = None) -> int:
         run_particles(problem, 100, args.seed)
     result: dict[str, Any] = {
         "benchmark": "pf_throughput",
-        "reference": "particles.SMC(Bootstrap) "
-        + (getattr(particles, "__version__", "?") if particles is not None else "(absent)"),
+        "reference": "particles.SMC(Bootstrap) " + _particles_version(),
         "problem": {
             "source": "simulate_walking 70 kg, 1.8 Hz, f_n 2.0 Hz, zeta 0.3, 100 Hz",
             "n_samples": problem.n_samples,

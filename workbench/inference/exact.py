@@ -32,9 +32,12 @@ same. The grid is built in stages:
    likelihood) it is the whole prior box.
 4. Checks, then re-gridding (at most ``refine`` times): *coverage* -- no node within
    ``log_threshold`` of the maximum next to a lattice position the frame leaves out while
-   the prior box continues there, else the frame grows; *resolution* -- the posterior sd in
-   every direction spans at least 1.5 cells (about 10 nodes across +-3 sd), else the frame
-   is rebuilt from the grid's own moments.
+   the prior box continues there; *resolution* -- the posterior sd in every direction spans
+   at least 1.5 cells (about 10 nodes across +-3 sd). A failed check rebuilds the frame as a
+   rectangle in the grid posterior's principal axes around its high region, reaching half
+   its width past any leak, with enough nodes per axis for 1.7 cells per sd (at most three
+   times ``grid_points``): this follows posteriors that are not Gaussian, such as one piled
+   against a face or a corner of the prior box.
    When the frame would contain the whole prior box it becomes the prior box: the grid then
    stays there and :attr:`ExactPosterior.grid_kind` says ``"prior box"``.
 
@@ -52,6 +55,22 @@ default resolution).
 Natural frequency ``f_n = sqrt(K / M) / (2 pi)`` depends on K alone and monotonically, so its
 interval is the transformed K interval; the damping ratio ``zeta = C / (2 sqrt(K M))``
 uses the cell mixture with each cell's spread of zeta linearised.
+
+Cost
+----
+Each likelihood call is a whole Kalman pass over the record whose time is dominated by the
+per-sample loop, nearly whatever the batch of (C, K) pairs, so the method minimises calls,
+not points: one coarse grid, usually one to five Newton stencils (the first Newton step comes
+free from the coarse grid's neighbourhood of its best node), one fine grid, one call for the
+force coefficients (with the MAP in the same batch). ``start`` (e.g. from the ``auto`` noise
+estimate) skips the coarse grid.
+
+What "exact" means
+------------------
+Exact for the model: the noise settings, the force prior and the piece structure are part
+of it. A narrow posterior is only as right as they are; a mode on a face of the prior box
+is reported (:attr:`ExactPosterior.notes`, and the identifiability report then calls that
+parameter "mostly prior").
 
 Force coefficients
 ------------------
@@ -425,7 +444,7 @@ class _Frame:
         fitted to, only density below ``exp(-log_threshold)``; the coverage check still
         catches a posterior that reaches them, and then the frame grows.
         """
-        return self.kind != "prior box"
+        return self.kind == "laplace"
 
     def _keep_z(self, z: FloatArray) -> NDArray[np.bool_]:
         inside_square = np.all(np.abs(z) <= 1.0 + 1e-12, axis=-1)
@@ -434,7 +453,8 @@ class _Frame:
         return inside_square & (np.sum(z * z, axis=-1) <= 1.0 + 1e-12)
 
     def z_of(self, points: FloatArray) -> FloatArray:
-        return np.linalg.solve(self.matrix, (np.atleast_2d(points) - self.centre).T).T
+        z = np.linalg.solve(self.matrix, (np.atleast_2d(points) - self.centre).T).T
+        return np.asarray(z, dtype=np.float64)
 
     def index_nodes(self) -> tuple[NDArray[np.int64], FloatArray]:
         """Lattice indices and (C, K) of the frame's nodes (ellipse or full square)."""
@@ -470,18 +490,20 @@ def _ellipse_frame(
 
 
 def _fit_frame(frame: _Frame, lo: FloatArray, hi: FloatArray, base_n: int) -> _Frame:
-    """Replace a frame that holds the whole box by the box; give clipped frames more nodes."""
+    """Choose the node count of a frame; a frame holding the whole box becomes the box.
+
+    A frame the prior box clips keeps about as many nodes inside the box as an unclipped
+    one has (at most twice the nodes per axis).
+    """
     corners = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], lo[1]], [hi[0], hi[1]]])
     if frame.kind != "prior box" and np.all(frame.contains(corners)):
         return _box_frame(lo, hi, base_n)
     if frame.kind == "prior box":
         return frame
-    # Nodes outside the box cost nothing but also resolve nothing: keep about as many nodes
-    # inside as an unclipped frame has (at most twice the nodes per axis).
     _, nodes = _Frame(frame.centre, frame.matrix, base_n, frame.kind).index_nodes()
     fraction = max(float(np.mean(_inside(nodes, lo, hi))), 1e-9)
-    n = int(min(2 * base_n, math.ceil(base_n / math.sqrt(fraction))))
-    return _Frame(frame.centre, frame.matrix, max(n, base_n), frame.kind)
+    n = int(min(2 * base_n, max(base_n, math.ceil(base_n / math.sqrt(fraction)))))
+    return _Frame(frame.centre, frame.matrix, n, frame.kind)
 
 
 @dataclass
@@ -507,6 +529,66 @@ def _evaluate_frame(frame: _Frame, ev: _Evaluator, lo: FloatArray, hi: FloatArra
         idx = np.array([[frame.n // 2, frame.n // 2]])
         keep = np.array([True])
     return _Grid(frame, idx[keep], nodes[keep], ev(nodes[keep]))
+
+
+def _region_frame(
+    grid: _Grid,
+    leaks: FloatArray,
+    lo: FloatArray,
+    hi: FloatArray,
+    threshold: float,
+    base_n: int,
+    grow: float,
+) -> _Frame:
+    """Return a rectangle in the posterior's principal axes around the grid's high region.
+
+    The rectangle spans the nodes within ``threshold`` of the maximum plus one cell, and
+    reaches past any leak (lattice positions beyond the old frame next to high nodes) by
+    ``grow`` times its width on that side; its nodes per axis give every principal sd at
+    least 1.7 cells (between ``base_n`` and three times that). Unlike the Laplace ellipse it
+    follows one-sided shapes: a posterior piled against a face or a corner of the box (then
+    the rectangle's edges are parallel to the box faces).
+    """
+    w = grid.weights()
+    mean, cov = _moments(grid.nodes, w)
+    edges = grid.frame.edges
+    # The cells' own spread keeps a posterior that sits inside one cell from giving a
+    # zero-width frame.
+    cov = cov + (np.outer(edges[:, 0], edges[:, 0]) + np.outer(edges[:, 1], edges[:, 1])) / 12.0
+    high = grid.loglik > np.max(grid.loglik) - threshold
+    cell_extent = np.sum(np.abs(edges), axis=1)
+    near_face = (grid.nodes[high] - lo < cell_extent) | (hi - grid.nodes[high] < cell_extent)
+    if np.any(near_face):
+        # Piled against a face of the box: edges parallel to the faces, or a slightly
+        # tilted edge would keep cutting through the densest part of the posterior.
+        v = np.eye(2)
+        evals = np.diag(cov).copy()
+    else:
+        evals, v = np.linalg.eigh(0.5 * (cov + cov.T))
+    sd_axis = np.sqrt(np.maximum(evals, 1e-300))
+    u = (grid.nodes[high] - mean) @ v
+    margin = np.sum(np.abs(v.T @ edges), axis=1)
+    lo_u, hi_u = u.min(axis=0) - margin, u.max(axis=0) + margin
+    if leaks.size:
+        ul = (leaks - mean) @ v
+        width = hi_u - lo_u
+        lo_u = np.where(ul.min(axis=0) < lo_u, ul.min(axis=0) - grow * width, lo_u)
+        hi_u = np.where(ul.max(axis=0) > hi_u, ul.max(axis=0) + grow * width, hi_u)
+    if np.any(near_face):
+        # Edges on the faces themselves: cells then tile the box up to the face and the
+        # midpoint rule keeps its accuracy where the density is largest.
+        lo_u = np.maximum(lo_u, lo - mean)
+        hi_u = np.minimum(hi_u, hi - mean)
+    half = 0.5 * (hi_u - lo_u)
+    centre = mean + v @ (0.5 * (hi_u + lo_u))
+    # Cells of c sd along each axis resolve the narrowest direction with 1.7 cells per sd
+    # when c <= sqrt(1 - |rho|) / 1.7 (rho: correlation in the frame's axes, zero for the
+    # principal axes).
+    cov_v = v.T @ cov @ v
+    rho = abs(float(cov_v[0, 1] / math.sqrt(max(cov_v[0, 0] * cov_v[1, 1], 1e-300))))
+    n_axis = np.ceil(2.0 * half / (sd_axis * math.sqrt(max(1.0 - rho, 1e-6)) / 1.7))
+    n = int(np.clip(np.max(n_axis), base_n, 3 * base_n))
+    return _Frame(centre, v * half, n, "region")
 
 
 def _coarse_start(
@@ -548,11 +630,18 @@ def _moments(x: FloatArray, w: FloatArray) -> tuple[FloatArray, FloatArray]:
     return mean, 0.5 * (cov + cov.T)
 
 
-def _check(grid: _Grid, lo: FloatArray, hi: FloatArray, threshold: float) -> tuple[bool, bool]:
-    """(covered, resolved) of a grid (module docstring, step 4)."""
+def _check(
+    grid: _Grid, lo: FloatArray, hi: FloatArray, threshold: float
+) -> tuple[bool, bool, FloatArray]:
+    """(covered, resolved, leaks) of a grid (module docstring, step 4).
+
+    ``leaks`` holds the lattice positions just outside the frame (inside the box) next to
+    high nodes.
+    """
     frame = grid.frame
     top = float(np.max(grid.loglik))
     covered = True
+    leaks: list[FloatArray] = []
     if frame.kind != "prior box":
         # A high node next to a lattice position the frame does not hold, where the prior
         # box continues, means the posterior's high region is cut off by the frame.
@@ -561,16 +650,17 @@ def _check(grid: _Grid, lo: FloatArray, hi: FloatArray, threshold: float) -> tup
         for step in ((1, 0), (-1, 0), (0, 1), (0, -1)):
             nb_idx = grid.index[high] + np.array(step)
             nb_x = grid.nodes[high] + edges @ np.array(step, dtype=np.float64)
-            if np.any(~frame.keeps_index(nb_idx) & _inside(nb_x, lo, hi)):
+            leak = ~frame.keeps_index(nb_idx) & _inside(nb_x, lo, hi)
+            if np.any(leak):
                 covered = False
-                break
+                leaks.append(nb_x[leak])
     w = grid.weights()
     _, cov = _moments(grid.nodes, w)
     inv = np.linalg.inv(frame.edges)
     cov_cells = inv @ cov @ inv.T
     eig = np.linalg.eigvalsh(0.5 * (cov_cells + cov_cells.T))
     resolved = bool(math.sqrt(max(float(eig[0]), 0.0)) >= _MIN_SD_CELLS)
-    return covered, resolved
+    return covered, resolved, (np.concatenate(leaks) if leaks else np.empty((0, 2)))
 
 
 # -- quantiles of the cell mixture -------------------------------------------------------------
@@ -733,8 +823,8 @@ class ExactPosterior:
         Area of a cell [N s/m x N/m].
     grid_kind : str
         ``"prior box"`` (the grid covers the whole box: the likelihood is too flat to zoom),
-        ``"laplace"`` (frame from the Laplace approximation) or ``"moments"`` (frame from a
-        previous grid's moments).
+        ``"laplace"`` (ellipse from the Laplace approximation) or ``"region"`` (rectangle
+        around a previous grid's high region).
     covered, resolved : bool
         Final grid checks (module docstring, step 4).
     mean, cov, sd : ndarray
@@ -975,7 +1065,7 @@ def _force_posterior(
 ) -> ForcePosterior:
     order = np.argsort(weights)[::-1]
     cum = np.cumsum(weights[order])
-    count = int(min(np.searchsorted(cum, 1.0 - _FORCE_MASS_TAIL) + 1, _FORCE_MAX_NODES, order.size))
+    count = min(int(np.searchsorted(cum, 1.0 - _FORCE_MASS_TAIL)) + 1, _FORCE_MAX_NODES, order.size)
     sel = order[:count]
     w = weights[sel] / weights[sel].sum()
     c_sel, k_sel = nodes[sel, 0], nodes[sel, 1]
@@ -1066,7 +1156,7 @@ def exact_posterior(
     problem: IdentificationProblem,
     *,
     grid_points: int = 23,
-    refine: int = 4,
+    refine: int = 5,
     discretisation: str = "foh",
     coarse_points: int = 13,
     log_threshold: float = DEFAULT_LOG_THRESHOLD,
@@ -1084,7 +1174,7 @@ def exact_posterior(
     grid_points : int, default 23
         Nodes per axis of the fine grid (more when the frame is clipped by the prior box).
         23 over +-7 sd gives 10 nodes across +-3 sd.
-    refine : int, default 4
+    refine : int, default 5
         Maximum number of re-gridding passes after the first fine grid.
     discretisation : str, default "foh"
         Kalman discretisation (:func:`workbench.inference.kalman.record_loglik`).
@@ -1169,29 +1259,14 @@ def exact_posterior(
     frame = _fit_frame(frame, lo, hi, grid_points)
 
     # 4. Grid, check, re-grid.
-    stretch = 1.0
     grid = _evaluate_frame(frame, ev, lo, hi)
-    covered, resolved = _check(grid, lo, hi, log_threshold)
+    covered, resolved, leaks = _check(grid, lo, hi, log_threshold)
     for _ in range(refine):
         if covered and resolved:
             break
-        w = grid.weights()
-        mean, cov = _moments(grid.nodes, w)
-        # Add the cells' own spread so a posterior inside one cell still gives a frame.
-        edges = grid.frame.edges
-        cov = cov + (np.outer(edges[:, 0], edges[:, 0]) + np.outer(edges[:, 1], edges[:, 1])) / 12.0
-        if not covered:
-            stretch *= 1.5
-        centre = grid.nodes[int(np.argmax(grid.loglik))] if resolved else mean
-        centre = 0.5 * (centre + mean)
-        frame = _fit_frame(
-            _ellipse_frame(centre, cov, half_width * stretch, grid_points, "moments"),
-            lo,
-            hi,
-            grid_points,
-        )
+        frame = _region_frame(grid, leaks, lo, hi, log_threshold, grid_points, grow=0.5)
         grid = _evaluate_frame(frame, ev, lo, hi)
-        covered, resolved = _check(grid, lo, hi, log_threshold)
+        covered, resolved, leaks = _check(grid, lo, hi, log_threshold)
 
     # A coarse node far outside the final frame that is nearly as likely means a second
     # mode the frame does not hold: fall back to the whole box and say so.
@@ -1204,7 +1279,7 @@ def exact_posterior(
                 "covers the whole box instead of zooming on one of them"
             )
             grid = _evaluate_frame(_box_frame(lo, hi, 2 * grid_points), ev, lo, hi)
-            covered, resolved = _check(grid, lo, hi, log_threshold)
+            covered, resolved, _ = _check(grid, lo, hi, log_threshold)
             top = float(np.max(grid.loglik))
 
     frame = grid.frame
@@ -1219,16 +1294,14 @@ def exact_posterior(
         - math.log(box_area)
     )
     grid_map = grid.nodes[int(np.argmax(grid.loglik))]
-    if mode.value >= top or mode.cov is not None:
-        map_x = mode.x
-    else:
-        map_x = grid_map
+    # The optimiser's point unless a grid node beat it (a search that stopped early).
+    map_x = mode.x if mode.value >= top - 1e-9 * max(1.0, abs(top)) else grid_map
     if frame.kind == "prior box":
         notes.append(
             "the likelihood is too flat to zoom: the grid covers the whole prior box, so "
             "the posterior is shaped by the prior range"
         )
-    if np.any(mode.at_bound):
+    if np.any(mode.at_bound) and frame.kind != "prior box":
         names = [n for n, b in zip(("C", "K"), mode.at_bound, strict=True) if b]
         notes.append(
             f"the posterior mode of {' and '.join(names)} lies on the edge of the prior box "

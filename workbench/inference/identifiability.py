@@ -27,6 +27,9 @@ Levels (per parameter, from the contraction alone; the thresholds are arguments)
     the prior still shapes the answer.
     ``contraction > 0.5``: ``"mostly prior"`` -- the posterior is more than half as wide as the
     prior box; the reported value says more about the box than about the record.
+    A parameter whose posterior mode lies on a face of the prior box is ``"mostly prior"``
+    whatever its contraction: the data (or the force prior) favour values outside the box,
+    so the reported value is the box's bound, not an identification.
     ``identified_damping`` / ``identified_stiffness`` are True unless the level is
     ``"mostly prior"``. The overall ``level`` is the worse of the two. Correlations do not
     change the level (a narrow posterior is informative however correlated it is) but are
@@ -89,7 +92,13 @@ def _percent(x: float) -> str:
     return f"{100.0 * x:.0f} %" if x >= 0.01 else f"{100.0 * x:.1g} %"
 
 
-def _clause(symbol: str, level: str, contraction: float) -> str:
+def _clause(symbol: str, level: str, contraction: float, on_edge: bool) -> str:
+    if on_edge:
+        return (
+            f"{symbol} is mostly prior: its posterior is piled against the edge of the prior "
+            f"box (posterior sd {_percent(contraction)} of the prior's), so the data favour "
+            "values outside the range and the reported value is the range's bound"
+        )
     if level == "mostly prior":
         return (
             f"{symbol} is mostly prior: its posterior sd is {_percent(contraction)} of the "
@@ -116,6 +125,8 @@ class IdentifiabilityReport:
         ``"well identified"``, ``"weakly identified"`` or ``"mostly prior"``.
     identified_damping, identified_stiffness : bool
         False when the parameter is ``"mostly prior"``.
+    on_prior_edge : (bool, bool)
+        Whether the posterior mode of C / K lies on a face of the prior box.
     level : str
         The worse of the two levels.
     sentence : str
@@ -136,6 +147,7 @@ class IdentifiabilityReport:
     level: str
     sentence: str
     thresholds: dict[str, float] = field(default_factory=dict)
+    on_prior_edge: tuple[bool, bool] = (False, False)
 
     def to_json(self) -> dict[str, Any]:
         """Return a JSON-able dict (NaN becomes None)."""
@@ -156,6 +168,10 @@ class IdentifiabilityReport:
             "max_force_correlation_damping": num(self.max_force_correlation_damping),
             "max_force_correlation_stiffness": num(self.max_force_correlation_stiffness),
             "thresholds": {k: float(v) for k, v in self.thresholds.items()},
+            "on_prior_edge": {
+                "damping": bool(self.on_prior_edge[0]),
+                "stiffness": bool(self.on_prior_edge[1]),
+            },
         }
 
 
@@ -177,6 +193,7 @@ def identifiability_report(
     well_identified: float = WELL_IDENTIFIED_CONTRACTION,
     mostly_prior: float = MOSTLY_PRIOR_CONTRACTION,
     high_correlation: float = HIGH_CORRELATION,
+    on_prior_edge: tuple[bool, bool] = (False, False),
 ) -> IdentifiabilityReport:
     """Grade how well C and K are identified and say it in plain words.
 
@@ -195,6 +212,9 @@ def identifiability_report(
         Contraction thresholds (module docstring); ``0 < well_identified <= mostly_prior``.
     high_correlation : float, optional
         |correlation| from which the sentence names a trade-off.
+    on_prior_edge : (bool, bool), optional
+        Whether the posterior mode of C / K lies on a face of the prior box (then that
+        parameter is ``"mostly prior"``).
 
     Returns
     -------
@@ -217,13 +237,19 @@ def identifiability_report(
     if np.any(~(prior > 0)):
         raise UsageError(f"identifiability_report: prior_sd must be positive, got {prior_sd!r}")
     contraction = post / prior
-    levels = [_level(float(c), well_identified, mostly_prior) for c in contraction]
+    edge = [bool(e) for e in on_prior_edge]
+    if len(edge) != 2:
+        raise UsageError("identifiability_report: on_prior_edge must be two booleans (C, K)")
+    levels = [
+        "mostly prior" if e else _level(float(c), well_identified, mostly_prior)
+        for c, e in zip(contraction, edge, strict=True)
+    ]
     level = max(levels, key=_LEVELS.index)
     # K first: it is the better identified of the two on almost every record, and the
     # sentence reads best from the firm statement to the weak one.
     clauses = [
-        _clause("K", levels[1], float(contraction[1])),
-        _clause("C", levels[0], float(contraction[0])),
+        _clause("K", levels[1], float(contraction[1]), edge[1]),
+        _clause("C", levels[0], float(contraction[0]), edge[0]),
     ]
     rho = float(ck_correlation)
     if np.isfinite(rho) and abs(rho) >= high_correlation:
@@ -263,6 +289,7 @@ def identifiability_report(
             "mostly_prior_contraction": float(mostly_prior),
             "high_correlation": float(high_correlation),
         },
+        on_prior_edge=(edge[0], edge[1]),
     )
 
 
@@ -435,6 +462,18 @@ def identifiability_from_posterior(
     """
     fc = force_correlation_from_posterior(posterior)
     force = (fc.max_damping, fc.max_stiffness) if fc is not None else (np.nan, np.nan)
+    # On a face of the box only if the MAP is there *and* the grid's mass piles up against
+    # it (a flat likelihood can leave the optimiser anywhere, including a corner).
+    edge = (
+        tuple(bool(b) for b in posterior.laplace.at_bound)
+        if posterior.grid_kind != "prior box"
+        else (False, False)
+    )
     return identifiability_report(
-        posterior.sd, posterior.prior.sd, posterior.correlation, force, **thresholds
+        posterior.sd,
+        posterior.prior.sd,
+        posterior.correlation,
+        force,
+        on_prior_edge=(edge[0], edge[1]),
+        **thresholds,
     )

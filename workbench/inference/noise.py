@@ -162,8 +162,13 @@ def _fit_quadratic(z: FloatArray, f: FloatArray) -> tuple[float, FloatArray, Flo
     design = np.column_stack([np.ones_like(x), x, y, 0.5 * x * x, x * y, 0.5 * y * y])
     coef, *_ = np.linalg.lstsq(design, f, rcond=None)
     resid = f - design @ coef
-    h = np.array([[coef[3], coef[4]], [coef[4], coef[5]]])
-    return float(coef[0]), coef[1:3], h, float(np.sqrt(np.mean(resid**2)))
+    h = np.array([[coef[3], coef[4]], [coef[4], coef[5]]], dtype=np.float64)
+    return (
+        float(coef[0]),
+        np.asarray(coef[1:3], dtype=np.float64),
+        h,
+        float(np.sqrt(np.mean(resid**2))),
+    )
 
 
 class _Profile:
@@ -227,7 +232,7 @@ class _Profile:
         pts = self._keep_positive(centre, s, z)
         f = self.call(fraction, pts)
         ok = np.isfinite(f)
-        zz = np.linalg.solve(s, (pts - centre).T).T
+        zz = np.asarray(np.linalg.solve(s, (pts - centre).T).T, dtype=np.float64)
         best = int(np.argmax(np.where(ok, f, -np.inf)))
         f0, g, h, resid = (
             _fit_quadratic(zz[ok], f[ok])
@@ -249,7 +254,7 @@ class _Profile:
             s2 = _sqrt_cov(new_cov)
             pts2 = self._keep_positive(x_star, s2, _CHECK)
             f2 = self.call(fraction, pts2)
-            z2 = np.linalg.solve(s2, (pts2 - x_star).T).T
+            z2 = np.asarray(np.linalg.solve(s2, (pts2 - x_star).T).T, dtype=np.float64)
             ok2 = np.isfinite(f2)
             f0b, gb, hb, _ = (
                 _fit_quadratic(z2[ok2], f2[ok2])

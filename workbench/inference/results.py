@@ -36,6 +36,11 @@ SCALAR_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", 
 DEGENERATE_ESS_FRACTION = 0.01
 #: A parameter with at most this many distinct particle values at the end is "frozen".
 FROZEN_UNIQUE_VALUES = 5
+#: Fraction of the prior width within which a 95 % interval counts as touching the box edge.
+BOUND_TOLERANCE = 0.01
+#: A filter whose particles all descend from at most this many initial particles has lost
+#: the diversity of its (C, K) cloud; reported with the frozen parameters.
+FROZEN_ANCESTORS = 5
 
 
 def weighted_quantile(values: FloatArray, weights: FloatArray, q: FloatArray) -> FloatArray:
@@ -226,15 +231,51 @@ class IdentificationResult:
         """Parameters whose particles collapsed to a handful of distinct values at the end."""
         if self.unique_values is None:
             return []
-        final = np.asarray(self.unique_values)[-1]
+        # A random walk makes every value distinct after each move, so look at the fewest
+        # distinct values over the last tenth of the run (resampling points show the truth).
+        uv = np.asarray(self.unique_values)
+        tail = uv[-max(1, uv.shape[0] // 10) :]
+        fewest = tail.min(axis=0)
         names = ("damping_ns_per_m", "stiffness_n_per_m")
-        return [n for n, u in zip(names, final, strict=True) if u <= FROZEN_UNIQUE_VALUES]
+        return [n for n, u in zip(names, fewest, strict=True) if u <= FROZEN_UNIQUE_VALUES]
+
+    @property
+    def parameters_at_prior_bound(self) -> list[str]:
+        """Parameters whose 95 % interval reaches the edge of the prior box.
+
+        A posterior piled against the box edge is the prior's range speaking, not the data:
+        the data pull the value beyond what the prior allows (often a sign that the model
+        does not fit the record), so the number is no estimate.
+        """
+        ci = self.interval()
+        prior = self.problem.prior
+        out = []
+        for key, (lo, hi) in (
+            ("damping_ns_per_m", prior.damping_ns_per_m),
+            ("stiffness_n_per_m", prior.stiffness_n_per_m),
+        ):
+            tol = BOUND_TOLERANCE * (hi - lo)
+            if ci[key][0] <= lo + tol or ci[key][1] >= hi - tol:
+                out.append(key)
+        return out
+
+    @property
+    def final_ancestors(self) -> int | None:
+        """Distinct initial particles with descendants at the end (filters only)."""
+        if self.distinct_ancestors is None or len(self.distinct_ancestors) == 0:
+            return None
+        return int(np.asarray(self.distinct_ancestors)[-1])
 
     @property
     def degenerate(self) -> bool:
         """Whether the filter's weights collapsed at some point (ESS below 1 % of P)."""
         frac = self.min_ess_fraction
         return frac is not None and frac < DEGENERATE_ESS_FRACTION
+
+    @property
+    def trustworthy(self) -> bool:
+        """False when a frozen, degenerate or prior-bound posterior makes the sd meaningless."""
+        return not (self.frozen_parameters or self.parameters_at_prior_bound)
 
     @property
     def warnings(self) -> list[str]:
@@ -246,10 +287,23 @@ class IdentificationResult:
                 f"{FROZEN_UNIQUE_VALUES} distinct values at the end, so the reported sd is not "
                 "a posterior sd; use more particles, jitter, or method rbpf/exact."
             )
+        anc = self.final_ancestors
+        if anc is not None and anc <= FROZEN_ANCESTORS:
+            out.append(
+                f"all particles descend from {anc} initial particle(s): the filter lost its "
+                "diversity, so the reported spread understates the uncertainty."
+            )
         if self.degenerate:
             out.append(
                 f"the particle weights degenerated (smallest ESS {self.min_ess_fraction:.2%} of "
                 "the particles); the estimates rest on very few particles."
+            )
+        bound = self.parameters_at_prior_bound
+        if bound:
+            out.append(
+                f"{' and '.join(bound)} reach the edge of the prior box: the data push the "
+                "value outside the range the prior allows, so it is not an estimate and its "
+                "sd is not an uncertainty (check the model fit and the noise setting)."
             )
         sentence = self.identifiability.get("sentence")
         level = self.identifiability.get("level")
@@ -282,6 +336,9 @@ class IdentificationResult:
             "min_ess_fraction": self.min_ess_fraction,
             "frozen_parameters": self.frozen_parameters,
             "degenerate": self.degenerate,
+            "final_ancestors": self.final_ancestors,
+            "at_prior_bound": self.parameters_at_prior_bound,
+            "trustworthy": self.trustworthy,
         }
         out["warnings"] = self.warnings
         out["settings"] = self.settings

@@ -114,6 +114,9 @@ _COLUMN_UNITS: dict[str, tuple[str, ...]] = {
     "ground_acc": ("m/s^2", "m/s2", "m/s²", "ms^-2", "ms-2", "m.s-2", "m.s^-2"),
 }
 
+#: How the accepted units are written in messages.
+_DISPLAY_UNITS = {"time": "s", "grf": "N", "grf_left": "N", "grf_right": "N", "ground_acc": "m/s^2"}
+
 _EXTENSIONS = {".csv": "csv", ".tsv": "csv", ".mot": "mot", ".c3d": "c3d"}
 _INSOLE_COLUMNS = 19
 
@@ -853,8 +856,8 @@ def _read_csv(p: Path, source: str) -> _Table:
                 source,
                 f"line {header_line}, column {_show(raw)}",
                 f"the unit {unit!r} is not the one the workbench reads "
-                f"({_COLUMN_UNITS[canonical][0]})",
-                f"convert the column to {_COLUMN_UNITS[canonical][0]} and name it "
+                f"({_DISPLAY_UNITS[canonical]})",
+                f"convert the column to {_DISPLAY_UNITS[canonical]} and name it "
                 f"'{canonical}' (for forces in kN or kgf you may instead name it '{canonical}' "
                 "and pass --force-unit)",
             )

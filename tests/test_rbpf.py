@@ -1,0 +1,221 @@
+"""Tests of the Rao-Blackwellised particle filter: workbench.inference.rbpf."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench.errors import UsageError
+from workbench.inference import kalman as kf
+from workbench.inference.outputs import ParticleFilterOutput
+from workbench.inference.problem import (
+    IdentificationProblem,
+    StiffnessDampingPrior,
+    build_problem,
+)
+from workbench.inference.rbpf import liu_west_move, run_rbpf
+from workbench.records.inspection import inspect_record
+from workbench.synth.simulate import simulate_walking
+
+
+def _walking_problem(seed: int, duration_s: float, harmonics: int) -> IdentificationProblem:
+    sim = simulate_walking(
+        mass_kg=70.0,
+        pacing_hz=1.8,
+        duration_s=duration_s,
+        sample_rate_hz=100,
+        noise_sd_n=3.0,
+        start="rest",
+        seed=seed,
+    )
+    insp = inspect_record(sim.record, highpass_hz=0.15)
+    return build_problem(insp.com, insp.steps, harmonics=harmonics)
+
+
+@pytest.fixture(scope="module")
+def short_problem() -> IdentificationProblem:
+    return _walking_problem(seed=4, duration_s=8.0, harmonics=4)
+
+
+def _tiny_box(c: float, k: float, half_width: float = 1e-9) -> StiffnessDampingPrior:
+    # A box so narrow that every particle has the same (C, K) to 1e-13 relative.
+    return StiffnessDampingPrior((c - half_width, c + half_width), (k - half_width, k + half_width))
+
+
+# -- exactness ------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"ess_threshold": 0.5},  # equal weights: never resamples
+        {"ess_threshold": 1.0, "shrinkage": 0.98},  # resamples and moves after every piece
+        {"ess_threshold": 0.5, "discretisation": "euler", "resampling": "residual"},
+    ],
+)
+def test_point_mass_rbpf_equals_the_kalman_likelihood(short_problem, settings) -> None:
+    c, k = 950.0, 14000.0
+    problem = short_problem.with_prior(_tiny_box(c, k))
+    disc = settings.get("discretisation", "foh")
+    exact = kf.record_loglik(problem, [c], [k], discretisation=disc, return_pieces=True)
+    out = run_rbpf(problem, n_particles=16, seed=3, **settings)
+    assert isinstance(out, ParticleFilterOutput)
+    assert out.method == "rbpf"
+    assert out.loglik == pytest.approx(exact.loglik[0], abs=1e-8)
+    np.testing.assert_allclose(out.loglik_increments, exact.piece_loglik[0], atol=1e-8)
+    np.testing.assert_allclose(out.mean[-1], [c, k], rtol=1e-12)
+    # The force coefficients are the Kalman posterior of each piece, their sd the exact one.
+    np.testing.assert_allclose(out.piece_coefficients_mean, exact.theta_mean[0], atol=1e-6)
+    sd = np.sqrt(np.diagonal(exact.theta_cov[0], axis1=1, axis2=2))
+    np.testing.assert_allclose(out.piece_coefficients_sd, sd, rtol=1e-6)
+    assert out.trace_time_s.shape == (problem.n_pieces,)
+    np.testing.assert_array_equal(out.trace_time_s, problem.time_s[problem.piece_starts[1:] - 1])
+    if settings["ess_threshold"] == 1.0:
+        assert out.resampled.any()
+
+
+def test_point_mass_predictive_is_the_kalman_prediction(short_problem) -> None:
+    c, k = 950.0, 14000.0
+    problem = short_problem.with_prior(_tiny_box(c, k))
+    dense = kf.dense_kalman_loglik(problem, c, k)
+    out = run_rbpf(problem, n_particles=8, seed=0, predictive=True)
+    assert out.predicted_obs is not None
+    np.testing.assert_allclose(
+        out.predicted_obs, dense.predicted_obs, atol=1e-8 * problem.rms.max()
+    )
+
+
+def test_unnormalised_importance_sampling_without_resampling(short_problem) -> None:
+    # ess_threshold = 0: never resample, so the filter is importance sampling from the prior
+    # and its log-likelihood is the log mean of the exact likelihoods of its particles.
+    out = run_rbpf(short_problem, n_particles=64, seed=5, ess_threshold=0.0)
+    c, k = out.particles.T
+    ll = kf.record_loglik(short_problem, c, k).loglik
+    expected = np.logaddexp.reduce(ll) - np.log(ll.size)
+    assert out.loglik == pytest.approx(expected, abs=1e-8)
+    np.testing.assert_allclose(out.log_weights, ll - np.logaddexp.reduce(ll), atol=1e-8)
+    assert not out.resampled.any()
+    assert out.distinct_ancestors[-1] == 64
+
+
+def test_determinism_and_seed_dependence(short_problem) -> None:
+    kwargs = {"n_particles": 32, "exact_moves": 1}
+    a = run_rbpf(short_problem, seed=7, **kwargs)
+    b = run_rbpf(short_problem, seed=7, **kwargs)
+    c = run_rbpf(short_problem, seed=8, **kwargs)
+    # The record has a surprising step, so both kinds of move are exercised.
+    assert a.settings["liu_west_moves"] > 0
+    assert a.settings["exact_move_events"] > 0
+    for name in (
+        "mean",
+        "sd",
+        "ess",
+        "particles",
+        "log_weights",
+        "loglik_increments",
+        "piece_coefficients_mean",
+        "distinct_ancestors",
+        "unique_values",
+    ):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert a.loglik == b.loglik
+    assert a.settings == b.settings
+    assert not np.array_equal(a.particles, c.particles)
+    assert a.seed == 7
+
+
+# -- agreement with the exact posterior ----------------------------------------------------
+def _grid_posterior(problem: IdentificationProblem) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior mean and sd of (C, K) by brute force: record_loglik on zooming grids."""
+    (c_lo, c_hi), (k_lo, k_hi) = problem.prior.damping_ns_per_m, problem.prior.stiffness_n_per_m
+    box_lo, box_hi = np.array([c_lo, k_lo]), np.array([c_hi, k_hi])
+    mean, sd = 0.5 * (box_lo + box_hi), np.full(2, np.inf)  # first grid: the whole box
+    for zoom in (1.0, 6.0, 5.0):
+        lo = np.maximum(box_lo, mean - zoom * sd)
+        hi = np.minimum(box_hi, mean + zoom * sd)
+        axes = [np.linspace(lo[i], hi[i], 30) for i in range(2)]
+        cc, kk = np.meshgrid(*axes, indexing="ij")
+        ll = kf.record_loglik(problem, cc.ravel(), kk.ravel()).loglik
+        w = np.exp(ll - ll.max())
+        w /= w.sum()
+        pts = np.column_stack([cc.ravel(), kk.ravel()])
+        mean = w @ pts
+        sd = np.sqrt(w @ (pts - mean) ** 2)
+    return mean, sd
+
+
+@pytest.mark.slow
+def test_rbpf_matches_the_exact_posterior_on_a_walking_record() -> None:
+    # 30 s at 100 Hz, n = 10, steady start: the posterior contracts steadily along the record
+    # (see the module docstring of rbpf for a record on which it drifts instead).
+    sim = simulate_walking(
+        mass_kg=70.0,
+        pacing_hz=1.8,
+        duration_s=30.0,
+        sample_rate_hz=100,
+        noise_sd_n=3.0,
+        start="steady",
+        seed=2,
+    )
+    insp = inspect_record(sim.record, highpass_hz=0.15)
+    problem = build_problem(insp.com, insp.steps, harmonics=10)
+    mean, sd = _grid_posterior(problem)
+    out = run_rbpf(problem, n_particles=256, seed=0)
+    z = (out.mean[-1] - mean) / sd
+    assert np.all(np.abs(z) < 0.3), (out.mean[-1], out.sd[-1], mean, sd)
+    assert np.all(np.abs(out.sd[-1] / sd - 1.0) < 0.3), (out.sd[-1], sd)
+    # Prior-to-posterior contraction is large: the filter did learn C and K.
+    assert np.all(out.sd[-1] < 0.2 * problem.prior.sd)
+
+
+@pytest.mark.slow
+def test_exact_moves_follow_a_surprising_step(short_problem) -> None:
+    # In this 8 s record the tenth step moves the posterior of C from about 1900 to about
+    # 60 N s/m, far outside the cloud: tempering with exact Metropolis moves follows it.
+    mean, sd = _grid_posterior(short_problem)
+    out = run_rbpf(short_problem, n_particles=128, seed=0)
+    assert max(out.settings["tempering_steps"]) > 5
+    z = (out.mean[-1] - mean) / sd
+    assert np.all(np.abs(z) < 0.3), (out.mean[-1], out.sd[-1], mean, sd)
+    assert np.all(np.abs(out.sd[-1] / sd - 1.0) < 0.4), (out.sd[-1], sd)
+    assert 0.1 < out.settings["metropolis_acceptance"] < 0.9
+
+
+# -- the Liu-West kernel -------------------------------------------------------------------
+def test_liu_west_move_keeps_mean_and_covariance_and_the_box() -> None:
+    box = StiffnessDampingPrior((100.0, 2000.0), (5000.0, 30000.0))
+    rng = np.random.default_rng(1)
+    n = 200_000
+    c = rng.normal(900.0, 60.0, n)
+    k = 12000.0 + 20.0 * (c - 900.0) + rng.normal(0.0, 800.0, n)
+    moved_c, moved_k = liu_west_move(c, k, box, 0.9, rng)
+    before = np.cov(np.vstack([c, k]))
+    after = np.cov(np.vstack([moved_c, moved_k]))
+    # Monte Carlo tolerance: 4 standard errors of the means and 2 % of the covariance at
+    # n = 2e5 (the standard error of a sample variance is sqrt(2 / n) = 0.3 %).
+    shift = np.abs([moved_c.mean() - c.mean(), moved_k.mean() - k.mean()])
+    assert np.all(shift < 4.0 * np.sqrt(np.diag(before) / n)), shift
+    np.testing.assert_allclose(after, before, rtol=0.02)
+    # The values were renewed, not copied.
+    assert np.unique(moved_c).size == n
+    # Near an edge, reflection keeps every value inside the box.
+    edge_c = np.full(1000, 101.0) + rng.normal(0.0, 5.0, 1000).clip(-1.0, None)
+    edge_k = rng.uniform(5000.0, 30000.0, 1000)
+    mc, mk = liu_west_move(edge_c, edge_k, box, 0.5, rng)
+    assert box.contains(mc, mk).all()
+
+
+# -- usage ---------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"n_particles": 1}, "particles"),
+        ({"resampling": "bogus"}, "resampling"),
+        ({"ess_threshold": 1.5}, "ess_threshold"),
+        ({"shrinkage": 0.0}, "shrinkage"),
+        ({"discretisation": "rk4"}, "discretisation"),
+        ({"exact_moves": -1}, "exact_moves"),
+        ({"rejuvenate": "sometimes"}, "rejuvenate"),
+    ],
+)
+def test_bad_settings_raise_usage_errors(short_problem, kwargs, match) -> None:
+    with pytest.raises(UsageError, match=match):
+        run_rbpf(short_problem, **kwargs)

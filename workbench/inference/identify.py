@@ -1,0 +1,260 @@
+"""Identify a record: preprocess, build the problem, set the noise, run a method, wrap results.
+
+This is the one function the command line, the demo, the studies and batch work call. The
+steps, with the decisions they take:
+
+1. inspect the record (validation, preprocessing, steps, pacing, static balance);
+2. build the :class:`~workbench.inference.problem.IdentificationProblem` with the settings'
+   basis, pieces and prior (``"modal"`` scales with body mass; ``"seed"`` is the seed's box);
+3. set the observation noise (``auto``: maximum marginal likelihood, the default; ``seed``:
+   10 % of the RMS of u, u', u''; or a fraction);
+4. run ``rbpf`` (default), ``pf`` (seed-faithful) or ``exact``;
+5. assess identifiability from the posterior: contraction against the prior, C-K correlation
+   and the joint correlation of C and K with the force coefficients (for the filters this
+   uses the Kalman conditional posterior of the coefficients at a subsample of particles).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from workbench.inference.identifiability import force_correlation, identifiability_report
+from workbench.inference.kalman import record_loglik
+from workbench.inference.noise import apply_noise_setting
+from workbench.inference.outputs import ParticleFilterOutput
+from workbench.inference.problem import (
+    IdentificationProblem,
+    StiffnessDampingPrior,
+    build_problem,
+)
+from workbench.inference.results import IdentificationResult
+from workbench.inference.settings import IdentifySettings
+from workbench.records.inspection import Inspection, inspect_record
+from workbench.records.record import Record
+
+__all__ = ["identify", "identify_problem", "problem_from_inspection"]
+
+#: Particles (a weighted subsample) used to estimate the C/K-force correlation of a filter.
+CORRELATION_DRAWS = 128
+
+
+@dataclass(frozen=True)
+class _NoiseInfo:
+    fraction: float | None
+    source: str
+    detail: dict[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        label = (
+            f"{self.source}: observation noise {100 * self.fraction:.3g} % of the RMS of u, u', u''"
+            if self.fraction is not None
+            else self.source
+        )
+        return {"obs_fraction": self.fraction, "source": self.source, "label": label, **self.detail}
+
+
+def problem_from_inspection(insp: Inspection, settings: IdentifySettings) -> IdentificationProblem:
+    """Build the identification problem of an inspected record (noise not yet set)."""
+    mass = insp.record.require_mass()
+    prior = StiffnessDampingPrior.seed() if settings.prior == "seed" else None
+    pacing = settings.pacing_hz
+    if pacing is None and settings.pieces == "whole":
+        pacing = insp.pacing.pacing_hz
+    problem = build_problem(
+        insp.com,
+        insp.steps if settings.pieces == "steps" else None,
+        harmonics=settings.harmonics,
+        pacing_hz=pacing,
+        time_basis=settings.time_basis,  # type: ignore[arg-type]
+        pieces=settings.pieces,  # type: ignore[arg-type]
+        state_fraction=settings.state_noise_fraction,
+        prior=prior or StiffnessDampingPrior.from_modal(mass),
+    )
+    return problem
+
+
+def _set_noise(
+    problem: IdentificationProblem, settings: IdentifySettings
+) -> tuple[IdentificationProblem, _NoiseInfo]:
+    problem, estimate = apply_noise_setting(problem, settings.obs_noise)
+    detail: dict[str, Any] = {}
+    if estimate is not None:
+        detail = {"method": estimate.method, "at_bound": estimate.at_bound}
+    return problem, _NoiseInfo(problem.noise.obs_fraction, problem.noise.source, detail)
+
+
+def _filter_identifiability(
+    problem: IdentificationProblem, out: ParticleFilterOutput, seed: int
+) -> dict[str, Any]:
+    w = np.exp(out.log_weights - np.max(out.log_weights))
+    w /= w.sum()
+    draws = out.particles
+    cov = np.cov(draws.T, aweights=w) if draws.shape[0] > 1 else np.zeros((2, 2))
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = float(cov[0, 1] / (sd[0] * sd[1])) if np.all(sd > 0) else float("nan")
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(draws.shape[0], size=min(CORRELATION_DRAWS, draws.shape[0]), p=w)
+    force_max = (float("nan"), float("nan"))
+    if np.all(sd > 0):
+        res = record_loglik(problem, draws[idx, 0], draws[idx, 1], return_pieces=True)
+        var = np.diagonal(res.theta_cov, axis1=-2, axis2=-1)
+        fc = force_correlation(
+            draws[idx, 0],
+            draws[idx, 1],
+            np.ones(idx.size),
+            res.theta_mean,
+            var,
+            problem.coefficient_names,
+        )
+        force_max = (fc.max_damping, fc.max_stiffness)
+    report = identifiability_report(sd, problem.prior.sd, corr, force_max)
+    return report.to_json()
+
+
+def identify_problem(
+    problem: IdentificationProblem,
+    settings: IdentifySettings,
+    *,
+    noise_info: dict[str, Any] | None = None,
+    progress: bool = False,
+) -> IdentificationResult:
+    """Run one method on a problem whose noise is already set and wrap the result."""
+    common: dict[str, Any] = {
+        "problem": problem,
+        "noise": noise_info
+        or {"obs_fraction": problem.noise.obs_fraction, "source": problem.noise.source},
+        "settings": settings.to_json(),
+    }
+    if settings.method == "exact":
+        from workbench.inference.exact import exact_posterior
+
+        post = exact_posterior(problem)
+        rng = np.random.default_rng(settings.seed)
+        draws = post.sample(4000, rng)
+        force = post.force
+        if force is None:  # pragma: no cover - only with an injected likelihood
+            raise RuntimeError("the exact posterior returned no force coefficients")
+        report = post.identifiability
+        return IdentificationResult(
+            method="exact",
+            draws=draws,
+            weights=np.full(draws.shape[0], 1.0 / draws.shape[0]),
+            piece_coefficients_mean=force.mean,
+            piece_coefficients_sd=force.sd,
+            loglik=float(post.log_evidence),
+            identifiability=report.to_json() if report is not None else {},
+            extra={"exact": post.to_json() if hasattr(post, "to_json") else {}},
+            **common,
+        )
+    if settings.method == "rbpf":
+        from workbench.inference.rbpf import run_rbpf
+
+        out = run_rbpf(
+            problem,
+            n_particles=settings.n_particles,
+            seed=settings.seed,
+            resampling=settings.resampling,
+            ess_threshold=settings.ess_threshold,
+            progress=progress,
+        )
+    else:
+        from workbench.inference.pf import run_pf
+
+        out = run_pf(
+            problem,
+            n_particles=settings.n_particles,
+            seed=settings.seed,
+            resampling=settings.resampling,
+            ess_threshold=settings.ess_threshold,
+            progress=progress,
+        )
+    w = np.exp(out.log_weights - np.max(out.log_weights))
+    return IdentificationResult(
+        method=out.method,
+        draws=np.asarray(out.particles),
+        weights=w / w.sum(),
+        piece_coefficients_mean=out.piece_coefficients_mean,
+        piece_coefficients_sd=out.piece_coefficients_sd,
+        loglik=float(out.loglik),
+        identifiability=_filter_identifiability(problem, out, settings.seed),
+        piece_mean=out.piece_mean,
+        piece_sd=out.piece_sd,
+        trace_time_s=out.trace_time_s,
+        trace_mean=out.mean,
+        trace_sd=out.sd,
+        ess=out.ess,
+        distinct_ancestors=out.distinct_ancestors,
+        unique_values=out.unique_values,
+        n_particles=out.n_particles,
+        extra={"filter_settings": out.settings},
+        **common,
+    )
+
+
+def identify(
+    record: Record | Inspection,
+    settings: IdentifySettings | None = None,
+    *,
+    rescale: bool = False,
+    progress: bool = False,
+) -> IdentificationResult:
+    """Identify the SMD model of one record.
+
+    Parameters
+    ----------
+    record : Record or Inspection
+        A loaded record (with body mass), or its inspection if already done.
+    settings : IdentifySettings, optional
+        Method, particles, harmonics, noise, prior, seed... (defaults: see
+        :mod:`workbench.inference.settings`).
+    rescale : bool, default False
+        Apply ``--rescale-to-mass`` during inspection.
+    progress : bool, default False
+        Show a progress bar for the filters.
+
+    Returns
+    -------
+    IdentificationResult
+    """
+    settings = settings or IdentifySettings()
+    if isinstance(record, Inspection):
+        insp = record
+    else:
+        insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=rescale)
+    problem = problem_from_inspection(insp, settings)
+    problem, info = _set_noise(problem, settings)
+    result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
+    result.extra["inspection_warnings"] = list(insp.warnings)
+    _downgrade_untrustworthy(result)
+    return result
+
+
+def _downgrade_untrustworthy(result: IdentificationResult) -> None:
+    """Mark a posterior piled at the prior's edge, or a collapsed cloud, as not identified.
+
+    Contraction alone would call such a posterior "well identified"; say what it is instead.
+    """
+    bound = result.parameters_at_prior_bound
+    collapsed = result.frozen_parameters or (
+        result.final_ancestors is not None and result.final_ancestors <= 5
+    )
+    if not bound and not collapsed:
+        return
+    report = dict(result.identifiability)
+    why = (
+        f"{' and '.join(bound)} sit at the edge of the prior box"
+        if bound
+        else "the particle cloud collapsed"
+    )
+    report["level"] = "not identified"
+    report["sentence"] = (
+        f"Not identified: {why}, so the numbers reflect the prior range or a collapsed filter, "
+        "not this record; a model that fits the record better (see the residual diagnostics) "
+        "or another noise setting is needed before C and K can be read from it."
+    )
+    report["identified_damping"] = False
+    report["identified_stiffness"] = False
+    result.identifiability = report
