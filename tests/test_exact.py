@@ -385,7 +385,7 @@ def _walking_problem(i: int):
     return build_problem(insp.com, insp.steps), truth
 
 
-@pytest.mark.slow
+@pytest.mark.study
 @pytest.mark.xfail(
     strict=True,
     reason=(

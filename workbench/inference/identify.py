@@ -100,6 +100,8 @@ def _filter_identifiability(
     force_max = (float("nan"), float("nan"))
     if np.all(sd > 0):
         res = record_loglik(problem, draws[idx, 0], draws[idx, 1], return_pieces=True)
+        if res.theta_cov is None or res.theta_mean is None:  # pragma: no cover - contract
+            raise RuntimeError("record_loglik(return_pieces=True) returned no coefficients")
         var = np.diagonal(res.theta_cov, axis1=-2, axis2=-1)
         fc = force_correlation(
             draws[idx, 0],
