@@ -301,22 +301,10 @@ def test_find_mode_on_a_box_constrained_quadratic() -> None:
 
 # -- the real likelihood: the seed's numerical example -----------------------------------------
 def _seed_problem(obs_fraction: float):
-    from workbench.records.preprocess import preprocess
-    from workbench.synth.simulate import seed_numerical_example
+    from workbench.inference.problem import seed_example_problem
 
-    sim = seed_numerical_example()
-    com = preprocess(sim.record, highpass_hz=0)
-    problem = build_problem(
-        com,
-        None,
-        pieces="whole",
-        pacing_hz=0.5,
-        time_basis="absolute",
-        harmonics=10,
-        obs_fraction=obs_fraction,
-    )
-    truth = np.array([sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]])
-    return problem, truth
+    problem, truth = seed_example_problem(obs_fraction=obs_fraction)
+    return problem, np.array([truth["damping_ns_per_m"], truth["stiffness_n_per_m"]])
 
 
 @pytest.mark.slow

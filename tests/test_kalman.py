@@ -16,11 +16,12 @@ from workbench.inference.problem import (
     NoiseModel,
     StiffnessDampingPrior,
     build_problem,
+    seed_example_problem,
 )
 from workbench.models.force import FourierForce
 from workbench.records.inspection import inspect_record
-from workbench.records.preprocess import COMResponse, preprocess
-from workbench.synth.simulate import seed_numerical_example, simulate_walking
+from workbench.records.preprocess import COMResponse
+from workbench.synth.simulate import simulate_walking
 
 MASS = 70.0
 DAMPING = 900.0
@@ -254,18 +255,8 @@ def test_piece_filter_chain_and_predictive_match_dense(walking_problem) -> None:
 # -- physics ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def seed_problem() -> tuple[IdentificationProblem, float, float]:
-    sim = seed_numerical_example(duration_s=5.0)
-    com = preprocess(sim.record, highpass_hz=0)
-    problem = build_problem(
-        com,
-        None,
-        pieces="whole",
-        pacing_hz=0.5,
-        time_basis="absolute",
-        harmonics=10,
-        obs_fraction=0.01,
-    )
-    return problem, sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]
+    problem, truth = seed_example_problem(duration_s=5.0)
+    return problem, truth["damping_ns_per_m"], truth["stiffness_n_per_m"]
 
 
 def test_seed_example_is_consistent_at_the_truth(seed_problem) -> None:

@@ -17,11 +17,11 @@ from workbench.inference.problem import (
     NoiseModel,
     StiffnessDampingPrior,
     build_problem,
+    seed_example_problem,
 )
 from workbench.inference.resampling import SCHEMES
 from workbench.records.inspection import inspect_record
-from workbench.records.preprocess import preprocess
-from workbench.synth.simulate import seed_numerical_example, simulate_walking
+from workbench.synth.simulate import simulate_walking
 
 
 def _walking(duration_s: float, seed: int):
@@ -233,19 +233,8 @@ SEED_PARTICLES = 2000
 
 @pytest.fixture(scope="module")
 def seed_example_run() -> tuple[ParticleFilterOutput, dict]:
-    sim = seed_numerical_example()
-    com = preprocess(sim.record, highpass_hz=0)
-    problem = build_problem(
-        com,
-        None,
-        pieces="whole",
-        pacing_hz=0.5,
-        time_basis="absolute",
-        harmonics=10,
-        obs_fraction=0.01,
-        prior=StiffnessDampingPrior.seed(),
-    )
-    return run_pf(problem, n_particles=SEED_PARTICLES, seed=0), sim.truth
+    problem, truth = seed_example_problem(prior=StiffnessDampingPrior.seed())
+    return run_pf(problem, n_particles=SEED_PARTICLES, seed=0), truth
 
 
 @pytest.mark.slow
