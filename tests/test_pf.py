@@ -12,6 +12,7 @@ from workbench.inference.kalman import dense_kalman_loglik
 from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.pf import run_pf
 from workbench.inference.problem import (
+    SEED_STATE_FRACTION,
     ForcePrior,
     IdentificationProblem,
     NoiseModel,
@@ -143,7 +144,8 @@ def test_output_structure(walking_problem):
     np.testing.assert_allclose(w @ out.particles, out.mean[-1], rtol=1e-12)
     assert np.all((out.ess >= 1.0 - 1e-9) & (out.ess <= 500 + 1e-9))
     # Resampling exactly where the ESS fell below half the particles.
-    np.testing.assert_array_equal(out.resampled, out.ess < 250)
+    np.testing.assert_array_equal(out.resampled[:-1], out.ess[:-1] < 250)
+    assert not out.resampled[-1]
     # Ancestors only die out.
     assert np.all(np.diff(out.distinct_ancestors) <= 0)
     assert out.settings["resampling"] == "systematic" and out.settings["jitter"] is None
@@ -153,7 +155,7 @@ def test_ess_threshold_extremes(walking_problem):
     never = run_pf(walking_problem, n_particles=200, seed=1, ess_threshold=0.0)
     assert not never.resampled.any() and np.all(never.distinct_ancestors == 200)
     always = run_pf(walking_problem, n_particles=200, seed=1, ess_threshold=1.0)
-    assert always.resampled.all()
+    assert always.resampled[:-1].all() and not always.resampled[-1]
 
 
 def test_determinism(walking_problem):
@@ -233,7 +235,9 @@ SEED_PARTICLES = 2000
 
 @pytest.fixture(scope="module")
 def seed_example_run() -> tuple[ParticleFilterOutput, dict]:
-    problem, truth = seed_example_problem(prior=StiffnessDampingPrior.seed())
+    problem, truth = seed_example_problem(
+        prior=StiffnessDampingPrior.seed(), state_fraction=SEED_STATE_FRACTION
+    )
     return run_pf(problem, n_particles=SEED_PARTICLES, seed=0), truth
 
 
@@ -241,11 +245,12 @@ def seed_example_run() -> tuple[ParticleFilterOutput, dict]:
 @pytest.mark.xfail(
     strict=True,
     reason=(
-        "the seed-faithful bootstrap filter degenerates on the seed example: the first "
-        "sample (u = u' = 0 observed to 1 % of their RMS against an initial spread of twice "
-        "the RMS) leaves one surviving particle whatever P, so its single prior draw of the "
-        "21 force coefficients (no process noise, one piece) is kept for the whole record and "
-        "C, K wander to compensate (measured at P = 2000: C -1041, K 69495 at 10 s)"
+        "the seed-faithful bootstrap filter degenerates on the seed example: its 21 force "
+        "coefficients are static prior draws (no process noise, one piece), and the first "
+        "u'' samples, observed to 1 % of their RMS, pin one linear combination of them each; "
+        "at P = 2000 the first sample leaves an ESS of 25 and the third a single ancestor, "
+        "whose force draw is kept for the whole record while C and K wander to compensate "
+        "(C -849, K 71 at 10 s)"
     ),
 )
 def test_seed_example_converges_within_5_percent(seed_example_run):
@@ -258,9 +263,11 @@ def test_seed_example_converges_within_5_percent(seed_example_run):
 @pytest.mark.slow
 def test_seed_example_degeneracy_is_reported(seed_example_run):
     out, _ = seed_example_run
-    # Collapse at the very first sample, one lineage for the rest of the record.
-    assert out.ess[0] < 1.5
-    assert np.all(out.distinct_ancestors == 1)
+    # u and u' of the first sample are drawn from their conditional, so the first sample
+    # keeps a few dozen particles; the static force coefficients then collapse the cloud onto
+    # one lineage within a few samples, for the rest of the record.
+    assert 2.0 < out.ess[0] < 0.1 * SEED_PARTICLES
+    assert np.all(out.distinct_ancestors[10:] == 1)
     assert out.resampled.mean() > 0.9
     # The estimate is then far from the truth, and the filter says so by its diagnostics
     # rather than by its (tiny) particle spread.

@@ -184,6 +184,9 @@ def _identify_settings(args: argparse.Namespace) -> Any:
         "pieces": args.pieces,
         "prior": args.prior,
         "seed": args.seed,
+        "state_noise_fraction": args.state_noise,
+        "observe": args.observe,
+        "force_check": False if args.no_force_check else None,
     }
     if args.config:
         return IdentifySettings.from_toml(args.config, **overrides)
@@ -299,6 +302,23 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["modal", "seed"],
         help="(C, K) prior box: from f_n 1-4 Hz and damping ratio 0.05-0.9 at the "
         "body mass (default), or the seed's 400-1000 N s/m, 12-20 kN/m",
+    )
+    p.add_argument(
+        "--state-noise",
+        type=float,
+        metavar="FRACTION",
+        help="process noise of u, u' per sample as a fraction of their RMS (default: the "
+        "seed's 0.005 for pf, 0 for rbpf and exact)",
+    )
+    p.add_argument(
+        "--observe",
+        choices=["all", "acc"],
+        help="channels the likelihood uses: u, u', u'' as the seed (default) or u'' only",
+    )
+    p.add_argument(
+        "--no-force-check",
+        action="store_true",
+        help="skip the check that C and K do not depend on the force model (saves time)",
     )
     p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
     p.add_argument("--seed", type=int, help="random seed (default 0)")

@@ -70,7 +70,8 @@ def problem_from_inspection(insp: Inspection, settings: IdentifySettings) -> Ide
         pacing_hz=pacing,
         time_basis=settings.time_basis,  # type: ignore[arg-type]
         pieces=settings.pieces,  # type: ignore[arg-type]
-        state_fraction=settings.state_noise_fraction,
+        state_fraction=settings.state_fraction,
+        observe=settings.observe,
         prior=prior or StiffnessDampingPrior.from_modal(mass),
     )
     return problem
@@ -230,8 +231,32 @@ def identify(
     problem, info = _set_noise(problem, settings)
     result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
     result.extra["inspection_warnings"] = list(insp.warnings)
+    if settings.force_check:
+        apply_force_model_check(result, problem)
     _downgrade_untrustworthy(result)
     return result
+
+
+def apply_force_model_check(result: IdentificationResult, problem: IdentificationProblem) -> None:
+    """Run :func:`~workbench.inference.force_check.force_model_check` and grade by it.
+
+    The check's JSON goes to ``identifiability["force_model_check"]``; a parameter that moves
+    beyond the threshold becomes "not identified" with the check's sentence, whatever its
+    contraction (a misfitting model is often the more confident one).
+    """
+    from workbench.inference.force_check import force_model_check
+
+    check = force_model_check(problem)
+    report = dict(result.identifiability)
+    report["force_model_check"] = check.to_json()
+    if not check.passed:
+        report["level"] = "not identified"
+        report["sentence"] = f"Not identified: {check.sentence}."
+        if check.dependent[0]:
+            report["identified_damping"] = False
+        if check.dependent[1]:
+            report["identified_stiffness"] = False
+    result.identifiability = report
 
 
 def _downgrade_untrustworthy(result: IdentificationResult) -> None:
@@ -251,11 +276,13 @@ def _downgrade_untrustworthy(result: IdentificationResult) -> None:
         if bound
         else "the particle cloud collapsed"
     )
+    check = report.get("force_model_check") or {}
+    also = "" if check.get("passed", True) else f" Also, {check['sentence']}."
     report["level"] = "not identified"
     report["sentence"] = (
         f"Not identified: {why}, so the numbers reflect the prior range or a collapsed filter, "
         "not this record; a model that fits the record better (see the residual diagnostics) "
-        "or another noise setting is needed before C and K can be read from it."
+        f"or another noise setting is needed before C and K can be read from it.{also}"
     )
     report["identified_damping"] = False
     report["identified_stiffness"] = False

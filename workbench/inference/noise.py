@@ -150,7 +150,7 @@ def noise_with_fraction(problem: IdentificationProblem, fraction: float, source:
         )
     return dataclasses.replace(
         problem.noise,
-        obs_sd=f * np.asarray(problem.rms, dtype=np.float64),
+        obs_sd=problem.obs_sd_for(f),
         obs_fraction=f,
         source=source,
     )

@@ -50,6 +50,8 @@ from workbench.records.record import G_M_S2
 from workbench.records.steps import Steps
 
 __all__ = [
+    "KALMAN_STATE_FRACTION",
+    "OBSERVED_CHANNELS",
     "SEED_OBS_FRACTION",
     "SEED_STATE_FRACTION",
     "ForcePrior",
@@ -67,6 +69,18 @@ PieceMode = Literal["steps", "whole"]
 SEED_OBS_FRACTION = 0.10
 #: Seed section 5.2: process noise 0.5 % of the RMS of each response state, per time step.
 SEED_STATE_FRACTION = 0.005
+#: Process noise of (u, u') for the Kalman-based methods (rbpf, exact): none. u and u' are
+#: integrals of the measured u'', so the SMD equation holds exactly between samples; the
+#: seed's 0.5 % only keeps the plain particle filter's particles alive.
+KALMAN_STATE_FRACTION = 0.0
+#: An unobserved channel keeps an observation sd this many times its RMS: its Kalman gain
+#: and its share of the likelihood's (C, K) dependence are then below 1e-8, i.e. rounding.
+UNOBSERVED_SD_FACTOR = 1e4
+#: Which of (u, u', u'') the likelihood uses (``observe=``): the seed's three, or only the
+#: acceleration u'' -- the one channel the force plate measures; u and u' are its integrals,
+#: whose integrated noise and high-pass distortion the i.i.d. noise model does not describe.
+OBSERVED_CHANNELS = {"all": (True, True, True), "acc": (False, False, True)}
+
 #: Seed section 5.2: random-walk std of C [N s/m] and K [N/m] per time step.
 SEED_DAMPING_RW_SD = 5.0
 SEED_STIFFNESS_RW_SD = 100.0
@@ -272,6 +286,9 @@ class IdentificationProblem:
         Record the problem was built from.
     rms : ndarray, shape (3,)
         RMS of u, u', u'' over the identified samples (noise fractions refer to these).
+    observe : {"all", "acc"}
+        Channels the likelihood uses (:data:`OBSERVED_CHANNELS`); an unobserved channel's
+        noise sd is :data:`UNOBSERVED_SD_FACTOR` times its RMS.
     """
 
     mass_kg: float
@@ -289,6 +306,18 @@ class IdentificationProblem:
     force_prior: ForcePrior
     source: str = "<memory>"
     rms: FloatArray = dataclasses.field(default_factory=lambda: np.ones(3))
+    observe: str = "all"
+
+    def obs_sd_for(self, fraction: float) -> FloatArray:
+        """Observation sd of (u, u', u'') for a noise fraction of the observed channels' RMS.
+
+        An unobserved channel gets :data:`UNOBSERVED_SD_FACTOR` times its RMS whatever the
+        fraction: a sd that scaled with the fraction would add ``-log(fraction)`` per sample
+        to the likelihood and bias the ``auto`` estimate (by 1/sqrt(3) with u'' alone).
+        """
+        observed = np.asarray(OBSERVED_CHANNELS[self.observe])
+        rms = np.asarray(self.rms, dtype=np.float64)
+        return np.where(observed, float(fraction) * rms, UNOBSERVED_SD_FACTOR * rms)
 
     @property
     def n_samples(self) -> int:
@@ -343,7 +372,7 @@ class IdentificationProblem:
                 f"the observation noise fraction must be a positive number, got {obs_fraction!r}"
             )
         return NoiseModel(
-            obs_sd=obs_fraction * self.rms,
+            obs_sd=self.obs_sd_for(obs_fraction),
             state_sd=state_fraction * self.rms[:2],
             initial_state_sd=2.0 * self.rms[:2],
             damping_rw_sd_ns_per_m=self.noise.damping_rw_sd_ns_per_m,
@@ -365,6 +394,7 @@ def build_problem(
     state_fraction: float = SEED_STATE_FRACTION,
     prior: StiffnessDampingPrior | None = None,
     force_prior: ForcePrior | None = None,
+    observe: str = "all",
 ) -> IdentificationProblem:
     """Build the identification problem of a preprocessed record.
 
@@ -394,11 +424,15 @@ def build_problem(
         Default: :meth:`StiffnessDampingPrior.from_modal` for the body mass.
     force_prior : ForcePrior, optional
         Default: :meth:`ForcePrior.default`.
+    observe : {"all", "acc"}, default "all"
+        Observe u, u', u'' (the seed) or only u'' (:data:`OBSERVED_CHANNELS`).
 
     Returns
     -------
     IdentificationProblem
     """
+    if observe not in OBSERVED_CHANNELS:
+        raise UsageError(f"observe must be 'all' or 'acc', got {observe!r}")
     if int(harmonics) < 1:
         raise UsageError(f"--harmonics must be a whole number of at least 1, got {harmonics!r}")
     harmonics = int(harmonics)
@@ -458,6 +492,7 @@ def build_problem(
         force_prior=force_prior or ForcePrior.default(float(com.mass_kg), harmonics),
         source=com.source,
         rms=rms,
+        observe=observe,
     )
     source = "seed" if obs_fraction == SEED_OBS_FRACTION else "fixed"
     return problem.with_noise(
@@ -469,6 +504,7 @@ def seed_example_problem(
     *,
     duration_s: float = 10.0,
     obs_fraction: float = 0.01,
+    state_fraction: float = KALMAN_STATE_FRACTION,
     prior: StiffnessDampingPrior | None = None,
 ) -> tuple[IdentificationProblem, dict[str, Any]]:
     """Return the seed's numerical example (section 4) as a problem, with its truth.
@@ -482,6 +518,9 @@ def seed_example_problem(
         Record length [s].
     obs_fraction : float, default 0.01
         Observation noise as a fraction of the RMS of u, u', u'' (the data are noise-free).
+    state_fraction : float, default 0
+        Process noise of (u, u') per sample as a fraction of their RMS (the Kalman-based
+        methods' default; pass :data:`SEED_STATE_FRACTION` for the seed-faithful filter).
     prior : StiffnessDampingPrior, optional
         Default: the box from natural frequency and damping ratio at 75 kg.
 
@@ -503,6 +542,7 @@ def seed_example_problem(
         time_basis="absolute",
         harmonics=10,
         obs_fraction=obs_fraction,
+        state_fraction=state_fraction,
         prior=prior,
     )
     return problem, sim.truth

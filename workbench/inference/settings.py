@@ -10,6 +10,18 @@ documents a better choice:
   marginal likelihood); ``"seed"`` is the seed's 10 % of the RMS of u, u', u''.
 - ``prior = "modal"``: a (C, K) box from natural frequency 1-4 Hz and damping ratio
   0.05-0.9 at the body mass; ``"seed"`` is the seed's 400-1000 N s/m, 12000-20000 N/m.
+- ``state_noise_fraction``: process noise of (u, u') per sample as a fraction of their RMS.
+  Unset, it is the seed's 0.5 % for ``"pf"`` (whose particles need it to stay alive) and
+  zero for ``"rbpf"`` and ``"exact"``: u and u' are integrals of the measured u'', so the
+  SMD equation holds exactly between samples, and a process noise the data do not have is
+  part of the model that pulls the estimate (seed example, obs noise 1 %: the exact
+  posterior mean moves from 1.0 % / 1.4 % below the truth in C / K with the seed's 0.5 %
+  to 0.2 % / 0.02 % with none; ``tests/test_exact.py``).
+- ``force_check = true``: after the method, refit (C, K) with a richer force (harmonics
+  drifting across each step) and call C or K "not identified" when the two disagree
+  (:mod:`workbench.inference.force_check`); costs two mode searches.
+- ``observe = "all"``: the likelihood uses u, u', u'' as the seed does; ``"acc"`` uses
+  only u'' (what the plate measures), leaving u, u' to the model's dynamics.
 - ``time_basis = "step_phase"``: each step's force basis runs on its own clock, so force
   coefficients are comparable across steps; ``"absolute"`` is the seed's.
 
@@ -34,6 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError
+from workbench.inference.problem import KALMAN_STATE_FRACTION, SEED_STATE_FRACTION
 
 __all__ = ["METHODS", "IdentifySettings", "parse_obs_noise"]
 
@@ -74,13 +87,15 @@ class IdentifySettings:
     pacing_hz: float | None = None
     highpass_hz: float = 0.15
     obs_noise: float | str = "auto"
-    state_noise_fraction: float = 0.005
+    state_noise_fraction: float | None = None
     time_basis: str = "step_phase"
     pieces: str = "steps"
     prior: str = "modal"
     resampling: str = "systematic"
     ess_threshold: float = 0.5
     seed: int = 0
+    force_check: bool = True
+    observe: str = "all"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -98,12 +113,28 @@ class IdentifySettings:
             raise UsageError(
                 f"time_basis must be 'step_phase' or 'absolute', got {self.time_basis!r}"
             )
+        if self.observe not in ("all", "acc"):
+            raise UsageError(f"--observe must be 'all' or 'acc', got {self.observe!r}")
         if self.pieces not in ("steps", "whole"):
             raise UsageError(f"pieces must be 'steps' or 'whole', got {self.pieces!r}")
         if not (0 < self.ess_threshold <= 1):
             raise UsageError(f"ess_threshold must be in (0, 1], got {self.ess_threshold}")
+        if self.state_noise_fraction is not None and not (
+            0 <= float(self.state_noise_fraction) < 1
+        ):
+            raise UsageError(
+                "state_noise_fraction must be a fraction in [0, 1), got "
+                f"{self.state_noise_fraction!r}"
+            )
         if self.highpass_hz < 0:
             raise UsageError(f"--highpass-hz must be 0 (off) or positive, got {self.highpass_hz}")
+
+    @property
+    def state_fraction(self) -> float:
+        """Process noise fraction to use: the given one or the method's default."""
+        if self.state_noise_fraction is not None:
+            return float(self.state_noise_fraction)
+        return SEED_STATE_FRACTION if self.method == "pf" else KALMAN_STATE_FRACTION
 
     @property
     def n_particles(self) -> int:
