@@ -101,3 +101,34 @@ def test_bad_threshold_is_a_usage_error() -> None:
     problem, _ = seed_example_problem(duration_s=1.0)
     with pytest.raises(UsageError, match="threshold"):
         force_model_check(problem, threshold=0.0)
+
+
+def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
+    """C and K are estimated jointly: when the check moves one, neither is identified."""
+    import workbench.inference.force_check as fc
+    from workbench.inference.identify import apply_force_model_check, identify
+    from workbench.inference.settings import IdentifySettings
+
+    sim, _, _ = _walk(0, variability=True)
+    settings = IdentifySettings(particles=32, obs_noise=0.1, harmonics=3, force_check=False)
+    result = identify(sim.record.slice_time(0.0, 8.0), settings)
+    problem = result.problem
+    assert "force_model_check" not in result.identifiability
+    fake = fc.ForceModelCheck(
+        reference_mode=np.array([700.0, 9000.0]),
+        rich_mode=np.array([1500.0, 9100.0]),
+        reference_sd=np.array([10.0, 100.0]),
+        rich_sd=np.array([40.0, 300.0]),
+        z=np.array([20.0, 0.4]),
+        dependent=np.array([True, False]),
+        threshold=3.0,
+        modulated_harmonics=3,
+        sentence="C depends on the force model",
+    )
+    monkeypatch.setattr(fc, "force_model_check", lambda _problem: fake)
+    apply_force_model_check(result, problem)
+    ident = result.identifiability
+    assert ident["level"] == "not identified"
+    assert not ident["identified_damping"] and not ident["identified_stiffness"]
+    assert "estimated jointly" in ident["sentence"]
+    assert ident["force_model_check"]["z"] == [20.0, 0.4]
