@@ -93,7 +93,10 @@ def _filter_identifiability(
     w = np.exp(out.log_weights - np.max(out.log_weights))
     w /= w.sum()
     draws = out.particles
-    cov = np.cov(draws.T, aweights=w) if draws.shape[0] > 1 else np.zeros((2, 2))
+    # Weighted moments without a degrees-of-freedom correction: np.cov's would divide by
+    # zero when all the weight sits on one particle (a collapsed cloud has zero spread).
+    dev = draws - w @ draws
+    cov = (dev * w[:, None]).T @ dev
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = float(cov[0, 1] / (sd[0] * sd[1])) if np.all(sd > 0) else float("nan")
     rng = np.random.default_rng(seed)
@@ -268,8 +271,11 @@ def _downgrade_untrustworthy(result: IdentificationResult) -> None:
     Contraction alone would call such a posterior "well identified"; say what it is instead.
     """
     bound = result.parameters_at_prior_bound
-    collapsed = result.frozen_parameters or (
-        result.final_ancestors is not None and result.final_ancestors <= 5
+    # Few surviving *initial* ancestors is path degeneracy, normal for the rbpf (its moves
+    # renew the values); it means a collapse only for the seed's pf, whose values are
+    # renewed by nothing but the random walk.
+    collapsed = bool(result.frozen_parameters) or (
+        result.method == "pf" and result.final_ancestors is not None and result.final_ancestors <= 5
     )
     if not bound and not collapsed:
         return

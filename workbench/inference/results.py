@@ -288,7 +288,7 @@ class IdentificationResult:
                 "a posterior sd; use more particles, jitter, or method rbpf/exact."
             )
         anc = self.final_ancestors
-        if anc is not None and anc <= FROZEN_ANCESTORS:
+        if self.method == "pf" and anc is not None and anc <= FROZEN_ANCESTORS:
             out.append(
                 f"all particles descend from {anc} initial particle(s): the filter lost its "
                 "diversity, so the reported spread understates the uncertainty."
