@@ -252,6 +252,25 @@ def test_piece_filter_chain_and_predictive_match_dense(walking_problem) -> None:
     assert total == pytest.approx(dense.loglik, rel=1e-9)
 
 
+def test_chunked_piece_filter_equals_one_chunk(walking_problem, monkeypatch) -> None:
+    # The piece filter works through a piece in chunks of samples (bounded memory); chunk
+    # boundaries must not change anything, the predictive output included.
+    problem, c, k = walking_problem
+    pairs = ([c, 0.8 * c, 1.3 * c], [k, 1.1 * k, 0.7 * k])
+    whole = kf.record_loglik(problem, *pairs, return_pieces=True)
+    x_mean, x_cov = kf.initial_state(problem, 3)
+    first = kf.piece_filter(problem, 0, *pairs, x_mean, x_cov, predictive=True)
+    monkeypatch.setattr(kf, "_MAX_CHUNK", 7)
+    chunked = kf.record_loglik(problem, *pairs, return_pieces=True)
+    np.testing.assert_allclose(chunked.piece_loglik, whole.piece_loglik, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(chunked.theta_mean, whole.theta_mean, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(chunked.theta_cov, whole.theta_cov, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(chunked.x_mean, whole.x_mean, rtol=1e-10, atol=1e-15)
+    again = kf.piece_filter(problem, 0, *pairs, x_mean, x_cov, predictive=True)
+    np.testing.assert_allclose(again.predicted_obs, first.predicted_obs, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(again.partial_loglik, first.partial_loglik, rtol=1e-12, atol=1e-9)
+
+
 # -- physics ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def seed_problem() -> tuple[IdentificationProblem, float, float]:

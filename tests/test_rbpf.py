@@ -122,6 +122,21 @@ def test_determinism_and_seed_dependence(short_problem) -> None:
     assert a.seed == 7
 
 
+def test_exact_budget_buys_exact_moves_at_the_first_resamplings(short_problem) -> None:
+    # The cloud collapses from the prior onto the posterior in the first pieces, where exact
+    # moves are cheap: the budget pays for them there and nowhere else.
+    kwargs = {"n_particles": 32, "seed": 2, "exact_moves": 1, "ess_threshold": 0.5}
+    out = run_rbpf(short_problem, **kwargs)
+    first = int(np.flatnonzero(out.resampled)[0])
+    assert out.settings["exact_move_events"] >= 1
+    assert out.settings["exact_budget"] == 0.3
+    none = run_rbpf(short_problem, exact_budget=0.0, **kwargs)
+    # Without a budget, exact moves remain only after a second resampling inside a piece.
+    surprises = sum(max(0, n - 2) for n in none.settings["tempering_steps"])
+    assert none.settings["exact_move_events"] == surprises
+    assert out.resampled[first] and none.resampled[first]
+
+
 # -- agreement with the exact posterior ----------------------------------------------------
 def _grid_posterior(problem: IdentificationProblem) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and sd of (C, K) by brute force: record_loglik on zooming grids."""
@@ -170,13 +185,24 @@ def test_rbpf_matches_the_exact_posterior_on_a_walking_record() -> None:
 def test_exact_moves_follow_a_surprising_step(short_problem) -> None:
     # In this 8 s record the tenth step moves the posterior of C from about 1900 to about
     # 60 N s/m, far outside the cloud: tempering with exact Metropolis moves follows it.
+    # One run of 128 particles is one Monte Carlo draw whose error on this hard record is
+    # about 0.25 posterior sd (rms over seeds 0-5): each run must be in the right place,
+    # and the runs of four seeds together (about 512 particles) close to the exact mean.
+    # The posterior of C sits 1.3 sd above the lower edge of the prior box, where the
+    # Liu-West kernel's reflection widens the cloud: its sd of C is 1.1-1.5 times the exact
+    # one over seeds 0-5 (1.2-1.5 with the earlier defaults, shrinkage 0.98 and no budget).
     mean, sd = _grid_posterior(short_problem)
-    out = run_rbpf(short_problem, n_particles=128, seed=0)
-    assert max(out.settings["tempering_steps"]) > 5
-    z = (out.mean[-1] - mean) / sd
-    assert np.all(np.abs(z) < 0.3), (out.mean[-1], out.sd[-1], mean, sd)
-    assert np.all(np.abs(out.sd[-1] / sd - 1.0) < 0.4), (out.sd[-1], sd)
-    assert 0.1 < out.settings["metropolis_acceptance"] < 0.9
+    means = []
+    for seed in range(4):
+        out = run_rbpf(short_problem, n_particles=128, seed=seed)
+        assert max(out.settings["tempering_steps"]) > 5
+        z = (out.mean[-1] - mean) / sd
+        assert np.all(np.abs(z) < 0.75), (seed, out.mean[-1], out.sd[-1], mean, sd)
+        assert np.all(np.abs(out.sd[-1] / sd - 1.0) < 0.5), (seed, out.sd[-1], sd)
+        assert 0.1 < out.settings["metropolis_acceptance"] < 0.9
+        means.append(out.mean[-1])
+    z = (np.mean(means, axis=0) - mean) / sd
+    assert np.all(np.abs(z) < 0.3), (means, mean, sd)
 
 
 # -- the Liu-West kernel -------------------------------------------------------------------
@@ -214,6 +240,7 @@ def test_liu_west_move_keeps_mean_and_covariance_and_the_box() -> None:
         ({"discretisation": "rk4"}, "discretisation"),
         ({"exact_moves": -1}, "exact_moves"),
         ({"rejuvenate": "sometimes"}, "rejuvenate"),
+        ({"exact_budget": -1.0}, "exact_budget"),
     ],
 )
 def test_bad_settings_raise_usage_errors(short_problem, kwargs, match) -> None:

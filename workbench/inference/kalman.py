@@ -24,9 +24,11 @@ Structure used for speed (:func:`piece_filter`, :func:`record_loglik`)
     prior makes ``J >= I``, so its Cholesky factor never fails and is well conditioned).
     The posterior of ``eta`` given the piece is ``N(J^-1 h, J^-1)``, that of ``theta``
     ``N(mu + s J^-1 h, diag(s) J^-1 diag(s))``. Per sample the work is a 2x2 Riccati step
-    on (B,) arrays and one batched small matrix product that updates the sensitivity and
-    the mean together and whitens the innovation; the sums over k are batched matrix
-    products over chunks of samples (``_filter_piece`` explains the layout).
+    on (B,) arrays (it does not depend on the data, so the Kalman gains and whitening
+    factors of a chunk of samples are then formed at once) and two batched small matrix
+    products that update the sensitivity and the mean together and whiten the innovation;
+    the sums over k are batched matrix products over chunks of samples (``_filter_piece``
+    explains the layout).
 
 Time convention at piece boundaries
     The problem's generative model drives the interval ``t_k -> t_{k+1}`` with the force of
@@ -68,8 +70,11 @@ Discretisation of ``(u, u')`` over one interval given (C, K) (:func:`transition_
 
 Noise
     ``w_k ~ N(0, diag(state_sd^2))`` added to ``(u, u')`` over every interval (including the
-    one that crosses a piece boundary), ``v_k ~ N(0, diag(obs_sd^2))``. Covariance updates
-    use the Joseph form; S and J are factorised by Cholesky, never inverted.
+    one that crosses a piece boundary), ``v_k ~ N(0, diag(obs_sd^2))``. The covariance
+    update keeps the 2x2 covariance symmetric and positive definite by construction (a
+    product form for u and u', a rank-one downdate bounded by the u'' noise, see
+    ``_Riccati``; the filtered state at a piece's end uses the Joseph form); S and J are
+    factorised by Cholesky, never inverted.
 """
 
 from __future__ import annotations
@@ -103,10 +108,14 @@ Discretisation = Literal["foh", "zoh", "euler"]
 DISCRETISATIONS: tuple[str, ...] = ("foh", "zoh", "euler")
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
-# Upper bound of the whitened-sensitivity buffer of one chunk of samples [number of
-# doubles]; 4 Mi doubles = 32 MB whatever the batch size, so a whole-record piece of
-# thousands of samples does not need memory proportional to its length.
-_CHUNK_DOUBLES = 1 << 22
+# The piece filter works through a piece in chunks of samples whose whitened-sensitivity
+# buffer holds about this many doubles (2 MB): small enough to stay in the processor's
+# cache between the per-sample products that write it and the Gram product that reads it
+# (measured: a whole-piece buffer of several MB made the per-sample copies 10x slower),
+# and independent of the piece's length.
+_CHUNK_DOUBLES = 1 << 18
+# At most this many samples per chunk (small batches: the per-chunk work is amortised).
+_MAX_CHUNK = 64
 
 
 # -- discretisation ---------------------------------------------------------------------
@@ -229,8 +238,20 @@ class _Dynamics(NamedTuple):
     phi: FloatArray  # (2, 2, B) Phi[i, j]
     g0: FloatArray  # (2, B) Gamma0
     g1: FloatArray  # (2, B) Gamma1
-    hx: FloatArray  # (3, 6, B) [H | H Gamma1 + d | -I], see _filter_piece
+    h_in: FloatArray  # (3, B) H Gamma1 + d, see _filter_piece
     has_end_share: bool  # Gamma1 != 0 (first-order hold)
+
+    def take(self, idx: NDArray[np.intp] | NDArray[np.bool_]) -> _Dynamics:
+        """Return the constants of the pairs ``idx`` (an index or mask into the batch)."""
+        return _Dynamics(
+            self.k_m[idx],
+            self.c_m[idx],
+            self.phi[..., idx],
+            self.g0[..., idx],
+            self.g1[..., idx],
+            self.h_in[..., idx],
+            self.has_end_share,
+        )
 
 
 def _dynamics(
@@ -242,19 +263,16 @@ def _dynamics(
     phi_b = np.ascontiguousarray(phi.transpose(1, 2, 0))
     g0_b = np.ascontiguousarray(g0.T)
     g1_b = np.ascontiguousarray(g1.T)
-    hx = np.zeros((3, 6, c.size))
-    hx[0, 0] = hx[1, 1] = 1.0
-    hx[2, 0], hx[2, 1] = -k_m, -c_m
-    hx[0, 2], hx[1, 2] = g1_b[0], g1_b[1]
-    hx[2, 2] = 1.0 / m - k_m * g1_b[0] - c_m * g1_b[1]
-    hx[0, 3] = hx[1, 4] = hx[2, 5] = -1.0
+    h_in = np.empty((3, c.size))
+    h_in[:2] = g1_b
+    h_in[2] = 1.0 / m - k_m * g1_b[0] - c_m * g1_b[1]
     return _Dynamics(
         k_m,
         c_m,
         phi_b,
         g0_b,
         g1_b,
-        hx,
+        h_in,
         discretisation == "foh",
     )
 
@@ -453,157 +471,112 @@ def _filter_piece(
     Implementation. With ``V_k`` the sensitivity and ``x_k`` the mean at ``eta = 0`` of the
     predicted state at sample k, let ``Vt_k = V_k - Gamma1 b_k s`` and
     ``xt_k = x_k - Gamma1 F0_k`` (the state without the interval's end share of the force,
-    ``F0`` the force at the prior mean). Stacking ``X_k = [Vt_k | xt_k]`` (2 x (m + 1)) over
-    the inputs ``[b_k s | F0_k]`` and ``[0 | y_k]`` (4 rows) gives a 6 x (m + 1) block per
-    particle, and two small batched matrix products per sample do everything that
-    involves m:
+    ``F0`` the force at the prior mean). Per particle and sample the filter works on the
+    4 x (m + 1) block ``Z_k = [X_k ; b_k s | F0_k ; 0 | 1]`` with ``X_k = [Vt_k | xt_k]``,
+    and one small batched matrix product per sample does everything that involves m::
 
-    * ``X_{k+1} = [T_k | ct_k | Phi K_k] X_k`` with ``T_k = Phi (I - K_k H)`` and
-      ``ct_k = T_k Gamma1 + Gamma0 - Phi K_k d`` (``d = (0, 0, 1/M)``): the Kalman update
-      followed by the prediction, for the sensitivity and the mean at once;
-    * ``W_k = L_k^-1 [H | H Gamma1 + d | -I] X_k = L_k^-1 [G_k | -e0_k]``, the whitened
-      sensitivity of the innovation and the whitened innovation (``S_k = L_k L_k^T``).
+        [W_k ; X_{k+1}] = [L_k^-1 [H | H Gamma1 + d | -y_k] ; T_k | ct_k | Phi K_k y_k] Z_k
 
-    The Gram matrix ``sum_k W_k^T W_k`` then holds ``J - I`` (top-left m x m block), ``-h``
-    (last column) and ``sum_k |L_k^-1 e0_k|^2`` (corner), computed by one batched matrix
-    product per chunk of samples. The 2x2 Riccati recursion runs on (B,) arrays in
-    component form; its update is the Joseph form folded into the prediction,
-    ``P_{k+1} = T_k P_k T_k^T + (Phi K_k) R (Phi K_k)^T + Q``.
+    with ``T_k = Phi (I - K_k H)`` and ``ct_k = T_k Gamma1 + Gamma0 - Phi K_k d``
+    (``d = (0, 0, 1/M)``): the rows ``X_{k+1}`` are the Kalman update followed by the
+    prediction, for the sensitivity and the mean at once; the rows
+    ``W_k = L_k^-1 [G_k | -e0_k]`` are the whitened sensitivity of the innovation and the
+    whitened innovation (``S_k = L_k L_k^T``).
+
+    The 5 x 4 coefficients depend on the data only through ``y_k`` and the 2x2 covariance
+    recursion not at all, so each chunk of samples runs (1) the covariance recursion alone on
+    (B,) arrays (:class:`_Riccati`), (2) the coefficients of all its samples at once,
+    vectorised over samples and particles (:func:`_step_coefficients`), and (3) the
+    per-sample products. The Gram matrix ``sum_k W_k^T W_k`` holds ``J - I`` (top-left
+    m x m block), ``-h`` (last column) and ``sum_k |L_k^-1 e0_k|^2`` (corner); it is one
+    batched matrix product per chunk.
     """
     start = int(problem.piece_starts[piece])
     end = int(problem.piece_starts[piece + 1])
     length = end - start
     b = dyn.k_m.size
     m = problem.n_coefficients
+    n1 = m + 1
     mass = problem.mass_kg
     y = problem.y
     fb = force.base
     bs = force.scaled
-    r0, r1, r2 = (float(v) for v in np.square(problem.noise.obs_sd))
-    q0, q1 = (float(v) for v in np.square(problem.noise.state_sd))
-    r_col = np.array([r0, r1, r2])[None, :, None]
+    r = np.square(problem.noise.obs_sd)
     k_m, c_m = dyn.k_m, dyn.c_m
-    kc = np.stack([k_m, c_m])  # (2, B)
-    phi, g0, g1, hx = dyn.phi, dyn.g0, dyn.g1, dyn.hx
+    g1 = dyn.g1
     end_share = dyn.has_end_share
 
-    # Per-sample work arrays (contiguous, so the small matmul runs at full speed; numpy
-    # copies operands that share memory with the output, hence separate in/out arrays).
-    xk = np.zeros((b, 6, m + 1))  # rows 0-1 X_k = [Vt | xt], 2 [b_k s | F0_k], 3-5 [0 | y_k]
-    xn = np.zeros((b, 6, m + 1))  # the same for the next sample (the two swap every sample)
-    coef_t = np.empty((5, 6, b))  # [L^-1 Hx ; T | ct | Phi K], B last
-    coef = coef_t.transpose(2, 0, 1)
-    chunk = max(1, min(length, max(16, _CHUNK_DOUBLES // max(1, b * 3 * (m + 1)))))
-    wbuf = np.empty((chunk, b, 3, m + 1))  # sample-major: each sample's write is contiguous
-    gram = np.zeros((b, m + 1, m + 1))
-    log_diag = np.empty((chunk, b))  # l00 l11 l22 of every sample of the chunk
+    chunk = max(1, min(length, _MAX_CHUNK, max(4, _CHUNK_DOUBLES // (b * 3 * n1))))
+    # Two (B, 8, m + 1) blocks used in turn: rows 0-2 W, rows 3-4 X, row 5 the force input
+    # [b_k s | F0_k], row 6 the constant [0 | 1]. The product reads rows 3-6 of one block and
+    # writes rows 0-4 of the other (numpy would copy an operand that overlaps the output).
+    blocks = (np.zeros((b, 4, n1)), np.zeros((b, 4, n1)))
+    for blk in blocks:
+        blk[:, 3, m] = 1.0
+    cur = blocks[0]
+    cf = np.empty((5, 4, chunk, b))  # coefficients (row, column, sample, pair)
+    wbuf = np.empty((b, chunk, 3, n1))  # each particle's rows contiguous for the Gram
+    gram = np.zeros((b, n1, n1))
     sum_log_diag = np.zeros(b)
     if predictive:
-        w_all = np.empty((b, length, 3, m + 1))
+        w_all = np.empty((b, length, 3, n1))
         l_all = np.empty((length, 6, b))
 
     # Initial X: [V | x] at the piece's first sample minus its end share (module docstring).
-    xk[:, 0, m] = xm[:, 0]
-    xk[:, 1, m] = xm[:, 1]
+    cur[:, 0, m] = xm[:, 0]
+    cur[:, 1, m] = xm[:, 1]
     if piece == 0 and end_share:
-        xk[:, 0, :m] = -g1[0][:, None] * bs[start]
-        xk[:, 1, :m] = -g1[1][:, None] * bs[start]
-        xk[:, 0, m] -= g1[0] * fb[start]
-        xk[:, 1, m] -= g1[1] * fb[start]
-    p = np.empty((2, 2, b))
-    p[0, 0] = xc[:, 0, 0]
-    p[1, 1] = xc[:, 1, 1]
-    p[0, 1] = p[1, 0] = 0.5 * (xc[:, 0, 1] + xc[:, 1, 0])
-    kt = np.empty((3, 2, b))  # kt[c, j] = K[j, c]
-    lw = coef_t[:3]
-    tr = coef_t[3:, :2]  # T[i, c]
-    ct = coef_t[3:, 2]
-    phk = coef_t[3:, 3:]  # (Phi K)[i, c]
-    last_p = last_kt = last_x = None
+        cur[:, 0, :m] = -g1[0][:, None] * bs[start]
+        cur[:, 1, :m] = -g1[1][:, None] * bs[start]
+        cur[:, 0, m] -= g1[0] * fb[start]
+        cur[:, 1, m] -= g1[1] * fb[start]
+    p = np.empty((3, b))  # predicted (p00, p01, p11)
+    p[0] = xc[:, 0, 0]
+    p[1] = 0.5 * (xc[:, 0, 1] + xc[:, 1, 0])
+    p[2] = xc[:, 1, 1]
+    riccati = _Riccati(dyn, r, np.square(problem.noise.state_sd))
+    inputs = np.empty((length, n1))
+    inputs[:, :m] = bs[start:end]
+    inputs[:, m] = fb[start:end]
 
-    j = 0
-    for i in range(length):
-        kk = start + i
-        xk[:, 2, :m] = bs[kk]
-        xk[:, 2, m] = fb[kk]
-        xk[:, 3:, m] = y[kk]
-        # Cholesky factor L of S = H P H^T + R and its inverse, in components.
-        p0, p1 = p[0], p[1]
-        hp2 = -(k_m * p0 + c_m * p1)  # row u'' of H P, (2, B)
-        l00 = np.sqrt(p[0, 0] + r0)
-        i00 = 1.0 / l00
-        l10 = p[0, 1] * i00
-        l20 = hp2[0] * i00
-        l11 = np.sqrt(p[1, 1] + r1 - l10 * l10)
-        i11 = 1.0 / l11
-        l21 = (hp2[1] - l20 * l10) * i11
-        l22 = np.sqrt(r2 - k_m * hp2[0] - c_m * hp2[1] - l20 * l20 - l21 * l21)
-        i22 = 1.0 / l22
-        i10 = -l10 * i00 * i11
-        i21 = -l21 * i11 * i22
-        i20 = -(l20 * i00 + l21 * i10) * i22
-        log_diag[j] = l00 * l11 * l22
+    for c0 in range(0, length, chunk):
+        cl = min(chunk, length - c0)
+        # (1) Predicted covariance of every sample of the chunk and of the one after it.
+        pk = np.empty((3, cl + 1, b))
+        pk[:, 0] = p
+        for i in range(cl):
+            riccati.step(pk[:, i], pk[:, i + 1])
+        p = pk[:, cl]
+        # (2) The coefficients of every sample of the chunk.
+        fac = _step_coefficients(pk[:, :cl], y[start + c0 : start + c0 + cl], dyn, r, mass, cf)
+        sum_log_diag += np.sum(np.log(fac[0] * fac[3] * fac[5]), axis=0)
         if predictive:
-            l_all[i] = (l00, l10, l20, l11, l21, l22)
-        # Gain K = P H^T S^-1: Z = L^-1 H P, K^T = L^-T Z.
-        z0 = i00 * p0
-        z1 = i10 * p0 + i11 * p1
-        z2 = i20 * p0 + i21 * p1 + i22 * hp2
-        np.multiply(i22, z2, out=kt[2])
-        np.multiply(i11, z1, out=kt[1])
-        kt[1] += i21 * z2
-        np.multiply(i00, z0, out=kt[0])
-        kt[0] += i10 * z1
-        kt[0] += i20 * z2
-        # Coefficients of the matmul: whitening rows L^-1 Hx, then Phi K, T = Phi (I - K H)
-        # = Phi - Phi K H, ct = T Gamma1 + Gamma0 - Phi K d.
-        np.multiply(i00, hx[0], out=lw[0])
-        np.multiply(i10, hx[0], out=lw[1])
-        lw[1] += i11 * hx[1]
-        np.multiply(i20, hx[0], out=lw[2])
-        lw[2] += i21 * hx[1]
-        lw[2] += i22 * hx[2]
-        np.multiply(phi[:, 0, None, :], kt[None, :, 0, :], out=phk)
-        phk += phi[:, 1, None, :] * kt[None, :, 1, :]
-        np.subtract(phi, phk[:, :2], out=tr)
-        tr += phk[:, 2, None, :] * kc[None]
-        np.subtract(g0, phk[:, 2] / mass, out=ct)
-        if end_share:
-            ct += tr[:, 0] * g1[0] + tr[:, 1] * g1[1]
-        np.matmul(coef[:, :3], xk, out=wbuf[j])
-        np.matmul(coef[:, 3:], xk, out=xn[:, :2])
+            l_all[c0 : c0 + cl] = fac[:6].transpose(1, 0, 2)
+        # (3) Sensitivity and mean, sample by sample.
+        for i in range(cl):
+            nxt_blk = blocks[1] if cur is blocks[0] else blocks[0]
+            cur[:, 2] = inputs[c0 + i]
+            coef = cf[:, :, i].transpose(2, 0, 1)  # (B, 5, 4)
+            np.matmul(coef[:, :3], cur, out=wbuf[:, i])
+            np.matmul(coef[:, 3:], cur, out=nxt_blk[:, :2])
+            if c0 + i == length - 1:
+                last_x = cur[:, :2].copy()
+            cur = nxt_blk
+        w = wbuf[:, :cl].reshape(b, 3 * cl, n1)
+        gram += w.transpose(0, 2, 1) @ w
         if predictive:
-            w_all[:, i] = wbuf[j]
-        if i == length - 1:
-            last_p, last_kt, last_x = p.copy(), kt.copy(), xk[:, :2].copy()
-        xk, xn = xn, xk
-        # Riccati prediction (Joseph form folded in): P = T P T^T + (Phi K) R (Phi K)^T + Q.
-        tp = tr[:, 0, None, :] * p0[None] + tr[:, 1, None, :] * p1[None]  # (T P)[i, c]
-        rph = phk * r_col
-        p = (
-            tp[:, 0, None, :] * tr[None, :, 0, :]
-            + tp[:, 1, None, :] * tr[None, :, 1, :]
-            + rph[:, 0, None, :] * phk[None, :, 0, :]
-            + rph[:, 1, None, :] * phk[None, :, 1, :]
-            + rph[:, 2, None, :] * phk[None, :, 2, :]
-        )
-        p[0, 0] += q0
-        p[1, 1] += q1
-        p[0, 1] = p[1, 0] = 0.5 * (p[0, 1] + p[1, 0])
-        j += 1
-        if j == chunk or i == length - 1:
-            w = np.ascontiguousarray(wbuf[:j].transpose(1, 0, 2, 3)).reshape(b, 3 * j, m + 1)
-            gram += w.transpose(0, 2, 1) @ w
-            sum_log_diag += np.sum(np.log(log_diag[:j]), axis=0)
-            j = 0
+            w_all[:, c0 : c0 + cl] = wbuf[:, :cl]
 
-    assert last_p is not None and last_kt is not None and last_x is not None
     # Filtered state at the last sample: the Kalman update of [V | x] there (Joseph form).
     kk = end - 1
+    last_p = np.empty((b, 2, 2))
+    last_p[:, 0, 0] = pk[0, cl - 1]
+    last_p[:, 0, 1] = last_p[:, 1, 0] = pk[1, cl - 1]
+    last_p[:, 1, 1] = pk[2, cl - 1]
+    gain = fac[6:12, cl - 1].T.reshape(b, 2, 3)  # K[j, c] at the last sample
     state = last_x
     if end_share:
-        state += g1.T[:, :, None] * np.append(bs[kk], fb[kk])[None, None, :]
-    gain = last_kt.transpose(2, 1, 0)  # (B, 2, 3)
+        state += g1.T[:, :, None] * inputs[length - 1][None, None, :]
     h_mat = np.zeros((b, 3, 2))
     h_mat[:, 0, 0] = h_mat[:, 1, 1] = 1.0
     h_mat[:, 2, 0], h_mat[:, 2, 1] = -k_m, -c_m
@@ -611,10 +584,14 @@ def _filter_piece(
     filtered = a_mat @ state
     filtered[:, :, :m] -= gain[:, :, 2, None] * (bs[kk] / mass)[None, None, :]
     filtered[:, :, m] += (gain @ y[kk, :, None])[:, :, 0] - gain[:, :, 2] * (fb[kk] / mass)
-    p_filt = a_mat @ last_p.transpose(2, 0, 1) @ a_mat.transpose(0, 2, 1)
-    p_filt += (gain * np.array([r0, r1, r2])) @ gain.transpose(0, 2, 1)
+    p_filt = a_mat @ last_p @ a_mat.transpose(0, 2, 1)
+    p_filt += (gain * r) @ gain.transpose(0, 2, 1)
     has_next = end < problem.n_samples
-    nxt = xk[:, :2] if has_next else filtered
+    nxt = cur[:, :2] if has_next else filtered
+    p_next = np.empty((b, 2, 2))
+    p_next[:, 0, 0] = p[0]
+    p_next[:, 0, 1] = p_next[:, 1, 0] = p[1]
+    p_next[:, 1, 1] = p[2]
 
     # Integrate eta out: J = I + Gram[:m, :m], h = -Gram[:m, m]; one forward substitution
     # gives L_J^-1 C for all right-hand sides C = [-h, V_end^T, V_next^T (, I)].
@@ -651,7 +628,7 @@ def _filter_piece(
 
     x_mean_end, x_cov_end = marginal(filtered, p_filt, solved[:, :, 1:3])
     if has_next:
-        x_mean_next, x_cov_next = marginal(nxt, p.transpose(2, 0, 1), solved[:, :, 3:5])
+        x_mean_next, x_cov_next = marginal(nxt, p_next, solved[:, :, 3:5])
     else:
         x_mean_next, x_cov_next = x_mean_end.copy(), x_cov_end.copy()
 
@@ -671,31 +648,184 @@ def _filter_piece(
     )
 
 
+class _Riccati:
+    """The 2x2 covariance recursion of ``(u, u')`` given (C, K), one sample at a time.
+
+    ``step(p, out)`` maps the predicted covariance ``(p00, p01, p11)`` (rows of a (3, B)
+    array) of one sample to that of the next. The update by u and u' together (they are
+    observed directly, with diagonal noise ``D = diag(r0, r1)``) is written as a product,
+    ``P_f = D (P + D)^-1 P``, with entries ``r0 (det P + p00 r1) / det(P + D)``,
+    ``r0 r1 p01 / det(P + D)`` and ``r1 (det P + p11 r0) / det(P + D)``, which stay positive
+    definite whatever the rounding; the update by u'' subtracts ``(P h)(P h)^T / s2`` with
+    ``s2 = h P h^T + r2 > h P h^T``; the prediction ``Phi P Phi^T + Q`` is one 3x3 map of
+    the three distinct entries per pair. A covariance stored by its three distinct entries
+    stays exactly symmetric. About 25 operations on (B,) arrays per sample: this loop is the
+    only per-sample work that does not involve m.
+    """
+
+    def __init__(self, dyn: _Dynamics, obs_var: FloatArray, state_var: FloatArray) -> None:
+        r0, r1, r2 = (float(v) for v in obs_var)
+        self.r01 = r0 * r1
+        self.r2 = r2
+        self.cross = np.array([[r1], [r0]])  # (p00, p11) * cross = (p00 r1, p11 r0)
+        self.scale = np.array([[r0], [r0 * r1], [r1]])
+        self.h = np.stack([-dyn.k_m, -dyn.c_m])  # (2, B): the u'' row of H
+        f00, f01, f10, f11 = dyn.phi[0, 0], dyn.phi[0, 1], dyn.phi[1, 0], dyn.phi[1, 1]
+        # (Phi P Phi^T)[i] = sum_j pred[i, j] p[j] over the entries (p00, p01, p11).
+        self.pred = np.array(
+            [
+                [f00 * f00, 2.0 * f00 * f01, f01 * f01],
+                [f00 * f10, f00 * f11 + f01 * f10, f01 * f11],
+                [f10 * f10, 2.0 * f10 * f11, f11 * f11],
+            ]
+        )
+        q0, q1 = (float(v) for v in state_var)
+        self.q = np.array([[q0], [0.0], [q1]]) if (q0 or q1) else None
+        self.g = np.empty((3, dyn.k_m.size))
+
+    def step(self, p: FloatArray, out: FloatArray) -> None:
+        """Write the predicted covariance of the next sample into ``out`` (3, B)."""
+        g = self.g
+        # u and u': g = (det P + p00 r1, p01, det P + p11 r0) * (r0, r0 r1, r1) / det(P + D).
+        det_p = p[0] * p[2] - p[1] * p[1]
+        diag = p[0::2] * self.cross
+        np.add(diag, det_p, out=g[0::2])
+        g[1] = p[1]
+        g *= self.scale / (g[0] + diag[1] + self.r01)
+        # u'': h = (-K/M, -C/M), hp = P h^T, P -= hp hp^T / (h P h^T + r2).
+        h = self.h
+        hp = h[0] * g[0:2] + h[1] * g[1:3]
+        u = hp / (h[0] * hp[0] + h[1] * hp[1] + self.r2)
+        g[0:2] -= hp[0] * u
+        g[2] -= hp[1] * u[1]
+        # Prediction.
+        np.sum(self.pred * g, axis=1, out=out)
+        if self.q is not None:
+            out += self.q
+
+
+def _step_coefficients(
+    pk: FloatArray,
+    y: FloatArray,
+    dyn: _Dynamics,
+    obs_var: FloatArray,
+    mass: float,
+    cf: FloatArray,
+) -> FloatArray:
+    """Coefficients of the per-sample product of :func:`_filter_piece` for L samples at once.
+
+    Parameters
+    ----------
+    pk : ndarray, shape (3, L, B)
+        Predicted covariance ``(p00, p01, p11)`` of each sample.
+    y : ndarray, shape (L, 3)
+        The samples' observations.
+    dyn : _Dynamics
+        Per-pair constants.
+    obs_var : ndarray, shape (3,)
+        Observation noise variances.
+    mass : float
+        Body mass [kg].
+    cf : ndarray, shape (5, 4, >= L, B)
+        Filled with ``[L^-1 [H | H Gamma1 + d | -y_k] ; T_k | ct_k | Phi K_k y_k]`` of each
+        sample (row, column, sample, pair).
+
+    Returns
+    -------
+    ndarray, shape (12, L, B)
+        ``(l00, l10, l20, l11, l21, l22)``, the Cholesky factor of ``S_k``, then the gain
+        ``K[j, c]`` in the order ``K00, K01, K02, K10, K11, K12``.
+    """
+    r0, r1, r2 = (float(v) for v in obs_var)
+    k_m, c_m, phi, g0, g1 = dyn.k_m, dyn.c_m, dyn.phi, dyn.g0, dyn.g1
+    h_in = dyn.h_in
+    n = pk.shape[1]
+    out = np.empty((12, n, k_m.size))
+    l00, l10, l20, l11, l21, l22 = out[:6]
+    # Rows of H P, each (2, L, B) over the column j: (p00, p01), (p01, p11), -(K P0 + C P1)/M.
+    hp0 = pk[0:2]
+    hp1 = pk[1:3]
+    hp2 = -(k_m * hp0 + c_m * hp1)
+    np.sqrt(hp0[0] + r0, out=l00)
+    i00 = 1.0 / l00
+    np.multiply(hp0[1], i00, out=l10)
+    np.multiply(hp2[0], i00, out=l20)
+    np.sqrt(hp1[1] + r1 - l10 * l10, out=l11)
+    i11 = 1.0 / l11
+    np.multiply(hp2[1] - l20 * l10, i11, out=l21)
+    np.sqrt(r2 - k_m * hp2[0] - c_m * hp2[1] - l20 * l20 - l21 * l21, out=l22)
+    i22 = 1.0 / l22
+    i10 = -l10 * i00 * i11
+    i21 = -l21 * i11 * i22
+    i20 = -(l20 * i00 + l21 * i10) * i22
+    # Gain K = P H^T S^-1: Z = L^-1 H P, K^T = L^-T Z (each row of Z indexed by j).
+    z0 = i00 * hp0
+    z1 = i10 * hp0 + i11 * hp1
+    z2 = i20 * hp0 + i21 * hp1 + i22 * hp2
+    gain = out[6:].reshape(2, 3, n, -1)  # gain[j, c] = K[j, c]
+    np.multiply(i22, z2, out=gain[:, 2])
+    np.add(i11 * z1, i21 * z2, out=gain[:, 1])
+    np.add(i00 * z0 + i10 * z1, i20 * z2, out=gain[:, 0])
+    # Phi K (index i of each is the row of Phi), T = Phi (I - K H), ct, Phi K y.
+    phi0, phi1 = phi[:, 0, None], phi[:, 1, None]  # columns of Phi, (2, 1, B)
+    phk = [phi0 * gain[0, c] + phi1 * gain[1, c] for c in range(3)]
+    t0 = cf[3:, 0, :n]
+    t1 = cf[3:, 1, :n]
+    ct = cf[3:, 2, :n]
+    np.subtract(phi0, phk[0], out=t0)
+    t0 += phk[2] * k_m
+    np.subtract(phi1, phk[1], out=t1)
+    t1 += phk[2] * c_m
+    np.subtract(g0[:, None], phk[2] / mass, out=ct)
+    if dyn.has_end_share:
+        ct += t0 * g1[0, None] + t1 * g1[1, None]
+    y0, y1, y2 = y[:, 0, None], y[:, 1, None], y[:, 2, None]
+    cf[3:, 3, :n] = phk[0] * y0 + phk[1] * y1 + phk[2] * y2
+    cf[0, 0, :n] = i00
+    cf[0, 1, :n] = 0.0
+    cf[0, 2, :n] = i00 * h_in[0]
+    cf[0, 3, :n] = -i00 * y0
+    cf[1, 0, :n] = i10
+    cf[1, 1, :n] = i11
+    cf[1, 2, :n] = i10 * h_in[0] + i11 * h_in[1]
+    cf[1, 3, :n] = -(i10 * y0 + i11 * y1)
+    np.subtract(i20, i22 * k_m, out=cf[2, 0, :n])
+    np.subtract(i21, i22 * c_m, out=cf[2, 1, :n])
+    cf[2, 2, :n] = i20 * h_in[0] + i21 * h_in[1] + i22 * h_in[2]
+    cf[2, 3, :n] = -(i20 * y0 + i21 * y1 + i22 * y2)
+    return out
+
+
 def _cholesky_solve_lower(gram_j: FloatArray, rhs: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Cholesky factor ``L_J`` of ``J = I + gram_j`` and ``L_J^-1 rhs``, batched over B.
 
     numpy has no batched triangular solve and a general ``solve`` costs far more than the
     factorisation, so the forward substitution runs row by row, vectorised over the batch
-    and the right-hand sides (m steps of small einsums).
+    and the right-hand sides, with the batch on the last axis (contiguous operands).
     """
     m = gram_j.shape[1]
     chol = np.asarray(np.linalg.cholesky(gram_j + np.eye(m)), dtype=np.float64)
-    out = np.empty_like(rhs)
-    out[:, 0, :] = rhs[:, 0, :] / chol[:, 0, 0, None]
+    lt = np.ascontiguousarray(chol.transpose(1, 2, 0))  # (m, m, B)
+    rt = rhs.transpose(1, 2, 0)  # (m, k, B)
+    inv_diag = 1.0 / np.diagonal(lt).T  # (m, B)
+    out = np.empty(rt.shape)
+    np.multiply(rt[0], inv_diag[0], out=out[0])
     for i in range(1, m):
-        acc = rhs[:, i, :] - np.einsum("bk,bkn->bn", chol[:, i, :i], out[:, :i, :])
-        out[:, i, :] = acc / chol[:, i, i, None]
-    return chol, out
+        acc = np.einsum("jb,jkb->kb", lt[i, :i], out[:i])
+        np.multiply(rt[i] - acc, inv_diag[i], out=out[i])
+    return chol, out.transpose(2, 0, 1)
 
 
 def _solve_lower_transposed(chol: FloatArray, rhs: FloatArray) -> FloatArray:
     """Solve ``L^T x = rhs`` for batched lower-triangular L (B, m, m), rhs (B, m)."""
     m = chol.shape[1]
-    x = np.empty_like(rhs)
+    lt = np.ascontiguousarray(chol.transpose(2, 1, 0))  # lt[j, i] = L[i, j], (m, m, B)
+    rt = rhs.T
+    x = np.empty(rt.shape)
     for i in range(m - 1, -1, -1):
-        acc = np.einsum("bj,bj->b", chol[:, i + 1 :, i], x[:, i + 1 :])
-        x[:, i] = (rhs[:, i] - acc) / chol[:, i, i]
-    return x
+        acc = np.einsum("jb,jb->b", lt[i, i + 1 :], x[i + 1 :])
+        np.divide(rt[i] - acc, lt[i, i], out=x[i])
+    return x.T
 
 
 def _predictive(

@@ -26,23 +26,32 @@ Per piece ``j``
        of total variance), distinct initial ancestors, distinct values of C and of K.
 
 Moves after resampling
-    *Liu-West kernel* (the first resampling in a piece, the usual case):
+    *Liu-West kernel* (the usual case for a resampling late in the record):
     ``z <- a z + (1 - a) mean(z) + sqrt(1 - a^2) L eps`` with ``L L^T`` the weighted
-    cloud's covariance before resampling and ``a = shrinkage`` (default 0.98, a jitter of
-    0.2 posterior sd; Liu & West 2001). It keeps the cloud's mean and covariance and renews
+    cloud's covariance before resampling and ``a = shrinkage`` (default 0.9, a jitter of
+    0.44 posterior sd; Liu & West 2001). It keeps the cloud's mean and covariance and renews
     the values that resampling duplicated, at no extra likelihood cost; a moved particle
     keeps the ``(u, u')`` statistics and the history of its parent, an approximation of the
     order of the jitter. Values leaving the prior box are reflected at the bound (clipped
     if they jump across it), which keeps a uniform prior uniform near its edges.
-    ``shrinkage=1`` switches it off.
+    ``shrinkage=1`` switches it off. The default was 0.98 (0.2 sd) until the benchmark
+    ``analyses/benchmarks/identify_speed.py`` showed that the larger jitter renews the
+    cloud better: over seeds 0-9 of its 30 s record, 128 particles, the rms distance of the
+    posterior mean of C from the exact one fell from 0.27 to 0.21 posterior sd.
 
-    *Exact Metropolis moves* (a second or later resampling inside one piece; every
-    resampling with ``rejuvenate="always"``): then the piece has moved the posterior by
-    more than the cloud's own spread, which a jitter-sized kernel cannot follow (it
+    *Exact Metropolis moves* (a second or later resampling inside one piece; the first
+    resamplings of the record while ``exact_budget`` lasts; every resampling with
+    ``rejuvenate="always"``). After a second resampling the piece has moved the posterior
+    by more than the cloud's own spread, which a jitter-sized kernel cannot follow (it
     collapses onto the few particles nearest the new mass: measured on a simulated walking
     record whose fifth step moved the posterior of C by seven sd, from about 2600 to about
     290 N s/m, the Liu-West cloud stopped at 800 N s/m with a fifth of the exact width).
-    Each particle then takes ``exact_moves`` random-walk Metropolis steps (proposal
+    The first resamplings are where the cloud collapses from the prior box onto a posterior
+    a hundred times smaller, so that the rest of the record works with the descendants of
+    a few prior draws; there the history is short and exact moves cheap (the budget, 0.3
+    passes over the record by default, bounds their cost; on the benchmark record it pays
+    for the moves at the first two resamplings and lowers the rms distance above from 0.21
+    to 0.15 sd). Each particle takes ``exact_moves`` random-walk Metropolis steps (proposal
     covariance ``2.38^2 / 2`` times the cloud's) targeting the
     exact tempered posterior ``p(C, K) p(y_before_j | C, K) p(y_j | ...)^alpha``, whose
     likelihood the batched Kalman filter recomputes for the proposals from the first
@@ -57,11 +66,14 @@ the exact posterior can keep its width while its mean walks along the record. Me
 noise_sd_n=3, start="steady", seed=1)``, seed noise, n = 10): the exact posterior mean of C
 moves from 411 to 701 N s/m (about 5 posterior sd of 61) between the 13th and the last
 step; with the default settings the filter's cloud narrows to a third of that width and ends
-3-4 sd short of the exact mean (seeds 0-2, 256 particles). ``rejuvenate="always"`` (exact
-moves after every resampling) agreed within 0.13 sd at about five times the cost. On records
-whose posterior contracts steadily the default agrees with the exact posterior within about
-0.3 sd (``tests/test_rbpf.py``). The exact method (:mod:`workbench.inference.exact`) is the
-reference when in doubt; a growing gap between the two is itself a sign of misfit.
+3-4 sd short of the exact mean (seeds 0-2, 256 particles, measured with the earlier
+shrinkage 0.98 and no exact budget). ``rejuvenate="always"`` (exact moves after every
+resampling) agreed within 0.13 sd at about five times the cost. On records whose posterior
+contracts steadily the default agrees with the exact posterior within about 0.3 sd
+(``tests/test_rbpf.py``; on the benchmark record, 256 particles, seeds 0-9, within 0.19 sd
+with the seed's process noise and 0.27 sd without, rms 0.1 and 0.13 sd). The exact method
+(:mod:`workbench.inference.exact`) is the reference when in doubt; a growing gap between the
+two is itself a sign of misfit.
 
 Noise model, discretisation and the piece-boundary convention are those of
 :mod:`workbench.inference.kalman` (``"foh"`` by default); the random walks of C and K in
@@ -82,8 +94,11 @@ from workbench.errors import UsageError
 from workbench.inference.kalman import (
     DISCRETISATIONS,
     PieceResult,
+    _Dynamics,
+    _dynamics,
+    _filter_piece,
+    _force_input,
     initial_state,
-    piece_filter,
 )
 from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.problem import IdentificationProblem, StiffnessDampingPrior
@@ -115,6 +130,12 @@ class _Cloud:
     theta_mean: FloatArray
     theta_cov: FloatArray
     history: FloatArray | None  # exact log p(y before the piece | C, K), when known
+    dyn: _Dynamics | None = None  # the Kalman filter's constants of (damping, stiffness)
+
+    def set_values(self, damping: FloatArray, stiffness: FloatArray) -> None:
+        """Replace the (C, K) values (a move); their filter constants are recomputed later."""
+        self.damping, self.stiffness = damping, stiffness
+        self.dyn = None
 
     def set_piece(self, res: PieceResult, rows: NDArray[np.bool_] | None = None) -> None:
         """Store a piece result (for all particles, or for the ``rows`` given)."""
@@ -141,6 +162,41 @@ class _Cloud:
             setattr(self, name, getattr(self, name)[idx])
         if self.history is not None:
             self.history = self.history[idx]
+        if self.dyn is not None:
+            self.dyn = self.dyn.take(idx)
+
+
+class _Pieces:
+    """The batched Kalman filter of one problem: pieces for a batch of (C, K) pairs."""
+
+    def __init__(self, problem: IdentificationProblem, discretisation: str) -> None:
+        self.problem = problem
+        self.discretisation = discretisation
+        self.force = _force_input(problem)
+
+    def dynamics(self, damping: FloatArray, stiffness: FloatArray) -> _Dynamics:
+        """Filter constants of the pairs (transition matrices etc.)."""
+        return _dynamics(self.problem, damping, stiffness, self.discretisation)
+
+    def run(
+        self,
+        piece: int,
+        dyn: _Dynamics,
+        x_mean: FloatArray,
+        x_cov: FloatArray,
+        predictive: bool = False,
+        theta_cov: bool = True,
+    ) -> PieceResult:
+        """Filter piece ``piece`` from the hand-in state (``kalman.piece_filter``)."""
+        return _filter_piece(
+            self.problem, piece, dyn, x_mean, x_cov, self.force, predictive, theta_cov
+        )
+
+    def run_cloud(self, piece: int, cloud: _Cloud, predictive: bool = False) -> PieceResult:
+        """Filter a piece for every particle of the cloud, reusing its filter constants."""
+        if cloud.dyn is None:
+            cloud.dyn = self.dynamics(cloud.damping, cloud.stiffness)
+        return self.run(piece, cloud.dyn, cloud.x_mean, cloud.x_cov, predictive)
 
 
 def run_rbpf(
@@ -150,11 +206,12 @@ def run_rbpf(
     seed: int | np.random.Generator | None = None,
     resampling: str = "systematic",
     ess_threshold: float = 0.5,
-    shrinkage: float = 0.98,
+    shrinkage: float = 0.9,
     discretisation: str = "foh",
     progress: bool = False,
     exact_moves: int = 3,
     rejuvenate: str = "surprise",
+    exact_budget: float = 0.3,
     predictive: bool = False,
 ) -> ParticleFilterOutput:
     """Run the Rao-Blackwellised particle filter over (C, K).
@@ -173,7 +230,7 @@ def run_rbpf(
         Resample (inside a piece, by tempering) so that the ESS never falls below
         ``ess_threshold * P``; 0 never resamples (plain importance sampling); 1 resamples
         after every piece (no tempering).
-    shrinkage : float, default 0.98
+    shrinkage : float, default 0.9
         Liu-West shrinkage ``a`` in (0, 1]; 1 switches the kernel move off.
     discretisation : {"foh", "zoh", "euler"}
         See :func:`workbench.inference.kalman.transition_matrices`.
@@ -183,10 +240,18 @@ def run_rbpf(
         Metropolis steps per particle of an exact move (module docstring); 0 uses Liu-West
         moves only.
     rejuvenate : {"surprise", "always"}, default "surprise"
-        When to use exact moves instead of the Liu-West kernel: only after a second
-        resampling inside one piece, or after every resampling (resample-move / IBIS:
-        exact whatever the record, several times slower; use it when the posterior drifts
-        along the record, see the module docstring).
+        When to use exact moves instead of the Liu-West kernel: after a second resampling
+        inside one piece and while ``exact_budget`` lasts, or after every resampling
+        (resample-move / IBIS: exact whatever the record, several times slower; use it
+        when the posterior drifts along the record, see the module docstring).
+    exact_budget : float, default 0.3
+        With ``rejuvenate="surprise"``: an ordinary resampling (the first in its piece)
+        uses exact moves as long as the exact moves of such resamplings have cost at most
+        this many passes over the record in total (a move at piece j costs
+        ``exact_moves`` (+1 if the particles' history must be recomputed) times ``j + 1``
+        piece filters). The first resamplings, where the cloud collapses from the prior
+        onto the posterior and exact moves are cheap, then use them; 0 leaves them to the
+        Liu-West kernel.
     predictive : bool, default False
         Also return the one-step-ahead predictive mean of ``y`` at every sample: the mixture
         of the particles' exact predictions, weighted by their weights given the data before
@@ -205,6 +270,13 @@ def run_rbpf(
     )
     if rejuvenate not in ("surprise", "always"):
         raise UsageError(f"rejuvenate must be 'surprise' or 'always', got {rejuvenate!r}")
+    if not (
+        isinstance(exact_budget, int | float)
+        and not isinstance(exact_budget, bool)
+        and math.isfinite(exact_budget)
+        and exact_budget >= 0
+    ):
+        raise UsageError(f"exact_budget must be a number >= 0, got {exact_budget!r}")
     always_exact = rejuvenate == "always"
     rng = np.random.default_rng(seed)
     n_p, m = problem.n_pieces, problem.n_coefficients
@@ -249,32 +321,14 @@ def run_rbpf(
     }
     pred = np.empty((problem.n_samples, 3)) if predictive else None
 
-    def run_piece(j: int, rows: NDArray[np.bool_] | None = None) -> None:
-        sel = slice(None) if rows is None else rows
-        res = piece_filter(
-            problem,
-            j,
-            cloud.damping[sel],
-            cloud.stiffness[sel],
-            cloud.x_mean[sel],
-            cloud.x_cov[sel],
-            discretisation=discretisation,
-        )
-        cloud.set_piece(res, rows)
+    pieces = _Pieces(problem, discretisation)
+    budget = exact_budget * n_p  # piece-runs for exact moves at ordinary resamplings
+    spent = 0.0
 
     bar = tqdm(total=n_p, desc="rbpf", unit="piece", disable=not progress)
     try:
         for j in range(n_p):
-            res = piece_filter(
-                problem,
-                j,
-                cloud.damping,
-                cloud.stiffness,
-                cloud.x_mean,
-                cloud.x_cov,
-                discretisation=discretisation,
-                predictive=predictive,
-            )
+            res = pieces.run_cloud(j, cloud, predictive)
             cloud.set_piece(res)
             if pred is not None:
                 s, e = problem.piece_starts[j], problem.piece_starts[j + 1]
@@ -298,19 +352,27 @@ def run_rbpf(
                 cloud.take(resample(lw, rng, resampling))
                 lw = np.full(n_part, -log_p)
                 counts["resamplings"] += 1
-                if n_mh == 0 or (step == 0 and not always_exact):
-                    if a < 1.0:
-                        cloud.damping, cloud.stiffness = liu_west_move(
-                            cloud.damping, cloud.stiffness, box, a, rng, reference=reference
-                        )
-                        cloud.history = None  # moved values inherit their parents' history
-                        counts["liu_west_moves"] += 1
-                        run_piece(j)
-                else:
+                # Exact moves: always, after a second resampling in one piece, or while
+                # their cost (Metropolis steps, plus the history if unknown, over pieces
+                # 0..j) fits the budget; otherwise the Liu-West kernel.
+                cost = (n_mh + (cloud.history is None)) * (j + 1)
+                exact = n_mh > 0 and (always_exact or step > 0 or spent + cost <= budget)
+                if exact and not always_exact and step == 0:
+                    spent += cost
+                if exact:
                     counts["exact_move_events"] += 1
                     if cloud.history is None:
-                        _exact_history(problem, j, cloud, discretisation)
-                    _metropolis(problem, j, cloud, done, n_mh, box, rng, discretisation, counts)
+                        _exact_history(pieces, j, cloud)
+                    _metropolis(pieces, j, cloud, done, n_mh, box, rng, counts)
+                elif a < 1.0:
+                    cloud.set_values(
+                        *liu_west_move(
+                            cloud.damping, cloud.stiffness, box, a, rng, reference=reference
+                        )
+                    )
+                    cloud.history = None  # moved values inherit their parents' history
+                    counts["liu_west_moves"] += 1
+                    cloud.set_piece(pieces.run_cloud(j, cloud))
             if ess_threshold >= 1.0:
                 # ess_threshold = 1: resample after the piece, Liu-West move; the moved
                 # particles start the next piece from their parents' hand-over states.
@@ -322,11 +384,13 @@ def run_rbpf(
                 if n_mh > 0 and always_exact:
                     counts["exact_move_events"] += 1
                     if cloud.history is None:
-                        _exact_history(problem, j, cloud, discretisation)
-                    _metropolis(problem, j, cloud, 1.0, n_mh, box, rng, discretisation, counts)
+                        _exact_history(pieces, j, cloud)
+                    _metropolis(pieces, j, cloud, 1.0, n_mh, box, rng, counts)
                 elif a < 1.0:
-                    cloud.damping, cloud.stiffness = liu_west_move(
-                        cloud.damping, cloud.stiffness, box, a, rng, reference=reference
+                    cloud.set_values(
+                        *liu_west_move(
+                            cloud.damping, cloud.stiffness, box, a, rng, reference=reference
+                        )
                     )
                     cloud.history = None
                     counts["liu_west_moves"] += 1
@@ -357,6 +421,7 @@ def run_rbpf(
         "shrinkage": a,
         "exact_moves": n_mh,
         "rejuvenate": rejuvenate,
+        "exact_budget": float(exact_budget),
         "discretisation": discretisation,
         "n_particles": n_part,
         "prior": box.label,
@@ -405,35 +470,28 @@ def _mixture_prediction(lw: FloatArray, res: PieceResult) -> FloatArray:
     return np.einsum("pl,plr->lr", wk, res.predicted_obs)
 
 
-def _exact_history(
-    problem: IdentificationProblem, piece: int, cloud: _Cloud, discretisation: str
-) -> None:
+def _exact_history(pieces: _Pieces, piece: int, cloud: _Cloud) -> None:
     """Recompute the particles' statistics exactly from the first piece up to ``piece``."""
-    hist, x_mean, x_cov, res = _run_up_to(
-        problem, piece, cloud.damping, cloud.stiffness, discretisation
-    )
+    if cloud.dyn is None:
+        cloud.dyn = pieces.dynamics(cloud.damping, cloud.stiffness)
+    hist, x_mean, x_cov, res = _run_up_to(pieces, piece, cloud.dyn)
     cloud.history, cloud.x_mean, cloud.x_cov = hist, x_mean, x_cov
     cloud.set_piece(res)
 
 
 def _run_up_to(
-    problem: IdentificationProblem,
-    piece: int,
-    damping: FloatArray,
-    stiffness: FloatArray,
-    discretisation: str,
+    pieces: _Pieces, piece: int, dyn: _Dynamics
 ) -> tuple[FloatArray, FloatArray, FloatArray, PieceResult]:
     """Kalman filter from the first piece through ``piece`` for a batch of (C, K).
 
     Returns the log-likelihood of the pieces before ``piece``, the hand-in state of
     ``piece`` and its :class:`PieceResult`.
     """
-    x_mean, x_cov = initial_state(problem, damping.size)
-    hist = np.zeros(damping.size)
+    n = dyn.k_m.size
+    x_mean, x_cov = initial_state(pieces.problem, n)
+    hist = np.zeros(n)
     for i in range(piece + 1):
-        res = piece_filter(
-            problem, i, damping, stiffness, x_mean, x_cov, discretisation=discretisation
-        )
+        res = pieces.run(i, dyn, x_mean, x_cov, theta_cov=i == piece)
         if i == piece:
             return hist, x_mean, x_cov, res
         hist += res.loglik
@@ -442,14 +500,13 @@ def _run_up_to(
 
 
 def _metropolis(
-    problem: IdentificationProblem,
+    pieces: _Pieces,
     piece: int,
     cloud: _Cloud,
     temperature: float,
     n_steps: int,
     box: StiffnessDampingPrior,
     rng: np.random.Generator,
-    discretisation: str,
     counts: dict[str, int],
 ) -> None:
     """Random-walk Metropolis steps on ``p(C, K | y_before) p(y_piece | ...)^temperature``."""
@@ -458,6 +515,7 @@ def _metropolis(
     cov = np.cov(z, rowvar=False, bias=True)
     root = _sym_sqrt(_RW_SCALE * cov)
     target = cloud.history + temperature * cloud.loglik
+    moved = False
     for _ in range(n_steps):
         proposal = z + rng.standard_normal(z.shape) @ root.T
         log_u = np.log(rng.uniform(size=z.shape[0]))
@@ -465,15 +523,15 @@ def _metropolis(
         counts["proposals"] += z.shape[0]
         if not np.any(inside):
             continue
-        hist, x_mean, x_cov, res = _run_up_to(
-            problem, piece, proposal[inside, 0], proposal[inside, 1], discretisation
-        )
+        dyn = pieces.dynamics(proposal[inside, 0], proposal[inside, 1])
+        hist, x_mean, x_cov, res = _run_up_to(pieces, piece, dyn)
         new_target = hist + temperature * res.loglik
         accept = log_u[inside] < new_target - target[inside]
         rows = np.flatnonzero(inside)[accept]
         counts["accepted"] += rows.size
         if rows.size == 0:
             continue
+        moved = True
         z[rows] = proposal[rows]
         target[rows] = new_target[accept]
         cloud.history[rows] = hist[accept]
@@ -481,8 +539,8 @@ def _metropolis(
         cloud.x_cov[rows] = x_cov[accept]
         for name in ("loglik", "x_mean_next", "x_cov_next", "theta_mean", "theta_cov"):
             getattr(cloud, name)[rows] = getattr(res, name)[accept]
-    cloud.damping = np.ascontiguousarray(z[:, 0])
-    cloud.stiffness = np.ascontiguousarray(z[:, 1])
+    if moved:
+        cloud.set_values(np.ascontiguousarray(z[:, 0]), np.ascontiguousarray(z[:, 1]))
 
 
 def _sym_sqrt(cov: FloatArray) -> FloatArray:
