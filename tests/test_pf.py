@@ -51,7 +51,7 @@ def lg_case() -> tuple[IdentificationProblem, tuple[float, float]]:
     noise 10 % of the RMS of each state, initial (u, u') spread 1 RMS, two harmonics with a
     force prior of 10 N around the least-squares force. With the seed's settings (10 %,
     0.5 %, n = 10, wide force prior) the estimate's spread is hundreds of nats: the
-    degeneracy the seed example test below documents.
+    degeneracy the seed example test below documents for blind regeneration.
     """
     sim, insp = _walking(4.0, seed=1)
     problem = build_problem(insp.com, insp.steps, harmonics=2)
@@ -69,15 +69,25 @@ def lg_case() -> tuple[IdentificationProblem, tuple[float, float]]:
 
 
 @pytest.mark.parametrize(
-    ("scheme", "repeats"), [("systematic", 10)] + [(s, 6) for s in SCHEMES[1:]]
+    ("scheme", "repeats", "proposal"),
+    [("systematic", 10, "regression"), ("systematic", 10, "prior")]
+    + [(s, 6, "regression") for s in SCHEMES[1:]],
 )
-def test_linear_gaussian_loglik_matches_kalman(lg_case, scheme, repeats):
+def test_linear_gaussian_loglik_matches_kalman(lg_case, scheme, repeats, proposal):
+    # Both ways of regenerating the force coefficients at the six piece starts target the
+    # same model: the regression proposal's importance correction at each piece end keeps
+    # the likelihood estimate unbiased.
     problem, fixed = lg_case
     exact = dense_kalman_loglik(problem, *fixed, discretisation="euler").loglik
     ll = np.array(
         [
             run_pf(
-                problem, n_particles=2000, seed=100 + r, resampling=scheme, fixed_parameters=fixed
+                problem,
+                n_particles=2000,
+                seed=100 + r,
+                resampling=scheme,
+                fixed_parameters=fixed,
+                force_proposal=proposal,
             ).loglik
             for r in range(repeats)
         ]
@@ -169,9 +179,14 @@ def test_determinism(walking_problem):
 
 
 def test_degeneracy_is_reported(walking_problem):
-    """Few particles: ancestors die out, parameter values collapse; with no random walk, frozen."""
-    few = run_pf(walking_problem, n_particles=20, seed=3)
-    many = run_pf(walking_problem, n_particles=2000, seed=3)
+    """Few particles: ancestors die out, parameter values collapse; with no random walk, frozen.
+
+    Blind regeneration of the force coefficients (the seed's) makes the collapse sharp; the
+    default regression proposal keeps more particles alive (median ESS 1313 against 154 of
+    2000 here), which the last lines check.
+    """
+    few = run_pf(walking_problem, n_particles=20, seed=3, force_proposal="prior")
+    many = run_pf(walking_problem, n_particles=2000, seed=3, force_proposal="prior")
     rs_few, rs_many = few.resampled, many.resampled
     assert few.distinct_ancestors[-1] == 1
     assert few.ess.min() < 2.0
@@ -188,10 +203,13 @@ def test_degeneracy_is_reported(walking_problem):
     np.testing.assert_array_equal(frozen.unique_values[-1], [1, 1])
     assert np.all(frozen.sd[-1] < 1e-9 * np.abs(frozen.mean[-1]))
     assert frozen.distinct_ancestors[-1] == 1
+    fitted = run_pf(walking_problem, n_particles=2000, seed=3)
+    assert np.median(fitted.ess) > 4 * np.median(many.ess)
 
 
 def test_jitter_renews_static_parameters(walking_problem):
-    out = run_pf(walking_problem, n_particles=300, seed=5, jitter=True)
+    # Jitter moves theta, so it goes with blind regeneration (no proposal density to correct).
+    out = run_pf(walking_problem, n_particles=300, seed=5, jitter=True, force_proposal="prior")
     assert out.settings["jitter"] == pytest.approx(0.98)
     rs = out.resampled
     assert rs.any()
@@ -199,9 +217,10 @@ def test_jitter_renews_static_parameters(walking_problem):
     # collapsed onto one particle (ESS ~ 1), whose zero spread the kernel cannot renew (98 %
     # of the resampling samples renew fully here).
     assert np.mean(np.all(out.unique_values[rs] == 300, axis=1)) > 0.9
-    plain = run_pf(walking_problem, n_particles=300, seed=5)
+    plain = run_pf(walking_problem, n_particles=300, seed=5, force_proposal="prior")
     assert np.median(plain.unique_values[plain.resampled]) < 300
-    assert run_pf(walking_problem, n_particles=50, seed=5, jitter=0.9).settings["jitter"] == 0.9
+    again = run_pf(walking_problem, n_particles=50, seed=5, jitter=0.9, force_proposal="prior")
+    assert again.settings["jitter"] == 0.9
 
 
 def test_diverging_filter_raises_clear_error(lg_case):
@@ -220,6 +239,8 @@ def test_diverging_filter_raises_clear_error(lg_case):
         ({"ess_threshold": 1.5}, "ess_threshold"),
         ({"discretisation": "foh"}, "Euler only"),
         ({"jitter": 1.5}, "jitter"),
+        ({"jitter": True}, "force_proposal='prior'"),
+        ({"force_proposal": "posterior"}, "force_proposal must be"),
         ({"fixed_parameters": (1.0,)}, "pair"),
         ({"fixed_parameters": (np.nan, 1.0)}, "finite"),
     ],
@@ -234,35 +255,42 @@ SEED_PARTICLES = 2000
 
 
 @pytest.fixture(scope="module")
-def seed_example_run() -> tuple[ParticleFilterOutput, dict]:
-    problem, truth = seed_example_problem(
+def seed_example() -> tuple[IdentificationProblem, dict]:
+    return seed_example_problem(
         prior=StiffnessDampingPrior.seed(), state_fraction=SEED_STATE_FRACTION
     )
-    return run_pf(problem, n_particles=SEED_PARTICLES, seed=0), truth
+
+
+@pytest.fixture(scope="module")
+def seed_example_blind_run(seed_example) -> tuple[ParticleFilterOutput, dict]:
+    problem, truth = seed_example
+    return run_pf(problem, n_particles=SEED_PARTICLES, seed=0, force_proposal="prior"), truth
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "the seed-faithful bootstrap filter degenerates on the seed example: its 21 force "
-        "coefficients are static prior draws (no process noise, one piece), and the first "
-        "u'' samples, observed to 1 % of their RMS, pin one linear combination of them each; "
-        "at P = 2000 the first sample leaves an ESS of 25 and the third a single ancestor, "
-        "whose force draw is kept for the whole record while C and K wander to compensate "
-        "(C -849, K 71 at 10 s)"
-    ),
-)
-def test_seed_example_converges_within_5_percent(seed_example_run):
-    out, truth = seed_example_run
+@pytest.mark.parametrize("seed", [0, 1])
+def test_seed_example_converges_within_5_percent(seed_example, seed):
+    # The seed's model, noise (obs 1 %, the seed's process noise and random walks of C, K) and
+    # prior box; the force coefficients regenerated from the regression proposal. The exact
+    # posterior of this model sits 0.6 % / 0.7 % below the truth (numerical_example.py).
+    problem, truth = seed_example
+    out = run_pf(problem, n_particles=4000, seed=seed)
+    assert out.settings["force_proposal"] == "regression"
     c, k = out.mean[-1]
     assert c == pytest.approx(truth["damping_ns_per_m"], rel=0.05)
     assert k == pytest.approx(truth["stiffness_n_per_m"], rel=0.05)
+    # The truth is inside the filter's own band, and the band is not the collapsed one of
+    # blind regeneration (sd 3-8 % of C, 1-2 % of K measured).
+    z = (out.mean[-1] - [truth["damping_ns_per_m"], truth["stiffness_n_per_m"]]) / out.sd[-1]
+    assert np.all(np.abs(z) < 2.0), z
+    assert 0.01 * c < out.sd[-1, 0] < 0.15 * c
+    # The importance correction at the piece end leaves a healthy cloud (ESS 1000-2000).
+    assert out.ess[-1] > 0.1 * 4000
 
 
 @pytest.mark.slow
-def test_seed_example_degeneracy_is_reported(seed_example_run):
-    out, _ = seed_example_run
+def test_seed_example_blind_regeneration_degenerates_and_says_so(seed_example_blind_run):
+    out, truth = seed_example_blind_run
     # u and u' of the first sample are drawn from their conditional, so the first sample
     # keeps a few dozen particles; the static force coefficients then collapse the cloud onto
     # one lineage within a few samples, for the rest of the record.
@@ -272,3 +300,4 @@ def test_seed_example_degeneracy_is_reported(seed_example_run):
     # The estimate is then far from the truth, and the filter says so by its diagnostics
     # rather than by its (tiny) particle spread.
     assert np.median(out.ess) < 0.01 * SEED_PARTICLES
+    assert abs(out.mean[-1, 0] / truth["damping_ns_per_m"] - 1.0) > 0.2

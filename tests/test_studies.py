@@ -90,7 +90,7 @@ def _check_numerical(summary: dict, out: Path, methods: list[str]) -> None:
 
 
 def test_numerical_example_smoke(tmp_path: Path) -> None:
-    """2 s of the seed example: exact recovers C and K; pf checkpoints replay the full run."""
+    """2 s of the seed example: exact recovers C and K; pf and its checkpoint runs."""
     out = tmp_path / "ne"
     summary = _script("numerical_example").main(
         [
@@ -105,7 +105,21 @@ def test_numerical_example_smoke(tmp_path: Path) -> None:
         assert abs(exact["error_in_sd"][key]) < 4
     assert exact["force_rms_relative_error"] < 0.01
     assert summary["traces"]["exact"]["time_s"] == pytest.approx([0.499, 1.999])
-    # The pf's checkpoint runs (same seed, causal filter) end where the full run was.
+    # The default regression proposal fits each run's force to the data it is given, so a
+    # checkpoint run is its own Monte Carlo run of the posterior given y(0..t).
+    assert summary["methods"]["pf"]["checkpoint_runs_gap_in_sd"] is not None
+
+
+def test_numerical_example_blind_pf_checkpoints_replay_the_full_run(tmp_path: Path) -> None:
+    # With the seed's blind regeneration the filter is causal: the run on the data up to a
+    # checkpoint (same seed) ends exactly where the full run was at that sample.
+    summary = _script("numerical_example").main(
+        [
+            *("--duration", "1", "--methods", "pf", "--checkpoints", "0.5"),
+            *("--pf-particles", "100", "--force-proposal", "prior"),
+            *("--out", str(tmp_path / "ne")),
+        ]
+    )
     assert summary["methods"]["pf"]["checkpoint_runs_match_full_run"]
 
 

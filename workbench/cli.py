@@ -186,6 +186,7 @@ def _identify_settings(args: argparse.Namespace) -> Any:
         "seed": args.seed,
         "state_noise_fraction": args.state_noise,
         "observe": args.observe,
+        "force_proposal": args.force_proposal,
         "force_check": False if args.no_force_check else None,
     }
     if args.config:
@@ -314,6 +315,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--observe",
         choices=["all", "acc"],
         help="channels the likelihood uses: u, u', u'' as the seed (default) or u'' only",
+    )
+    p.add_argument(
+        "--force-proposal",
+        choices=["regression", "prior"],
+        help="pf only: regenerate the force coefficients at each step from a fit to the "
+        "step's data with an importance correction (default), or blindly from the prior "
+        "as the seed",
     )
     p.add_argument(
         "--no-force-check",

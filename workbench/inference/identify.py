@@ -175,6 +175,7 @@ def identify_problem(
             seed=settings.seed,
             resampling=settings.resampling,
             ess_threshold=settings.ess_threshold,
+            force_proposal=settings.force_proposal,
             progress=progress,
         )
     w = np.exp(out.log_weights - np.max(out.log_weights))

@@ -32,7 +32,9 @@ FloatArray = NDArray[np.float64]
 #: Keys of the scalar estimates, in report order (DESIGN.md 4.2 names).
 SCALAR_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", "damping_ratio")
 
-#: A filter whose smallest ESS fraction falls below this is reported as degenerate.
+#: A filter whose median ESS fraction falls below this is reported as degenerate: its
+#: weights stayed collapsed for most of the record. A single dip (the first informative
+#: sample, a piece end's importance correction) that the filter recovers from is not.
 DEGENERATE_ESS_FRACTION = 0.01
 #: A parameter with at most this many distinct particle values at the end is "frozen".
 FROZEN_UNIQUE_VALUES = 5
@@ -227,6 +229,22 @@ class IdentificationResult:
         return float(np.min(self.ess) / self.n_particles)
 
     @property
+    def median_ess_fraction(self) -> float | None:
+        """Median ESS along the run as a fraction of the particle count (filters only)."""
+        if self.ess is None or not self.n_particles:
+            return None
+        return float(np.median(self.ess) / self.n_particles)
+
+    @property
+    def static_parameters(self) -> bool:
+        """Whether C and K had no artificial random walk in the filter (pf only)."""
+        fs = self.extra.get("filter_settings", {})
+        return (
+            float(fs.get("damping_rw_sd_ns_per_m", 0.0)) == 0.0
+            and float(fs.get("stiffness_rw_sd_n_per_m", 0.0)) == 0.0
+        )
+
+    @property
     def frozen_parameters(self) -> list[str]:
         """Parameters whose particles collapsed to a handful of distinct values at the end."""
         if self.unique_values is None:
@@ -268,8 +286,8 @@ class IdentificationResult:
 
     @property
     def degenerate(self) -> bool:
-        """Whether the filter's weights collapsed at some point (ESS below 1 % of P)."""
-        frac = self.min_ess_fraction
+        """Whether the filter's weights stayed collapsed (median ESS below 1 % of P)."""
+        frac = self.median_ess_fraction
         return frac is not None and frac < DEGENERATE_ESS_FRACTION
 
     @property
@@ -288,14 +306,22 @@ class IdentificationResult:
                 "a posterior sd; use more particles, jitter, or method rbpf/exact."
             )
         anc = self.final_ancestors
-        if self.method == "pf" and anc is not None and anc <= FROZEN_ANCESTORS:
+        # With the seed's random walks of C and K every value is renewed at each sample, so
+        # a single surviving lineage over a long record is expected and says nothing about
+        # the cloud's spread (the frozen check does); for static C and K it does.
+        if (
+            self.method == "pf"
+            and anc is not None
+            and anc <= FROZEN_ANCESTORS
+            and self.static_parameters
+        ):
             out.append(
                 f"all particles descend from {anc} initial particle(s): the filter lost its "
                 "diversity, so the reported spread understates the uncertainty."
             )
         if self.degenerate:
             out.append(
-                f"the particle weights degenerated (smallest ESS {self.min_ess_fraction:.2%} of "
+                f"the particle weights degenerated (median ESS {self.median_ess_fraction:.2%} of "
                 "the particles); the estimates rest on very few particles."
             )
         bound = self.parameters_at_prior_bound
@@ -334,6 +360,7 @@ class IdentificationResult:
         out["diagnostics"] = {
             "n_particles": int(self.n_particles),
             "min_ess_fraction": self.min_ess_fraction,
+            "median_ess_fraction": self.median_ess_fraction,
             "frozen_parameters": self.frozen_parameters,
             "degenerate": self.degenerate,
             "final_ancestors": self.final_ancestors,

@@ -22,6 +22,11 @@ documents a better choice:
   (:mod:`workbench.inference.force_check`); costs two mode searches.
 - ``observe = "all"``: the likelihood uses u, u', u'' as the seed does; ``"acc"`` uses
   only u'' (what the plate measures), leaving u, u' to the model's dynamics.
+- ``force_proposal = "regression"`` (``pf`` only): at each piece start the force
+  coefficients are regenerated from a Gaussian fitted to the piece's data given each
+  particle's (C, K), with the importance correction that keeps the seed's target; the
+  seed's blind draws from the force prior (``"prior"``) leave a single force draw alive on
+  its numerical example (:mod:`workbench.inference.pf`, "Regeneration of theta").
 - ``time_basis = "step_phase"``: each step's force basis runs on its own clock, so force
   coefficients are comparable across steps; ``"absolute"`` is the seed's.
 
@@ -96,6 +101,7 @@ class IdentifySettings:
     seed: int = 0
     force_check: bool = True
     observe: str = "all"
+    force_proposal: str = "regression"
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -115,6 +121,10 @@ class IdentifySettings:
             )
         if self.observe not in ("all", "acc"):
             raise UsageError(f"--observe must be 'all' or 'acc', got {self.observe!r}")
+        if self.force_proposal not in ("regression", "prior"):
+            raise UsageError(
+                f"--force-proposal must be 'regression' or 'prior', got {self.force_proposal!r}"
+            )
         if self.pieces not in ("steps", "whole"):
             raise UsageError(f"pieces must be 'steps' or 'whole', got {self.pieces!r}")
         if not (0 < self.ess_threshold <= 1):
