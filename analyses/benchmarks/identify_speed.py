@@ -37,24 +37,9 @@ import tracemalloc
 from collections.abc import Callable
 from typing import Any
 
+from _cores import affinity, pin_cores
 
-def _pin_cores(argv: list[str]) -> int:
-    """Pin this process to ``--cores`` CPUs (default 1) and size the BLAS pools to match.
-
-    Runs before numpy is imported: the thread pools read these variables when they start.
-    """
-    cores = 1
-    if "--cores" in argv[:-1]:
-        cores = max(1, int(argv[argv.index("--cores") + 1]))
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = str(cores)
-    if hasattr(os, "sched_setaffinity"):
-        allowed = sorted(os.sched_getaffinity(0))
-        os.sched_setaffinity(0, set(allowed[:cores]))
-    return cores
-
-
-_CORES = _pin_cores(sys.argv)
+_CORES = pin_cores(sys.argv)
 
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
@@ -210,9 +195,7 @@ def main() -> None:
             "machine": platform.machine(),
             "cpu_count": os.cpu_count(),
             "cores_used": _CORES,
-            "affinity": (
-                sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-            ),
+            "affinity": affinity(),
             "load_average_before": load_before,
             "load_average_after": load_after,
         },

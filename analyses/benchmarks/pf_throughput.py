@@ -24,6 +24,10 @@ estimates (mean and spread over repeats) are printed beside the exact Kalman val
 ``particles`` needs numpy < 2 (and numba), so this script runs from its own virtual
 environment; see ``analyses/benchmarks/README.md``.
 
+Both filters run on one pinned core with single-threaded numerical libraries (``--cores N``
+relaxes that; :mod:`_cores` says why it matters: unpinned, the library's small matrix products
+oversubscribe the cores and the ratio triples).
+
 Usage::
 
     .venv-bench/bin/python analyses/benchmarks/pf_throughput.py [--particles 500 2000 8000]
@@ -37,6 +41,7 @@ import dataclasses
 import importlib.metadata
 import json
 import math
+import os
 import platform
 import sys
 import time
@@ -44,18 +49,22 @@ import tracemalloc
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
+from _cores import affinity, pin_cores
 
-from workbench.inference.kalman import dense_kalman_loglik
-from workbench.inference.pf import run_pf
-from workbench.inference.problem import (
+_CORES = pin_cores(sys.argv)
+
+import numpy as np  # noqa: E402  (after the thread-pool settings above)
+
+from workbench.inference.kalman import dense_kalman_loglik  # noqa: E402
+from workbench.inference.pf import run_pf  # noqa: E402
+from workbench.inference.problem import (  # noqa: E402
     ForcePrior,
     IdentificationProblem,
     NoiseModel,
     build_problem,
 )
-from workbench.records.inspection import inspect_record
-from workbench.synth.simulate import simulate_walking
+from workbench.records.inspection import inspect_record  # noqa: E402
+from workbench.synth.simulate import simulate_walking  # noqa: E402
 
 try:
     import particles
@@ -322,6 +331,9 @@ def main(argv: list[str] | None = None) -> int:
         "--ours-only", action="store_true", help="run without the particles library"
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--cores", type=int, default=1, help="CPUs to run on (pinned before numpy; default 1)"
+    )
     args = parser.parse_args(argv)
     if particles is None and not args.ours_only:
         print(
@@ -352,6 +364,9 @@ def main(argv: list[str] | None = None) -> int:
             "python": platform.python_version(),
             "numpy": np.__version__,
             "machine": platform.machine(),
+            "cores_used": _CORES,
+            "affinity": affinity(),
+            "load_average": list(os.getloadavg()),
         },
         "rows": [measure(problem, n, args.repeats, args.seed) for n in args.particles],
     }
@@ -365,7 +380,8 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"Bootstrap particle filter throughput: {prob['n_samples']} samples, "
         f"{prob['n_pieces']} pieces, state dim {prob['state_dim']}, "
-        f"reference {result['reference']}, numpy {np.__version__}"
+        f"reference {result['reference']}, numpy {np.__version__}, {_CORES} core(s) pinned, "
+        f"load average {result['environment']['load_average'][0]:.2f}"
     )
     header = (
         f"{'particles':>9} {'workbench s':>12} {'Mpart-steps/s':>14} {'peak MB':>8} | "

@@ -549,6 +549,9 @@ def _filter_piece(
         p = pk[:, cl]
         # (2) The coefficients of every sample of the chunk.
         fac = _step_coefficients(pk[:, :cl], y[start + c0 : start + c0 + cl], dyn, r, mass, cf)
+        # One copy per chunk into (sample, pair, row, column): each sample's coefficients are
+        # then a contiguous (B, 5, 4) operand (a strided one made matmul 1.5x slower).
+        cf_s = np.ascontiguousarray(cf[:, :, :cl].transpose(2, 3, 0, 1))
         sum_log_diag += np.sum(np.log(fac[0] * fac[3] * fac[5]), axis=0)
         if predictive:
             l_all[c0 : c0 + cl] = fac[:6].transpose(1, 0, 2)
@@ -556,7 +559,7 @@ def _filter_piece(
         for i in range(cl):
             nxt_blk = blocks[1] if cur is blocks[0] else blocks[0]
             cur[:, 2] = inputs[c0 + i]
-            coef = cf[:, :, i].transpose(2, 0, 1)  # (B, 5, 4)
+            coef = cf_s[i]  # (B, 5, 4)
             np.matmul(coef[:, :3], cur, out=wbuf[:, i])
             np.matmul(coef[:, 3:], cur, out=nxt_blk[:, :2])
             if c0 + i == length - 1:
