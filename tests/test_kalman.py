@@ -19,7 +19,6 @@ from workbench.inference.problem import (
     seed_example_problem,
 )
 from workbench.models.force import FourierForce
-from workbench.records.inspection import inspect_record
 from workbench.records.preprocess import COMResponse
 from workbench.synth.simulate import simulate_walking
 
@@ -114,23 +113,6 @@ def _tiny_problem(seed: int, *, pieces: int = 3, samples: int = 15) -> Identific
     return IdentificationProblem(**{**problem.__dict__, "y": y})
 
 
-@pytest.fixture(scope="module")
-def walking_problem() -> tuple[IdentificationProblem, float, float]:
-    """A realistic 10 s, 100 Hz walking record in footfall pieces, n = 4."""
-    sim = simulate_walking(
-        mass_kg=70.0,
-        pacing_hz=1.8,
-        duration_s=10.0,
-        sample_rate_hz=100,
-        noise_sd_n=3.0,
-        start="rest",
-        seed=11,
-    )
-    insp = inspect_record(sim.record, highpass_hz=0.15)
-    problem = build_problem(insp.com, insp.steps, harmonics=4)
-    return problem, sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]
-
-
 # -- discretisation -----------------------------------------------------------------------
 @pytest.mark.parametrize("c, k", [(900.0, 15000.0), (200.0, 40000.0)])
 def test_transition_matrices_match_quadrature(c: float, k: float) -> None:
@@ -200,8 +182,8 @@ def test_record_loglik_equals_brute_force_joint_gaussian(discretisation: str) ->
 
 
 @pytest.mark.parametrize("discretisation", ["foh", "euler"])
-def test_record_loglik_equals_dense_filter(walking_problem, discretisation: str) -> None:
-    problem, c, k = walking_problem
+def test_record_loglik_equals_dense_filter(walking_steps_problem, discretisation: str) -> None:
+    problem, c, k = walking_steps_problem
     dense = kf.dense_kalman_loglik(problem, c, k, discretisation=discretisation)
     fast = kf.record_loglik(
         problem, [c, 1.2 * c], [k, 0.9 * k], discretisation=discretisation, return_pieces=True
@@ -224,8 +206,8 @@ def test_record_loglik_equals_dense_filter(walking_problem, discretisation: str)
     assert alone.loglik[0] == pytest.approx(fast.loglik[1], rel=1e-12)
 
 
-def test_piece_filter_chain_and_predictive_match_dense(walking_problem) -> None:
-    problem, c, k = walking_problem
+def test_piece_filter_chain_and_predictive_match_dense(walking_steps_problem) -> None:
+    problem, c, k = walking_steps_problem
     dense = kf.dense_kalman_loglik(problem, c, k)
     # Per-sample log-densities of the dense filter, from its innovations.
     innov = problem.y - dense.predicted_obs
@@ -252,10 +234,10 @@ def test_piece_filter_chain_and_predictive_match_dense(walking_problem) -> None:
     assert total == pytest.approx(dense.loglik, rel=1e-9)
 
 
-def test_chunked_piece_filter_equals_one_chunk(walking_problem, monkeypatch) -> None:
+def test_chunked_piece_filter_equals_one_chunk(walking_steps_problem, monkeypatch) -> None:
     # The piece filter works through a piece in chunks of samples (bounded memory); chunk
     # boundaries must not change anything, the predictive output included.
-    problem, c, k = walking_problem
+    problem, c, k = walking_steps_problem
     pairs = ([c, 0.8 * c, 1.3 * c], [k, 1.1 * k, 0.7 * k])
     whole = kf.record_loglik(problem, *pairs, return_pieces=True)
     x_mean, x_cov = kf.initial_state(problem, 3)

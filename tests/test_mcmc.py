@@ -17,9 +17,6 @@ import pytest
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
 from workbench.inference.mcmc import RHAT_MAX, McmcResult, run_ensembles
-from workbench.inference.problem import IdentificationProblem, build_problem
-from workbench.records.inspection import inspect_record
-from workbench.synth.simulate import simulate_walking
 
 
 # -- helpers -------------------------------------------------------------------------------
@@ -253,21 +250,6 @@ def test_bad_arguments_raise_usage_error(kwargs: dict, match: str) -> None:
 
 
 # -- one footfall step of the SMD model ----------------------------------------------------
-@pytest.fixture(scope="module")
-def walking_problem() -> tuple[IdentificationProblem, float, float]:
-    """The 10 s, 100 Hz walking record of tests/test_kalman.py, in footfall pieces, n = 4."""
-    sim = simulate_walking(
-        mass_kg=70.0,
-        pacing_hz=1.8,
-        duration_s=10.0,
-        sample_rate_hz=100,
-        noise_sd_n=3.0,
-        start="rest",
-        seed=11,
-    )
-    insp = inspect_record(sim.record, highpass_hz=0.15)
-    problem = build_problem(insp.com, insp.steps, harmonics=4)
-    return problem, sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]
 
 
 def _grid_moments(log_density, lo: np.ndarray, hi: np.ndarray, n: int):
@@ -290,8 +272,8 @@ def _grid_moments(log_density, lo: np.ndarray, hi: np.ndarray, n: int):
 
 
 @pytest.mark.slow
-def test_collapsed_step_posterior_matches_exact_grid(walking_problem) -> None:
-    problem, c_true, k_true = walking_problem
+def test_collapsed_step_posterior_matches_exact_grid(walking_steps_problem) -> None:
+    problem, c_true, k_true = walking_steps_problem
     j = 5
     # Fixed hand-in state: the filter run at the true (C, K) through pieces 0..j-1.
     xm, xc = kf.initial_state(problem, 1)
