@@ -158,23 +158,16 @@ def _checkpoint_run(
         if post.force is None:  # pragma: no cover - only with an injected likelihood
             raise RuntimeError("exact_posterior returned no force posterior")
         return post.mean, post.sd, post.force.mean[0]
+    common: dict[str, Any] = {
+        "n_particles": settings.n_particles,
+        "seed": settings.seed,
+        "resampling": settings.resampling,
+        "ess_threshold": settings.ess_threshold,
+    }
     if method == "pf":
-        out = run_pf(
-            problem,
-            n_particles=settings.n_particles,
-            seed=settings.seed,
-            resampling=settings.resampling,
-            ess_threshold=settings.ess_threshold,
-            force_proposal=settings.force_proposal,
-        )
+        out = run_pf(problem, force_proposal=settings.force_proposal, **common)
     else:
-        out = run_rbpf(
-            problem,
-            n_particles=settings.n_particles,
-            seed=settings.seed,
-            resampling=settings.resampling,
-            ess_threshold=settings.ess_threshold,
-        )
+        out = run_rbpf(problem, **common)
     return out.mean[-1], out.sd[-1], out.piece_coefficients_mean[-1]
 
 
