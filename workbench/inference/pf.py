@@ -83,7 +83,8 @@ and at the piece's last sample every particle's weight is multiplied by
 target, so the filter at piece ends, its log-likelihood estimate over a piece and the
 posterior it reports are those of the seed's model (only the proposal changed). Inside a
 piece the weights that drive resampling target the auxiliary ``q(theta) p(y_{s..k} | ...)``;
-the estimates reported there use the corrected weights. The regression is one eigen-
+the estimates reported there, and the one-step-ahead predictions (which must not see the
+sample they predict, although ``q`` did), use the corrected weights. The regression is one eigen-
 decomposition of the piece's whitened Gram matrix and O(m^2) per particle, once per piece.
 Measured on the seed example (obs 1 %, the seed's process noise, P = 4000; ``python
 analyses/numerical_example.py --methods pf --seed S`` for S = 0-3): C from -2.0 % to +1.7 %,
@@ -477,6 +478,7 @@ def run_pf(
     # log p(theta) - log q(theta) of each table row (regression proposal; 0 for the prior).
     correction = np.zeros(n_part)
     w_est = np.empty(n_part)
+    w_pred = np.empty(n_part)
 
     def draw_theta() -> None:
         if regression is None:
@@ -535,16 +537,26 @@ def run_pf(
 
             # One-step-ahead predictive mean of y_k under the carried weights W_{k-1}
             # (``w`` holds them: normalised at the end of the previous sample, 1/P after a
-            # resampling).
+            # resampling). The regression proposal fitted theta to the whole piece, y_k
+            # included: its importance correction turns the weights back into those of
+            # p(. | y_{<k}), so that the prediction does not see the sample it predicts.
+            wp = w
+            if regression is not None:
+                np.take(correction, pointer, out=w_pred)
+                w_pred -= w_pred.max()
+                np.exp(w_pred, out=w_pred)
+                w_pred *= w
+                w_pred *= 1.0 / float(w_pred.sum())
+                wp = w_pred
             if k > 0:
-                pred_tr[k, 0] = w @ u
-                pred_tr[k, 1] = w @ v
-                pred_tr[k, 2] = w @ acc
+                pred_tr[k, 0] = wp @ u
+                pred_tr[k, 1] = wp @ v
+                pred_tr[k, 2] = wp @ acc
             else:
                 # Before y_0 the state is its prior N(0, s0^2), not the conditional it was
                 # drawn from: predict with u = u' = 0.
                 pred_tr[0, :2] = 0.0
-                pred_tr[0, 2] = w @ (acc + (kk * u + c * v) * inv_mass)
+                pred_tr[0, 2] = wp @ (acc + (kk * u + c * v) * inv_mass)
 
             # Minus the log-likelihood of y_k for every particle (eq. 22, R diagonal), up to
             # its constant, which cancels in the weights and joins log p(y_k | past) below:
