@@ -49,6 +49,15 @@ A run is called converged when all of these hold (thresholds are module constant
 
 Every failed condition adds one plain sentence to :attr:`McmcResult.reasons`.
 
+One call of the target per round, for all ensembles
+    A log density that costs a Kalman filter per call is dominated by per-call overhead at
+    a few dozen points, so the ensembles step in lockstep: each runs in its own thread, and
+    every time emcee asks one of them for log densities the request waits until every
+    running ensemble has asked, then all are evaluated in one call of ``log_prob`` (ensemble
+    order, so the batch, and with a row-wise target the result, is the same on every run).
+    The ensembles stay independent: each keeps its own walkers and random stream; only the
+    arithmetic is shared. ``lockstep=False`` evaluates them one after the other instead.
+
 Determinism
     ``np.random.SeedSequence(seed).spawn(n_ensembles)`` gives every ensemble its own
     sequence; each of those is spawned once more into a stream for the starting positions
@@ -64,6 +73,7 @@ Determinism
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -247,6 +257,7 @@ def run_ensembles(
     vectorize: bool = True,
     param_names: Sequence[str] | None = None,
     moves: str | Any = "de",
+    lockstep: bool = True,
 ) -> McmcResult:
     """Sample a log density with several independent emcee ensembles and check convergence.
 
@@ -308,6 +319,9 @@ def run_ensembles(
         which is what matters when every step costs a Kalman filter. ``"stretch"`` is
         emcee's default move; anything else is passed to
         :class:`emcee.EnsembleSampler` as ``moves`` unchanged.
+    lockstep : bool, default True
+        Evaluate the requests of all ensembles in one call of ``log_prob`` per round
+        (module docstring); the samples are the same either way for a row-wise target.
 
     Returns
     -------
@@ -348,6 +362,7 @@ def run_ensembles(
     # emcee always runs with `vectorize=True`: a point-wise target is batched here instead.
     target = _CountingLogProb(log_prob if vectorize else _row_by_row(log_prob), n_dim)
 
+    batcher = _Lockstep(target, n_ensembles) if lockstep else None
     samplers: list[emcee.EnsembleSampler] = []
     states: list[emcee.State] = []
     for e, start in enumerate(starts):
@@ -359,7 +374,8 @@ def run_ensembles(
                 "density; start the walkers inside the support (a smaller scale or a "
                 "different centre)"
             )
-        sampler = emcee.EnsembleSampler(n_walkers, n_dim, target, vectorize=True, moves=move_spec())
+        fn = batcher.proxy(e) if batcher is not None else target
+        sampler = emcee.EnsembleSampler(n_walkers, n_dim, fn, vectorize=True, moves=move_spec())
         rng_state = np.random.RandomState(np.random.MT19937(streams[e][1])).get_state()
         samplers.append(sampler)
         states.append(emcee.State(start, log_prob=lp0, random_state=rng_state))
@@ -370,16 +386,18 @@ def run_ensembles(
     previous_tau: FloatArray | None = None
     while True:
         chunk = target_steps - n_steps
-        for e, sampler in enumerate(samplers):
-            try:
-                states[e] = sampler.run_mcmc(states[e], chunk, progress=False)
-            except ValueError as err:
-                if n_steps:
-                    raise
-                # emcee refuses starting points that are (nearly) linearly dependent.
-                raise UsageError(
-                    f"emcee cannot start ensemble {e}: {err}; spread the starting points"
-                ) from err
+        try:
+            _run_chunk(samplers, states, chunk, batcher)
+        except _EnsembleError as failure:
+            err = failure.__cause__
+            if err is None:
+                raise
+            if n_steps or not isinstance(err, ValueError):
+                raise err from None
+            # emcee refuses starting points that are (nearly) linearly dependent.
+            raise UsageError(
+                f"emcee cannot start ensemble {failure.ensemble}: {err}; spread the starting points"
+            ) from err
         n_steps = target_steps
         tau = np.array([_tau(sampler.get_chain()) for sampler in samplers])
         long_enough = n_steps >= tau_factor * np.nanmax(tau, axis=1)
@@ -468,6 +486,108 @@ def run_ensembles(
 
 
 # -- helpers ------------------------------------------------------------------------------
+class _EnsembleError(Exception):
+    """An ensemble's run failed; ``__cause__`` is the original exception."""
+
+    def __init__(self, ensemble: int) -> None:
+        super().__init__(f"ensemble {ensemble} failed")
+        self.ensemble = ensemble
+
+
+class _PeerFailure(RuntimeError):
+    """Raised in an ensemble waiting on a round whose evaluation failed in another thread."""
+
+
+class _Lockstep:
+    """Gather the log-density requests of all running ensembles into one call per round."""
+
+    def __init__(self, target: Callable[[FloatArray], FloatArray], n: int) -> None:
+        self._target = target
+        self._cond = threading.Condition()
+        self._active = set(range(n))
+        self._pending: dict[int, FloatArray] = {}
+        self._results: dict[int, FloatArray] = {}
+        self._error: BaseException | None = None
+
+    def proxy(self, e: int) -> Callable[[FloatArray], FloatArray]:
+        """Return the log density that ensemble ``e`` sees."""
+        return lambda coords: self._submit(e, coords)
+
+    def restart(self, n: int) -> None:
+        """Before a chunk: all ``n`` ensembles run again."""
+        self._active = set(range(n))
+        self._error = None
+
+    def retire(self, e: int) -> None:
+        """Ensemble ``e`` finished its chunk (or failed): stop waiting for it."""
+        with self._cond:
+            self._active.discard(e)
+            self._evaluate_if_ready()
+
+    def _submit(self, e: int, coords: FloatArray) -> FloatArray:
+        with self._cond:
+            self._pending[e] = np.asarray(coords, dtype=np.float64)
+            self._evaluate_if_ready()
+            while e not in self._results and self._error is None:
+                self._cond.wait()
+            if e in self._results:
+                return self._results.pop(e)
+            raise _PeerFailure("another ensemble's log-density call failed") from self._error
+
+    def _evaluate_if_ready(self) -> None:
+        # Called with the lock held, by whichever thread completes the round.
+        if not self._pending or set(self._pending) != self._active:
+            return
+        keys = sorted(self._pending)
+        batch = [self._pending.pop(k) for k in keys]
+        try:
+            lp = self._target(np.concatenate(batch))
+        except BaseException as err:
+            self._error = err
+            self._cond.notify_all()
+            raise
+        edges = np.cumsum([len(x) for x in batch])[:-1]
+        for k, part in zip(keys, np.split(lp, edges), strict=True):
+            self._results[k] = part
+        self._cond.notify_all()
+
+
+def _run_chunk(
+    samplers: list[emcee.EnsembleSampler],
+    states: list[emcee.State],
+    chunk: int,
+    batcher: _Lockstep | None,
+) -> None:
+    """Advance every ensemble by ``chunk`` steps (in lockstep threads when batching)."""
+    if batcher is None:
+        for e, sampler in enumerate(samplers):
+            try:
+                states[e] = sampler.run_mcmc(states[e], chunk, progress=False)
+            except Exception as err:
+                raise _EnsembleError(e) from err
+        return
+    batcher.restart(len(samplers))
+    errors: dict[int, BaseException] = {}
+
+    def run(e: int) -> None:
+        try:
+            states[e] = samplers[e].run_mcmc(states[e], chunk, progress=False)
+        except BaseException as err:
+            errors[e] = err
+        finally:
+            batcher.retire(e)
+
+    threads = [threading.Thread(target=run, args=(e,)) for e in range(len(samplers))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    if errors:
+        # The original failure, not the "another ensemble failed" of those waiting on it.
+        first = min(errors, key=lambda e: (isinstance(errors[e], _PeerFailure), e))
+        raise _EnsembleError(first) from errors[first]
+
+
 def _check_int(name: str, value: object, least: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
         raise UsageError(f"{name} must be an integer of at least {least}, got {value!r}")
