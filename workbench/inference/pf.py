@@ -56,9 +56,9 @@ draws) and C, K then wander to compensate -- the failure DESIGN.md 2.4 warns abo
     z <- a z + (1 - a) mean(z) + sqrt(1 - a^2) L eps,   L L^T = cov(z),  eps ~ N(0, I),
 
 which keeps the mean and covariance of the particle cloud but renews its values (Liu & West
-2001). It does not rescue blind regeneration on the seed example: the cloud of theta still
-collapses onto one particle (zero spread, nothing left to jitter; C -367 N s/m at 10 s, P =
-2000, shrinkage 0.98). ``jitter=True`` uses ``a = 0.98``; a float sets ``a``. It needs
+2001). It does not rescue blind regeneration on the seed example, where the cloud of theta
+collapses onto one particle within a few samples and leaves no spread to jitter.
+``jitter=True`` uses ``a = 0.98``; a float sets ``a``. It needs
 ``force_proposal="prior"`` (a moved theta has no proposal density to correct by).
 It targets a kernel-smoothed posterior, is reported in ``settings``, costs a covariance and a
 Cholesky factor per resampling, and cannot renew a cloud that has already collapsed onto one
@@ -69,9 +69,11 @@ every piece start without saying from what. Drawn blindly from the force prior
 (``force_proposal="prior"``), the 21 static coefficients of the seed's numerical example
 (1 kHz, observation noise 1 % of the RMS) cannot be explored: each early u'' sample, observed
 to 1 % of its RMS, pins one linear combination of them, so at P = 2000 the first sample
-leaves an ESS of about 25 and the third a single ancestor, whose force draw is kept for the
-whole record while C and K wander to compensate (C -849 N s/m, K 71 N/m at 10 s; the
-diagnostics report the collapse). The default, ``force_proposal="regression"``, draws each
+leaves an ESS below a tenth of the particles and from the tenth sample on all descend from a
+single ancestor (``tests/test_pf.py``), whose force draw is kept for the whole record while C
+and K wander to compensate (``python analyses/numerical_example.py --methods pf
+--force-proposal prior``: C +470 %, K -109 % at 10 s; the diagnostics report the
+collapse). The default, ``force_proposal="regression"``, draws each
 particle's coefficients from a Gaussian ``q(theta | C, K, y_piece)``: given the particle's
 (C, K), ``M y'' + K y + C y'`` is the force ``b_k theta`` plus white noise of variance
 ``M^2 r2 + K^2 r0 + C^2 r1``, a conjugate regression on the piece's basis rows with the force
