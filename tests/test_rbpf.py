@@ -190,7 +190,7 @@ def test_exact_moves_follow_a_surprising_step(short_problem) -> None:
     # and the runs of four seeds together (about 512 particles) close to the exact mean.
     # The posterior of C sits 1.3 sd above the lower edge of the prior box, where the
     # Liu-West kernel's reflection widens the cloud: its sd of C is 1.1-1.5 times the exact
-    # one over seeds 0-5 (1.2-1.5 with the earlier defaults, shrinkage 0.98 and no budget).
+    # one, hence the sd bound below.
     mean, sd = _grid_posterior(short_problem)
     means = []
     for seed in range(4):

@@ -34,10 +34,9 @@ Moves after resampling
     keeps the ``(u, u')`` statistics and the history of its parent, an approximation of the
     order of the jitter. Values leaving the prior box are reflected at the bound (clipped
     if they jump across it), which keeps a uniform prior uniform near its edges.
-    ``shrinkage=1`` switches it off. The default was 0.98 (0.2 sd) until the benchmark
-    ``analyses/benchmarks/identify_speed.py`` showed that the larger jitter renews the
-    cloud better: over seeds 0-9 of its 30 s record, 128 particles, the rms distance of the
-    posterior mean of C from the exact one fell from 0.27 to 0.21 posterior sd.
+    ``shrinkage=1`` switches it off. The default 0.9 was chosen on the record of
+    ``analyses/benchmarks/identify_speed.py``, where a larger jitter than the earlier 0.98
+    renewed the cloud better.
 
     *Exact Metropolis moves* (a second or later resampling inside one piece; the first
     resamplings of the record while ``exact_budget`` lasts; every resampling with
@@ -50,13 +49,13 @@ Moves after resampling
     a hundred times smaller, so that the rest of the record works with the descendants of
     a few prior draws; there the history is short and exact moves cheap (the budget, 0.3
     passes over the record by default, bounds their cost; on the benchmark record it pays
-    for the moves at the first two resamplings and lowers the rms distance above from 0.21
-    to 0.15 sd). Each particle takes ``exact_moves`` random-walk Metropolis steps (proposal
-    covariance ``2.38^2 / 2`` times the cloud's) targeting the
-    exact tempered posterior ``p(C, K) p(y_before_j | C, K) p(y_j | ...)^alpha``, whose
-    likelihood the batched Kalman filter recomputes for the proposals from the first
-    piece (resample-move / IBIS, Chopin 2002). This is exact but costs a pass over the
-    pieces so far per step; ``exact_moves=0`` falls back to Liu-West moves throughout.
+    for the moves at the first two resamplings). Each particle takes ``exact_moves``
+    random-walk Metropolis steps (proposal covariance ``2.38^2 / 2`` times the cloud's)
+    targeting the exact tempered posterior
+    ``p(C, K) p(y_before_j | C, K) p(y_j | ...)^alpha``, whose likelihood the batched
+    Kalman filter recomputes for the proposals from the first piece (resample-move / IBIS,
+    Chopin 2002). This is exact but costs a pass over the pieces so far per step;
+    ``exact_moves=0`` falls back to Liu-West moves throughout.
 
 Known limitation: a posterior that drifts. The Liu-West kernel only knows the cloud's
 mean and covariance, so it cannot *transport* particles. When the record's pieces disagree
@@ -70,8 +69,8 @@ step; with the default settings the filter's cloud narrows to a third of that wi
 shrinkage 0.98 and no exact budget). ``rejuvenate="always"`` (exact moves after every
 resampling) agreed within 0.13 sd at about five times the cost. On records whose posterior
 contracts steadily the default agrees with the exact posterior within about 0.3 sd
-(``tests/test_rbpf.py``; on the benchmark record, 256 particles, seeds 0-9, within 0.19 sd
-with the seed's process noise and 0.27 sd without, rms 0.1 and 0.13 sd). The exact method
+(``tests/test_rbpf.py``; on the benchmark record, 256 particles, ``identify_speed.py
+--rbpf-seeds 10``: rms 0.14 (C) and 0.12 (K), at most 0.27 posterior sd). The exact method
 (:mod:`workbench.inference.exact`) is the reference when in doubt; a growing gap between the
 two is itself a sign of misfit.
 
