@@ -111,8 +111,8 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 # The piece filter works through a piece in chunks of samples whose whitened-sensitivity
 # buffer holds about this many doubles (2 MB): small enough to stay in the processor's
 # cache between the per-sample products that write it and the Gram product that reads it
-# (measured: a whole-piece buffer of several MB made the per-sample copies 10x slower),
-# and independent of the piece's length.
+# (a whole-piece buffer of several MB made the per-sample copies many times slower), and
+# independent of the piece's length.
 _CHUNK_DOUBLES = 1 << 18
 # At most this many samples per chunk (small batches: the per-chunk work is amortised).
 _MAX_CHUNK = 64
@@ -550,7 +550,7 @@ def _filter_piece(
         # (2) The coefficients of every sample of the chunk.
         fac = _step_coefficients(pk[:, :cl], y[start + c0 : start + c0 + cl], dyn, r, mass, cf)
         # One copy per chunk into (sample, pair, row, column): each sample's coefficients are
-        # then a contiguous (B, 5, 4) operand (a strided one made matmul 1.5x slower).
+        # then a contiguous (B, 5, 4) operand (numpy's batched product is slower on a strided one).
         cf_s = np.ascontiguousarray(cf[:, :, :cl].transpose(2, 3, 0, 1))
         sum_log_diag += np.sum(np.log(fac[0] * fac[3] * fac[5]), axis=0)
         if predictive:

@@ -295,11 +295,10 @@ def run_ensembles(
         Largest relative change of every tau estimate between two consecutive checks for
         the estimate to count as settled. Not emcee's tutorial 1 %: our checks are spaced by
         at least 25 % more chain (not emcee's 100 steps), and between such checks the
-        estimate from 32 walkers over about 50 tau moves by a few per cent from noise alone
-        (measured: 2-8 % on the Gaussians of the tests). A tolerance at the noise level
-        turns the check into a lottery that extends the run again and again (1 % ran a 2-D
-        Gaussian to 20 000 steps; 5 % quadrupled the length of an SMD step run whose 50-tau
-        rule held from the start), while the failure it exists for, a tau that keeps
+        estimate from 32 walkers over about 50 tau moves by a few per cent from noise alone.
+        A tolerance at that noise level turns the check into a lottery that extends the run
+        again and again (with 1 % the 2-D Gaussian of the tests ran on to ``max_steps``),
+        while the failure it exists for, a tau that keeps
         growing because the chain has not yet seen its slow directions, changes it by much
         more than 10 %.
     burn_tau : float, default 3
@@ -314,9 +313,9 @@ def run_ensembles(
         The proposal. ``"de"`` is the mixture emcee's documentation suggests for targets
         that are roughly Gaussian, 80 % differential evolution and 20 % DE snooker moves
         (both affine invariant, like the stretch move); on the correlated Gaussians of the
-        tests its autocorrelation time is about 8 steps against about 30 for the stretch
-        move at the same cost per step, so the 50-tau rule is met about four times sooner,
-        which is what matters when every step costs a Kalman filter. ``"stretch"`` is
+        tests its autocorrelation time is several times shorter than the stretch move's at
+        the same cost per step, so the 50-tau rule is met that much sooner, which is what
+        matters when every step costs a Kalman filter. ``"stretch"`` is
         emcee's default move; anything else is passed to
         :class:`emcee.EnsembleSampler` as ``moves`` unchanged.
     lockstep : bool, default True
