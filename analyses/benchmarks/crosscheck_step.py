@@ -1,6 +1,7 @@
 """Seconds per footstep of the collapsed per-step MCMC, with and without lockstep batching.
 
-Usage: ``python analyses/benchmarks/crosscheck_step.py [--harmonics 10] [--step 5] [--json]``
+Usage: ``python analyses/benchmarks/crosscheck_step.py [--harmonics 10] [--step 5]
+[--walkers 32] [--json]``
 (main environment, one pinned core by default, ``--cores N`` to change).
 
 The target is the collapsed posterior of (C, K) given one footfall step, as the per-step
@@ -87,6 +88,9 @@ def main() -> None:
     parser.add_argument("--harmonics", type=int, default=10)
     parser.add_argument("--step", type=int, default=5)
     parser.add_argument("--seed", type=int, default=2024)
+    parser.add_argument(
+        "--walkers", type=int, default=None, help="walkers per ensemble (runner default 32)"
+    )
     parser.add_argument("--cores", type=int, default=1, help="CPUs (pinned; default 1)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args()
@@ -94,13 +98,15 @@ def main() -> None:
     log_density, centre, scale, counts = step_target(args.harmonics, args.step)
 
     def initial(gen: np.random.Generator) -> np.ndarray:
-        return np.abs(centre + scale * gen.standard_normal((32, 2)))
+        return np.abs(centre + scale * gen.standard_normal((args.walkers or 32, 2)))
 
     rows = []
     for lockstep in (True, False):
         counts["calls"] = 0
         t0 = time.perf_counter()
-        res = run_ensembles(log_density, initial, seed=args.seed, lockstep=lockstep)
+        res = run_ensembles(
+            log_density, initial, seed=args.seed, lockstep=lockstep, n_walkers=args.walkers
+        )
         seconds = time.perf_counter() - t0
         rows.append(
             {
@@ -131,7 +137,7 @@ def main() -> None:
         return
     print(
         f"collapsed (C, K) posterior of step {args.step}, n = {args.harmonics}, "
-        f"{_CORES} core(s); target < 1 s per step"
+        f"{args.walkers or 32} walkers x 4 ensembles, {_CORES} core(s); target < 1 s per step"
     )
     print(
         f"{'mode':<10} {'s':>7} {'evals':>8} {'calls':>6} {'steps':>6} {'tau':>6} "
