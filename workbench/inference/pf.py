@@ -479,6 +479,8 @@ def run_pf(
 
     # log p(theta) - log q(theta) of each table row (regression proposal; 0 for the prior).
     correction = np.zeros(n_part)
+    corr_now = np.empty(n_part)  # correction of each particle's row at this sample
+    corr_exp = np.empty(n_part)  # exp(corr_now - max): the same, as a weight factor
     w_est = np.empty(n_part)
     w_pred = np.empty(n_part)
 
@@ -544,11 +546,19 @@ def run_pf(
             # p(. | y_{<k}), so that the prediction does not see the sample it predicts.
             wp = w
             if regression is not None:
-                np.take(correction, pointer, out=w_pred)
-                w_pred -= w_pred.max()
-                np.exp(w_pred, out=w_pred)
-                w_pred *= w
-                w_pred *= 1.0 / float(w_pred.sum())
+                # The rows particles point into change only at resampling, after the
+                # estimates below, so this gather serves the prediction and the estimate.
+                np.take(correction, pointer, out=corr_now)
+                np.subtract(corr_now, corr_now.max(), out=corr_exp)
+                np.exp(corr_exp, out=corr_exp)
+                np.multiply(w, corr_exp, out=w_pred)
+                total_pred = float(w_pred.sum())
+                if not total_pred > 0.0:
+                    np.add(lw, corr_now, out=w_pred)  # log domain, as for the estimate
+                    w_pred -= w_pred.max()
+                    np.exp(w_pred, out=w_pred)
+                    total_pred = float(w_pred.sum())
+                w_pred *= 1.0 / total_pred
                 wp = w_pred
             if k > 0:
                 pred_tr[k, 0] = wp @ u
@@ -605,11 +615,10 @@ def run_pf(
             w *= 1.0 / total  # normalised weights W_k
             est = w
             if regression is not None:
-                np.take(correction, pointer, out=w_est)
                 if is_end[k]:
                     # End of the piece: the importance correction of the regression proposal
                     # joins the weights (and log p(y_piece | past) through its log-mean).
-                    lw += w_est
+                    lw += corr_now
                     top = lw.max()
                     np.subtract(lw, top, out=w)
                     np.exp(w, out=w)
@@ -622,10 +631,15 @@ def run_pf(
                 else:
                     # Inside the piece the weights target the proposal's auxiliary
                     # distribution; the estimate uses the corrected ones.
-                    w_est += lw
-                    w_est -= w_est.max()
-                    np.exp(w_est, out=w_est)
-                    w_est *= 1.0 / float(w_est.sum())
+                    np.multiply(w, corr_exp, out=w_est)
+                    total_est = float(w_est.sum())
+                    if not total_est > 0.0:
+                        # Both factors tiny on every particle: combine in the log domain.
+                        np.add(lw, corr_now, out=w_est)
+                        w_est -= w_est.max()
+                        np.exp(w_est, out=w_est)
+                        total_est = float(w_est.sum())
+                    w_est *= 1.0 / total_est
                     est = w_est
             ess_tr[k] = ess_k
 
