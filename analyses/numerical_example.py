@@ -28,7 +28,8 @@ Convergence along the record (seed figs. 2-4). What each method carries over tim
 
 - ``pf`` (:class:`~workbench.inference.outputs.ParticleFilterOutput`): C and K at every
   sample (``mean``, ``sd``; inside the piece these use the importance-corrected weights of
-  the regression proposal, so they estimate the posterior given the data so far), but the
+  the regression proposal, which lean towards the whole piece's posterior early on, see
+  :mod:`workbench.inference.pf`; the checkpoint runs are the proper values), but the
   force coefficients only at piece ends -- here once, at the end. Its force coefficients at
   the checkpoints come from re-running the filter on the data up to each checkpoint with the
   same seed: the posterior given y(0..t). With the default regression proposal the force

@@ -106,8 +106,11 @@ def test_numerical_example_smoke(tmp_path: Path) -> None:
     assert exact["force_rms_relative_error"] < 0.01
     assert summary["traces"]["exact"]["time_s"] == pytest.approx([0.499, 1.999])
     # The default regression proposal fits each run's force to the data it is given, so a
-    # checkpoint run is its own Monte Carlo run of the posterior given y(0..t).
-    assert summary["methods"]["pf"]["checkpoint_runs_gap_in_sd"] is not None
+    # checkpoint run is its own run of the posterior given y(0..t), and the full run's value
+    # there leans towards the whole record's posterior: the study reports the gap (large
+    # on this 2 s record) rather than hiding it.
+    gap = summary["methods"]["pf"]["checkpoint_runs_gap_in_sd"]
+    assert gap is not None and gap > 0
 
 
 def test_numerical_example_blind_pf_checkpoints_replay_the_full_run(tmp_path: Path) -> None:

@@ -86,7 +86,13 @@ target, so the filter at piece ends, its log-likelihood estimate over a piece an
 posterior it reports are those of the seed's model (only the proposal changed). Inside a
 piece the weights that drive resampling target the auxiliary ``q(theta) p(y_{s..k} | ...)``;
 the estimates reported there, and the one-step-ahead predictions (which must not see the
-sample they predict, although ``q`` did), use the corrected weights. The regression is one eigen-
+sample they predict, although ``q`` did), use the corrected weights. That correction is
+right in expectation but cannot widen a cloud of (C, K) that resampling has already
+narrowed with the help of ``q``, which saw the whole piece: early in a long piece the
+reported values lean towards the whole piece's posterior and their spread is too small.
+Only piece-end values are the seed model's estimates; for a trace inside one long piece,
+run the filter on the data up to each time (``analyses/numerical_example.py`` does, and
+its ``checkpoint_runs_gap_in_sd`` shows the difference). The regression is one eigen-
 decomposition of the piece's whitened Gram matrix and O(m^2) per particle, once per piece.
 Measured on the seed example (obs 1 %, the seed's process noise, P = 4000; ``python
 analyses/numerical_example.py --methods pf --seed S`` for S = 0-3): C from -2.0 % to +1.7 %,
