@@ -113,14 +113,18 @@ again after the next move, so a count near 1 on a resampling sample means the cl
 onto one parent), and the one-step-ahead predictive mean of ``y_k`` (``sum_i W_{k-1,i} h(X_k^i)``
 before weighting with ``y_k``), for model criticism.
 
-Implementation. The per-sample loop works in place on preallocated buffers. The moving part
-of the state, ``(u, u', C, K)``, is a ``(4, P)`` array of contiguous rows (a ``(P, d)`` array
-made every column operation strided and several times slower); theta, constant within a
-piece, lives in a ``(P, m)`` table drawn at the piece start, into which every particle points,
-so resampling gathers four rows and an index instead of ``d`` columns, and
-``F_bio = b_k theta`` is one matrix-vector product over the table plus a gather. The
-acceleration computed for the weights at sample k is reused by the Euler step to k + 1, and
-the process noise is drawn in blocks of samples.
+Implementation. The per-sample loop is compiled (:mod:`workbench.inference._pf_kernel`, numba):
+one sample is three passes over the particles (Euler step with its process noise drawn
+inline, acceleration, prediction, likelihood; exponentials, ESS and moments; normalisation),
+and systematic resampling runs inside the loop. All random numbers come from one numpy
+``Generator`` (``SFC64`` for an integer seed), which numba drives through numpy's own
+algorithms, so a seed fixes the result. The moving part of the state, ``(u, u', C, K)``, is a
+``(4, P)`` array of contiguous rows; theta, constant within a piece, lives in a ``(P, m)``
+table drawn at the piece start, into which every particle points, so resampling moves four
+rows and an index instead of ``d`` columns, and the force of every table row at a block of
+samples is one matrix product. The acceleration computed for the weights at sample k is
+reused by the Euler step to k + 1. Throughput against the ``particles`` library's bootstrap
+filter on the same model: ``analyses/benchmarks/pf_throughput.py``.
 """
 
 from __future__ import annotations
@@ -133,6 +137,13 @@ from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
 from workbench.errors import UsageError
+from workbench.inference._pf_kernel import (
+    STATUS_COLLAPSED,
+    STATUS_RESAMPLE,
+    advance,
+    fill_standard_normal,
+    transition,
+)
 from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.problem import IdentificationProblem
 from workbench.inference.resampling import SCHEMES, draw_ancestors
@@ -148,10 +159,9 @@ FORCE_PROPOSALS: tuple[str, ...] = ("prior", "regression")
 REGRESSION_INFLATION = 2.0
 #: Liu-West shrinkage ``a`` used by ``jitter=True`` (the RBPF's default shrinkage too).
 DEFAULT_JITTER_SHRINKAGE = 0.98
-#: Process noise is drawn for several samples per call to the generator (fewer calls in the
-#: hot loop), in blocks of at most this many doubles (512 KiB) and at most 64 samples.
-_NOISE_BLOCK_DOUBLES = 1 << 16
-_NOISE_BLOCK_MAX = 64
+#: The force of every table row is precomputed for blocks of samples of at most this many
+#: values (2 MiB).
+_FORCE_BLOCK_VALUES = 1 << 18
 _LOG_2PI = math.log(2.0 * math.pi)
 
 # Columns of the state array.
@@ -310,7 +320,8 @@ class _RegressionProposal:
         ]
         shrink = 1.0 / (1.0 + lam[None, :] / sigma2[:, None])  # (P, m) posterior variances
         mean_v = (rhs @ vec) * shrink  # posterior mean of eta in V coordinates
-        z = rng.standard_normal(mean_v.shape)
+        z = np.empty(mean_v.shape)
+        fill_standard_normal(rng, z)
         eta = (mean_v + np.sqrt(shrink) * z) @ vec.T
         np.multiply(eta, self.s, out=out)
         out += self.mu
@@ -391,7 +402,13 @@ def run_pf(
         if (force_proposal == "regression")
         else None
     )
-    rng = np.random.default_rng(seed)
+    # SFC64 draws the process noise (most of the filter's random numbers) faster than numpy's
+    # default PCG64; a generator passed in is used as it is.
+    rng = (
+        seed
+        if isinstance(seed, np.random.Generator)
+        else np.random.Generator(np.random.SFC64(seed))
+    )
     n_samples = problem.n_samples
     m = problem.n_coefficients
     mass = float(problem.mass_kg)
@@ -405,7 +422,6 @@ def run_pf(
     # Constant of the Gaussian log-density of the three observations.
     log_norm_const = -float(np.sum(np.log(obs_sd))) - 1.5 * _LOG_2PI
     starts = np.asarray(problem.piece_starts, dtype=np.int64)
-    is_start = problem.piece_start_mask
     piece_ends = starts[1:] - 1
     is_end = np.zeros(n_samples, dtype=bool)
     is_end[piece_ends] = True
@@ -431,19 +447,16 @@ def run_pf(
     state_spare = np.empty_like(state)
     table = np.empty((n_part, m))
     pointer = np.arange(n_part, dtype=np.int64)
-    force_rows = np.empty(n_part)  # table @ b_k
-    acc = np.empty(n_part)  # (-K u - C u' + b theta) / M at the current sample
+    acc = np.empty(n_part)  # (-K u - C u' + b theta) / M at the last sample run
     work = np.empty(n_part)
-    ll = np.empty(n_part)
-    resid = np.empty(n_part)
     lw = np.full(n_part, -math.log(n_part))  # normalised log-weights
     w = np.full(n_part, 1.0 / n_part)  # normalised weights exp(lw) between samples
     origin = np.arange(n_part, dtype=np.int64)
     index_spare = np.empty(n_part, dtype=np.int64)
-    block_len = max(1, min(_NOISE_BLOCK_MAX, _NOISE_BLOCK_DOUBLES // (n_moving * n_part)))
-    noise_block = np.empty((block_len, n_moving, n_part))
-    move_sd_col = move_sd[:, None]
-    block_pos = block_len
+    block_cap = max(1, _FORCE_BLOCK_VALUES // n_part)
+    idx_scratch = np.empty(n_part, dtype=np.int64)
+    int_scratch = np.empty(n_part, dtype=np.int64)
+    resample_here = resampling == "systematic" and shrinkage is None
     u, v, c, kk = state  # row views (the buffers are updated in place, never rebound)
 
     mean_tr = np.empty((n_samples, 2))
@@ -457,7 +470,6 @@ def run_pf(
     n_pieces = problem.n_pieces
     piece_coef_mean = np.empty((n_pieces, m))
     piece_coef_sd = np.empty((n_pieces, m))
-    piece_no = 0
     log_p = math.log(n_part)
 
     # --- initial particles (first sample: no transition) ---------------------------------
@@ -475,235 +487,161 @@ def run_pf(
     first_log_marginal = float(
         np.sum(-0.5 * np.square(y[0, :2]) / (s0_sq + r_sq) - 0.5 * np.log(s0_sq + r_sq)) - _LOG_2PI
     )
+    # Diagnostics carried from sample to sample: distinct initial ancestors, distinct C and
+    # distinct K values among the particles.
+    counters = np.array([n_part, n_part, n_part], dtype=np.int64)
     if fixed is None:
         c[:], kk[:] = problem.prior.sample(n_part, rng)
-        unique = [n_part, n_part]
     else:
         c[:], kk[:] = fixed
-        unique = [1, 1]
-    distinct = n_part
+        counters[1:] = 1
+    random_walk = np.array(rw_positive, dtype=np.bool_)
 
     # log p(theta) - log q(theta) of each table row (regression proposal; 0 for the prior).
     correction = np.zeros(n_part)
-    corr_now = np.empty(n_part)  # correction of each particle's row at this sample
+    corr_now = np.empty(n_part)  # correction of each particle's row (kernel scratch)
     corr_exp = np.empty(n_part)  # exp(corr_now - max): the same, as a weight factor
-    w_est = np.empty(n_part)
-    w_pred = np.empty(n_part)
+    w_aux = np.empty(n_part)  # corrected weights for prediction and estimate (scratch)
 
-    def draw_theta() -> None:
+    def draw_theta(piece: int) -> None:
         if regression is None:
-            table[:] = theta_mean + theta_sd * rng.standard_normal((n_part, m))
+            fill_standard_normal(rng, table)
+            np.multiply(table, theta_sd, out=table)
+            np.add(table, theta_mean, out=table)
         else:
-            s0, s1 = int(starts[piece_no]), int(starts[piece_no + 1])
+            s0, s1 = int(starts[piece]), int(starts[piece + 1])
             correction[:] = regression.draw(s0, s1, c, kk, rng, table)
         pointer[:] = np.arange(n_part)
 
     def acceleration(row: int) -> None:
-        """``acc = (-K u - C u' + b_row theta) / M`` for the current particles."""
-        np.dot(table, basis[row], out=force_rows)
-        np.take(force_rows, pointer, out=acc)
-        np.multiply(kk, u, out=work)
-        np.subtract(acc, work, out=acc)
-        np.multiply(c, v, out=work)
-        np.subtract(acc, work, out=acc)
+        """``acc = (-K u - C u' + b_row theta) / M`` for the current particles (numpy)."""
+        np.take(table @ basis[row], pointer, out=acc)
+        np.subtract(acc, kk * u, out=acc)
+        np.subtract(acc, c * v, out=acc)
         np.multiply(acc, inv_mass, out=acc)
 
-    draw_theta()
-    acc_valid = False  # whether `acc` holds the acceleration of the current particles
+    def piece_summary(piece: int) -> None:
+        # Weight of each table row = sum of the weights of the particles using it.
+        row_w = np.bincount(pointer, weights=w, minlength=n_part)
+        cm = row_w @ table
+        dc = table - cm
+        dc *= dc
+        piece_coef_mean[piece] = cm
+        piece_coef_sd[piece] = np.sqrt(row_w @ dc)
 
-    # Overflow (a diverging Euler step) and the NaN it breeds are handled explicitly below:
-    # such particles get zero weight, and a filter with nothing left raises a clear error.
-    with (
-        np.errstate(over="ignore", invalid="ignore"),
-        tqdm(total=n_samples, disable=not progress, unit="sample", desc="pf") as bar,
-    ):
-        for k in range(n_samples):
-            if k > 0:
-                if not acc_valid:
-                    acceleration(k - 1)
-                # Euler step (eq. 20): u uses the old u', u' the acceleration of the old state.
-                np.multiply(v, dt, out=work)
-                u += work
-                acc *= dt
-                v += acc
-                if block_pos == block_len:
-                    rng.standard_normal(out=noise_block)
-                    noise_block *= move_sd_col
-                    block_pos = 0
-                state[:n_moving] += noise_block[block_pos]
-                block_pos += 1
-                if rw_positive[0]:
-                    unique[0] = n_part
-                if rw_positive[1]:
-                    unique[1] = n_part
-                if is_start[k]:
-                    # Fresh force coefficients for the new piece, after the interval that led
-                    # here was driven by the old piece's force.
-                    draw_theta()
-
-            # Predicted u'' of every particle (row 3 of eq. 23).
+    def resample(k: int) -> bool:
+        """Resample after sample ``k``; return whether ``table`` changed (jitter)."""
+        idx = draw_ancestors(w, rng, resampling, n_part)
+        # Gather into spare buffers and copy back, so that the row views (u, v, c, kk)
+        # keep pointing at live memory.
+        np.take(state, idx, axis=1, out=state_spare)
+        state[...] = state_spare
+        np.take(acc, idx, out=work)
+        acc[:] = work
+        np.take(pointer, idx, out=index_spare)
+        pointer[:] = index_spare
+        np.take(origin, idx, out=index_spare)
+        origin[:] = index_spare
+        lw.fill(-log_p)
+        w.fill(1.0 / n_part)
+        resampled_tr[k] = True
+        counters[0] = int(np.count_nonzero(np.bincount(origin, minlength=n_part)))
+        if shrinkage is not None:
+            _liu_west(state, table, pointer, fixed is None, shrinkage, rng)
+            pointer[:] = np.arange(n_part)
             acceleration(k)
-            acc_valid = True
-
-            # One-step-ahead predictive mean of y_k under the carried weights W_{k-1}
-            # (``w`` holds them: normalised at the end of the previous sample, 1/P after a
-            # resampling). The regression proposal fitted theta to the whole piece, y_k
-            # included: its importance correction turns the weights back into those of
-            # p(. | y_{<k}), so that the prediction does not see the sample it predicts.
-            wp = w
-            if regression is not None:
-                # The rows particles point into change only at resampling, after the
-                # estimates below, so this gather serves the prediction and the estimate.
-                np.take(correction, pointer, out=corr_now)
-                np.subtract(corr_now, corr_now.max(), out=corr_exp)
-                np.exp(corr_exp, out=corr_exp)
-                np.multiply(w, corr_exp, out=w_pred)
-                total_pred = float(w_pred.sum())
-                if not total_pred > 0.0:
-                    np.add(lw, corr_now, out=w_pred)  # log domain, as for the estimate
-                    w_pred -= w_pred.max()
-                    np.exp(w_pred, out=w_pred)
-                    total_pred = float(w_pred.sum())
-                w_pred *= 1.0 / total_pred
-                wp = w_pred
-            if k > 0:
-                pred_tr[k, 0] = wp @ u
-                pred_tr[k, 1] = wp @ v
-                pred_tr[k, 2] = wp @ acc
-            else:
-                # Before y_0 the state is its prior N(0, s0^2), not the conditional it was
-                # drawn from: predict with u = u' = 0.
-                pred_tr[0, :2] = 0.0
-                pred_tr[0, 2] = wp @ (acc + (kk * u + c * v) * inv_mass)
-
-            # Minus the log-likelihood of y_k for every particle (eq. 22, R diagonal), up to
-            # its constant, which cancels in the weights and joins log p(y_k | past) below:
-            # sum_j (r_j / (sqrt(2) sd_j))^2.
-            yk = y[k]
-            if k > 0:
-                np.subtract(u, yk[0], out=resid)
-                resid *= half_prec_sd[0]
-                np.multiply(resid, resid, out=ll)
-                np.subtract(v, yk[1], out=resid)
-                resid *= half_prec_sd[1]
-                resid *= resid
-                ll += resid
-            else:
-                ll[:] = 0.0  # u, u' of y_0 are in the initial draw (see above)
-            np.subtract(acc, yk[2], out=resid)
-            resid *= half_prec_sd[2]
-            resid *= resid
-            ll += resid
-
-            # Incremental weights: lw (normalised) + log-likelihood; the log-sum-exp gives
-            # log p(y_k | y_{1:k-1}).
-            lw -= ll
-            top = lw.max()
-            if not math.isfinite(top):
-                lw[~np.isfinite(lw)] = -np.inf
-                top = lw.max()
-                if not math.isfinite(top):
-                    raise UsageError(
-                        f"{problem.source}: the particle filter collapsed at t = "
-                        f"{problem.time_s[k]:.4g} s (every particle has zero likelihood, or "
-                        "the Euler step diverged); use more particles, a larger observation "
-                        "noise or method 'rbpf'"
-                    )
-            np.subtract(lw, top, out=w)
-            np.exp(w, out=w)
-            total = float(w.sum())
-            log_incr = top + math.log(total)
-            incr_tr[k] = log_incr + log_norm_const
-            if k == 0:
-                incr_tr[0] += float(np.sum(np.log(obs_sd[:2]))) + _LOG_2PI + first_log_marginal
-            lw -= log_incr
-            ess_k = total * total / float(w @ w)
-            w *= 1.0 / total  # normalised weights W_k
-            est = w
-            if regression is not None:
-                if is_end[k]:
-                    # End of the piece: the importance correction of the regression proposal
-                    # joins the weights (and log p(y_piece | past) through its log-mean).
-                    lw += corr_now
-                    top = lw.max()
-                    np.subtract(lw, top, out=w)
-                    np.exp(w, out=w)
-                    total = float(w.sum())
-                    log_corr = top + math.log(total)
-                    lw -= log_corr
-                    incr_tr[k] += log_corr
-                    ess_k = total * total / float(w @ w)
-                    w *= 1.0 / total
-                else:
-                    # Inside the piece the weights target the proposal's auxiliary
-                    # distribution; the estimate uses the corrected ones.
-                    np.multiply(w, corr_exp, out=w_est)
-                    total_est = float(w_est.sum())
-                    if not total_est > 0.0:
-                        # Both factors tiny on every particle: combine in the log domain.
-                        np.add(lw, corr_now, out=w_est)
-                        w_est -= w_est.max()
-                        np.exp(w_est, out=w_est)
-                        total_est = float(w_est.sum())
-                    w_est *= 1.0 / total_est
-                    est = w_est
-            ess_tr[k] = ess_k
-
-            # Weighted mean and std of (C, K): the estimate after assimilating y_k.
-            ck = state[2:4]
-            mean_ck = ck @ est
-            dev = ck - mean_ck[:, None]
-            dev *= dev
-            mean_tr[k] = mean_ck
-            sd_tr[k] = np.sqrt(dev @ est)
-            if is_end[k]:
-                # Weight of each table row = sum of the weights of the particles using it.
-                row_w = np.bincount(pointer, weights=w, minlength=n_part)
-                cm = row_w @ table
-                dc = table - cm
-                dc *= dc
-                piece_coef_mean[piece_no] = cm
-                piece_coef_sd[piece_no] = np.sqrt(row_w @ dc)
-                piece_no += 1
-
-            # Never after the last sample: nothing follows, and the weighted cloud is the
-            # better description of the final posterior than a resampled copy of it.
-            if ess_k < ess_threshold * n_part and k < n_samples - 1:
-                idx = draw_ancestors(w, rng, resampling, n_part)
-                # Gather into spare buffers and copy back, so that the row views (u, v, c,
-                # kk) and the closures above keep pointing at live memory.
-                np.take(state, idx, axis=1, out=state_spare)
-                state[...] = state_spare
-                np.take(acc, idx, out=work)
-                acc[:] = work
-                np.take(pointer, idx, out=index_spare)
-                pointer[:] = index_spare
-                np.take(origin, idx, out=index_spare)
-                origin[:] = index_spare
-                lw.fill(-log_p)
-                w.fill(1.0 / n_part)
-                resampled_tr[k] = True
-                distinct = int(np.count_nonzero(np.bincount(origin, minlength=n_part)))
+        if fixed is None:
+            # With a random walk every value was distinct before resampling, so the
+            # distinct values are the distinct parents; otherwise count them.
+            parents = int(np.count_nonzero(idx[1:] != idx[:-1])) + 1
+            for j, row in ((0, c), (1, kk)):
                 if shrinkage is not None:
-                    _liu_west(state, table, pointer, fixed is None, shrinkage, rng)
-                    pointer[:] = np.arange(n_part)
-                    acc_valid = False
-                if fixed is None:
-                    # With a random walk every value was distinct before resampling, so the
-                    # distinct values are the distinct parents; otherwise count them.
-                    parents = int(np.count_nonzero(idx[1:] != idx[:-1])) + 1
-                    for j, row in ((0, c), (1, kk)):
-                        if shrinkage is not None:
-                            unique[j] = _count_unique(row)
-                        elif rw_positive[j] or k == 0:
-                            unique[j] = parents
-                        else:
-                            unique[j] = _count_unique(row)
-            distinct_tr[k] = distinct
-            unique_tr[k] = unique
-            if progress and (k + 1) % 1000 == 0:
-                bar.update(1000)
-        bar.update(n_samples - bar.n)
+                    counters[1 + j] = _count_unique(row)
+                elif rw_positive[j] or k == 0:
+                    counters[1 + j] = parents
+                else:
+                    counters[1 + j] = _count_unique(row)
+        distinct_tr[k] = counters[0]
+        unique_tr[k] = counters[1:]
+        return shrinkage is not None
+
+    kernel_args = (
+        rng,
+        move_sd,
+        pointer,
+        origin,
+        state,
+        acc,
+        lw,
+        w,
+        correction,
+        regression is not None,
+        corr_now,
+        corr_exp,
+        w_aux,
+        idx_scratch,
+        work,
+        int_scratch,
+        resample_here,
+        is_end,
+        half_prec_sd,
+        inv_mass,
+        dt,
+        log_norm_const,
+        float(ess_threshold) * n_part,
+        n_samples,
+        random_walk,
+        fixed is not None,
+        counters,
+        mean_tr,
+        sd_tr,
+        ess_tr,
+        incr_tr,
+        pred_tr,
+        distinct_tr,
+        unique_tr,
+        resampled_tr,
+    )
+
+    # Pieces run in blocks of samples that share one force matrix; the compiled kernel
+    # returns to Python at piece starts, block ends and resamplings it does not do itself.
+    with tqdm(total=n_samples, disable=not progress, unit="sample", desc="pf") as bar:
+        for piece in range(n_pieces):
+            s_start, s_stop = int(starts[piece]), int(starts[piece + 1])
+            b0 = s_start
+            while b0 < s_stop:
+                b1 = min(s_stop, b0 + block_cap)
+                skip = False
+                if b0 == s_start:
+                    if b0 > 0:
+                        # The interval into the piece's first sample is driven by the old
+                        # piece's force (module docstring), then theta is drawn afresh.
+                        transition(state, acc, rng, move_sd, dt)
+                        counters[1:] = np.where(random_walk, n_part, counters[1:])
+                        skip = True
+                    draw_theta(piece)
+                force = np.ascontiguousarray(basis[b0:b1] @ table.T)
+                k = b0
+                while k < b1:
+                    k_last, status = advance(k, b1, skip, b0, y, force, *kernel_args)
+                    if status == STATUS_COLLAPSED:
+                        raise UsageError(
+                            f"{problem.source}: the particle filter collapsed at t = "
+                            f"{problem.time_s[k_last]:.4g} s (every particle has zero "
+                            "likelihood, or the Euler step diverged); use more particles, a "
+                            "larger observation noise or method 'rbpf'"
+                        )
+                    if k == 0:
+                        incr_tr[0] += (
+                            float(np.sum(np.log(obs_sd[:2]))) + _LOG_2PI + first_log_marginal
+                        )
+                    if is_end[k_last]:
+                        piece_summary(piece)
+                    if status == STATUS_RESAMPLE and resample(k_last):
+                        force = np.ascontiguousarray(basis[b0:b1] @ table.T)
+                    k, skip = k_last + 1, False
+                bar.update(b1 - b0)
+                b0 = b1
 
     piece_mean = mean_tr[piece_ends]
     piece_sd = sd_tr[piece_ends]
