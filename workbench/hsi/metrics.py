@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,7 +23,7 @@ def running_rms(acc: ArrayLike, dt_s: float, window_s: float = 1.0) -> NDArray[n
     The first ``window_s`` uses the samples available so far.
     """
     a = np.asarray(acc, float)
-    w = max(1, int(round(window_s / dt_s)))
+    w = max(1, round(window_s / dt_s))
     c = np.cumsum(a * a, axis=-1)
     shifted = np.zeros_like(c)
     shifted[..., w:] = c[..., :-w]
@@ -33,7 +34,7 @@ def running_rms(acc: ArrayLike, dt_s: float, window_s: float = 1.0) -> NDArray[n
 def comfort_class(peak_m_s2: float, limits_m_s2: Sequence[float] = SETRA_LIMITS_M_S2) -> str:
     """Setra comfort class of a peak vertical acceleration, for the given three limits."""
     lim = [float(x) for x in limits_m_s2]
-    if len(lim) != 3 or any(b <= a for a, b in zip(lim, lim[1:], strict=False)) or lim[0] <= 0:
+    if len(lim) != 3 or any(b <= a for a, b in itertools.pairwise(lim)) or lim[0] <= 0:
         raise UsageError(
             f"comfort limits {lim} must be three increasing positive accelerations in m/s^2, "
             "e.g. 0.5,1.0,2.5"

@@ -96,8 +96,9 @@ def _modes(
     )
     n = mass.shape[0]
     minv = 1.0 / np.diag(mass)
-    first = np.block([[np.zeros((n, n)), np.eye(n)],
-                      [-(minv[:, None] * stiff), -(minv[:, None] * damp)]])
+    first = np.block(
+        [[np.zeros((n, n)), np.eye(n)], [-(minv[:, None] * stiff), -(minv[:, None] * damp)]]
+    )
     lam, vec = np.linalg.eig(first)
     modes = []
     j = structure.n_modes

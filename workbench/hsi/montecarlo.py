@@ -29,12 +29,13 @@ from workbench.errors import UsageError
 from workbench.hsi.metrics import SETRA_LIMITS_M_S2, comfort_class, running_rms
 from workbench.hsi.modes import apparent_structure_modes
 from workbench.hsi.pedestrians import PedestrianSampler, validate_pedestrians
-from workbench.hsi.simulate import CrowdBatch, integrate
+from workbench.hsi.simulate import CrowdBatch, Model, integrate
 from workbench.hsi.structure import ModalStructure
 
 __all__ = ["CrossingSpec", "crossing_metrics", "draw_crossing", "run_monte_carlo"]
 
 Crowd = Literal["single", "stream"]
+MODELS_COMPARED: tuple[Model, ...] = ("interaction", "moving_force")
 
 
 @dataclass(frozen=True)
@@ -125,7 +126,7 @@ def draw_crossing(
     rate = spec.arrival_rate_per_s
     n = int(rng.poisson(rate * (spec.duration_s + lead_s)))
     if n == 0:
-        return validate_empty(), np.zeros(0), np.zeros(0), spec.duration_s
+        return empty_table(), np.zeros(0), np.zeros(0), spec.duration_s
     entry = rng.uniform(-lead_s, spec.duration_s, size=n)
     frame = validate_pedestrians(spec.sampler(n, seed=table_seed), "the sampler's table")
     v = frame["speed_m_s"].to_numpy(float)
@@ -134,8 +135,8 @@ def draw_crossing(
     return frame, -v[keep] * entry[keep], v[keep], spec.duration_s
 
 
-def validate_empty() -> pd.DataFrame:
-    """An empty pedestrian table (a stream in which nobody arrived)."""
+def empty_table() -> pd.DataFrame:
+    """Return an empty pedestrian table (a stream in which nobody arrived)."""
     from workbench.hsi.pedestrians import PEDESTRIAN_COLUMNS
 
     return pd.DataFrame({c: pd.Series(dtype=float) for c in PEDESTRIAN_COLUMNS})
@@ -159,11 +160,11 @@ def crossing_metrics(
             batch,
             duration_s=duration,
             dt_s=dt_s,
-            model=m,  # type: ignore[arg-type]
+            model=m,
             response_x_m=response_x_m,
             static_weight=static_weight,
         )
-        for m in ("interaction", "moving_force")
+        for m in MODELS_COMPARED
     }
     t = hist["interaction"].time_s
     rows = []
@@ -302,8 +303,9 @@ def _run_dask(
             "the address"
         ) from None
     try:
-        futs = client.map(_run_chunk, [spec] * len(chunks), [seed] * len(chunks), chunks,
-                          pure=False)
+        futs = client.map(
+            _run_chunk, [spec] * len(chunks), [seed] * len(chunks), chunks, pure=False
+        )
         out = client.gather(futs)
         update(sum(len(c) for c in chunks))
         return list(out)

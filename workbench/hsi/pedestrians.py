@@ -19,8 +19,8 @@ from numpy.typing import NDArray
 from workbench.errors import InputError
 
 __all__ = [
-    "G",
     "PEDESTRIAN_COLUMNS",
+    "G",
     "PedestrianSampler",
     "TableSampler",
     "read_pedestrians",

@@ -109,8 +109,9 @@ class CrowdBatch:
         """COM displacement and velocity of each SMD walking steadily on rigid ground."""
         i = np.arange(1, self.blf.shape[-1] + 1)
         w = 2 * np.pi * i * self.pacing_hz[..., None]
-        m, k, c = (a[..., None] for a in (self.mass_kg, self.stiffness_n_per_m,
-                                           self.damping_ns_per_m))
+        m, k, c = (
+            a[..., None] for a in (self.mass_kg, self.stiffness_n_per_m, self.damping_ns_per_m)
+        )
         amp = G * m * self.blf * np.exp(1j * (w * t + self.phase_rad)) / (k - m * w**2 + 1j * c * w)
         return np.sum(amp.real, axis=-1), np.sum((1j * w * amp).real, axis=-1)
 
@@ -196,8 +197,12 @@ def integrate(
     n_j = structure.n_modes
 
     def accelerations(
-        h: float, t: float, xq: NDArray[np.float64], vq: NDArray[np.float64],
-        xy: NDArray[np.float64], vy: NDArray[np.float64],
+        h: float,
+        t: float,
+        xq: NDArray[np.float64],
+        vq: NDArray[np.float64],
+        xy: NDArray[np.float64],
+        vy: NDArray[np.float64],
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         # Solves (M + h/2 C + h^2/4 K) a = f(t) - C v - K x for the end-of-step
         # accelerations, given the Newmark predictors x, v (h = 0: the equation of motion).
@@ -248,7 +253,7 @@ def integrate(
         xy = pxy + 0.25 * h * h * ay
         vy = pvy + 0.5 * h * ay
         acc[:, :, step] = aq @ phi_r.T
-    return HsiHistory(np.arange(n + 1) * h, acc, xr, model, h)
+    return HsiHistory(np.arange(n + 1, dtype=np.float64) * h, acc, xr, model, h)
 
 
 def simulate_pedestrians(

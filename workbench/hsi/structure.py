@@ -175,7 +175,7 @@ def simply_supported_beam(
     zeta = np.broadcast_to(np.asarray(damping_ratio, float), (n_modes,)).copy()
     return ModalStructure(
         span_m=float(span_m),
-        frequencies_hz=frequency_hz * j**2,
+        frequencies_hz=np.asarray(frequency_hz * j**2, dtype=np.float64),
         damping_ratios=zeta,
         modal_masses_kg=np.full(n_modes, mass_per_m_kg * span_m / 2.0),
         width_m=float(width_m),
