@@ -76,6 +76,49 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------------------
+# batch
+# ---------------------------------------------------------------------------------------------
+def _batch_settings(args: argparse.Namespace) -> Any:
+    from workbench.inference.settings import IdentifySettings
+
+    overrides = {
+        "method": args.method,
+        "particles": args.particles,
+        "harmonics": args.harmonics,
+        "obs_noise": args.obs_noise,
+        "seed": args.seed,
+        "force_check": False if args.no_force_check else None,
+    }
+    if args.config:
+        return IdentifySettings.from_toml(args.config, **overrides)
+    return IdentifySettings().replace(**overrides)
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from workbench.population.batch import run_batch
+
+    summary = run_batch(
+        args.manifest,
+        args.out,
+        settings=_batch_settings(args),
+        workers=args.workers,
+        scheduler=args.scheduler,
+        resume=args.resume,
+        progress=not args.json,
+    )
+    obj = summary.to_json()
+    lines = [
+        f"{summary.done} identified, {summary.failed} failed, {summary.skipped} skipped "
+        f"(finished earlier) in {summary.elapsed_s:.1f} s",
+        f"results  {summary.results_csv}",
+        f"failures {summary.failures_csv}",
+    ]
+    lines += [f"failed: {f['path']}: {f['reason']}" for f in summary.failures]
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
 def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands."""
     p = sub.add_parser(
@@ -94,3 +137,31 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.set_defaults(handler=_cmd_sample)
+
+    p = sub.add_parser(
+        "batch",
+        parents=[out_opts],
+        help="identify every record of a manifest (process pool or Dask cluster)",
+        description="Identify every record listed in a manifest CSV (path, optional mass_kg, "
+        "pacing_hz, subject). Writes DIR/results.csv (one row per identified record), "
+        "DIR/failures.csv (path, reason) and one JSON file per record, atomically; --resume "
+        "skips finished records. Each record's seed comes from the batch seed, its path and "
+        "its bytes, so the worker count does not change the results.",
+    )
+    p.add_argument("manifest", help="manifest CSV")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS", help="run on a Dask distributed scheduler instead"
+    )
+    p.add_argument("--resume", action="store_true", help="continue a batch in DIR")
+    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default rbpf)")
+    p.add_argument("--particles", type=int, metavar="N", help="particles per record")
+    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
+    p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")
+    p.add_argument(
+        "--no-force-check", action="store_true", help="skip the force-model check (faster)"
+    )
+    p.add_argument("--config", metavar="TOML", help="identification settings file")
+    p.add_argument("--seed", type=int, help="batch seed (default 0)")
+    p.set_defaults(handler=_cmd_batch)

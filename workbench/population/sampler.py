@@ -60,7 +60,8 @@ def _truncnorm(
         return np.clip(mean, low, high)
     a = (low - mean) / sd
     b = (high - mean) / sd
-    return np.asarray(stats.truncnorm.rvs(a, b, loc=mean, scale=sd, random_state=rng))
+    draws = stats.truncnorm.rvs(a, b, loc=mean, scale=sd, size=mean.shape, random_state=rng)
+    return np.asarray(draws, dtype=float).reshape(mean.shape)
 
 
 def _law_draw(
