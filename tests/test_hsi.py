@@ -323,3 +323,22 @@ def test_cli_hsi(tmp_path: Path) -> None:
     _crowd(2, seed=8).drop(columns="mass_kg").to_csv(bad, index=False)
     assert main(["hsi", "--pedestrians", str(bad), "--crossings", "2"]) == 2
     assert main(["hsi", "--crowd", "stream", "--crossings", "2"]) == 2
+    user = tmp_path / "bridge.json"
+    x = [0.0, 10.0, 20.0, 30.0]
+    user.write_text(
+        json.dumps(
+            {
+                "span_m": 30.0,
+                "frequencies_hz": [1.9],
+                "damping_ratios": [0.006],
+                "modal_masses_kg": [9000.0],
+                "mode_shapes": {"x_m": x, "values": [[0], [1], [1], [0]]},
+            }
+        )
+    )
+    assert (
+        main(["hsi", "--structure", str(user), "--crossings", "2", "--dt", "0.01", "--at", "15"])
+        == 0
+    )
+    user.write_text(json.dumps({"span_m": 30.0}))
+    assert main(["hsi", "--structure", str(user)]) == 2

@@ -63,28 +63,48 @@ def _summary(results: Any, model: str, limits: tuple[float, ...]) -> dict[str, A
     }
 
 
+def _structure(args: argparse.Namespace) -> Any:
+    import json
+
+    from workbench.errors import InputError
+    from workbench.hsi.structure import simply_supported_beam, structure_from_json
+
+    if args.structure is None:
+        return simply_supported_beam(
+            args.span,
+            args.mass_per_m,
+            args.frequency,
+            args.damping,
+            n_modes=args.modes,
+            width_m=args.width,
+        )
+    try:
+        obj = json.loads(Path(args.structure).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(args.structure, "whole file", "does not exist", "check the path") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(
+            args.structure, "whole file", f"is not JSON ({err})", "give a JSON object"
+        ) from None
+    return structure_from_json(obj, str(args.structure))
+
+
 def _cmd_hsi(args: argparse.Namespace) -> int:
     from workbench.cli import _emit
     from workbench.hsi.loads import setra_crowd_load
     from workbench.hsi.metrics import SETRA_LIMITS_M_S2
     from workbench.hsi.montecarlo import CrossingSpec, run_monte_carlo
-    from workbench.hsi.structure import simply_supported_beam
 
     _positive(args, "span", "mass_per_m", "frequency", "width", "dt", "duration", "density", "flow")
     if args.crossings < 1:
         raise UsageError(f"--crossings {args.crossings}: give at least one crossing")
     if args.dt > 0.02:
         raise UsageError(f"--dt {args.dt:g} s is too coarse for 2 Hz walking; use 0.01 or less")
-    structure = simply_supported_beam(
-        args.span,
-        args.mass_per_m,
-        args.frequency,
-        args.damping,
-        n_modes=args.modes,
-        width_m=args.width,
-    )
+    structure = _structure(args)
     sampler, source = _sampler(args)
     limits = tuple(args.comfort_limits) if args.comfort_limits else SETRA_LIMITS_M_S2
+    if args.at is not None and not 0 <= args.at <= structure.span_m:
+        raise UsageError(f"--at {args.at:g} m is off the {structure.span_m:g} m span")
     if args.crowd == "single" and (args.density is not None or args.flow is not None):
         raise UsageError("--density and --flow describe a crowd; add --crowd stream")
     spec = CrossingSpec(
@@ -97,6 +117,7 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         dt_s=args.dt,
         comfort_limits_m_s2=limits,
         static_weight=args.static_weight,
+        response_x_m=args.at,
     )
     t0 = time.perf_counter()
     results = run_monte_carlo(
@@ -175,16 +196,18 @@ def _write_outputs(
             dt_s=spec.dt_s,
             model=m,
             static_weight=spec.static_weight,
+            response_x_m=spec.response_x_m,
         )
         for m in ("interaction", "moving_force")
     }
     t = hist["interaction"].time_s
+    x_at = float(hist["interaction"].response_x_m[0])
     fig = history_figure(
         t,
         {m: h.acceleration_m_s2[0, 0] for m, h in hist.items()},
         spec.dt_s,
         limits_m_s2=spec.comfort_limits_m_s2,
-        title=f"crossing 0: {len(frame)} pedestrian(s), midspan",
+        title=f"crossing 0: {len(frame)} pedestrian(s), x = {x_at:g} m",
     )
     files.append(save_figure(fig, folder / "crossing_0.png"))
     files.append(
@@ -254,6 +277,12 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--modes", type=int, default=1, metavar="N", help="modes kept (1)")
     g.add_argument("--width", type=float, default=2.0, metavar="M", help="deck width (2 m)")
+    g.add_argument(
+        "--structure",
+        metavar="FILE.json",
+        help="user-given modes instead of the beam: span_m, frequencies_hz, damping_ratios, "
+        "modal_masses_kg, optional width_m and mode_shapes {x_m, values}",
+    )
     g = p.add_argument_group("pedestrians")
     g.add_argument(
         "--pedestrians",
@@ -286,6 +315,9 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         type=_floats,
         metavar="A,B,C",
         help="comfort limits in m/s^2 (Setra 0.5,1.0,2.5)",
+    )
+    g.add_argument(
+        "--at", type=float, metavar="M", help="where the acceleration is taken (midspan)"
     )
     g.add_argument(
         "--static-weight", action="store_true", help="add the walkers' weight as a moving load"

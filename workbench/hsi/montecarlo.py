@@ -14,6 +14,7 @@ workers or on where the chunks run.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -272,7 +273,10 @@ def run_monte_carlo(
                 results.append(_run_chunk(spec, seed, c))
                 bar.update(len(c))
         else:
-            with ProcessPoolExecutor(max_workers=min(workers, os.cpu_count() or 1)) as pool:
+            # Spawned workers share no state (threads, generators) with this process.
+            ctx = multiprocessing.get_context("spawn")
+            n_proc = min(workers, os.cpu_count() or 1, len(chunks))
+            with ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx) as pool:
                 futs = [pool.submit(_run_chunk, spec, seed, c) for c in chunks]
                 for f, c in zip(futs, chunks, strict=True):
                     results.append(f.result())

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
 
-__all__ = ["ModalStructure", "simply_supported_beam"]
+__all__ = ["ModalStructure", "simply_supported_beam", "structure_from_json"]
 
 
 @dataclass(frozen=True)
@@ -180,3 +180,51 @@ def simply_supported_beam(
         modal_masses_kg=np.full(n_modes, mass_per_m_kg * span_m / 2.0),
         width_m=float(width_m),
     )
+
+
+def structure_from_json(obj: object, source: str = "the structure file") -> ModalStructure:
+    """Build a structure from a JSON object (as :meth:`ModalStructure.to_json` describes).
+
+    Keys: ``span_m``, ``frequencies_hz``, ``damping_ratios``, ``modal_masses_kg`` (one per
+    mode), optional ``width_m`` and ``mode_shapes`` (``{"x_m": [...], "values": [[mode 1,
+    mode 2, ...] per position]}``; left out, simply supported beam shapes).
+    """
+    from workbench.errors import InputError
+
+    if not isinstance(obj, dict):
+        raise InputError(source, "whole file", "is not a JSON object", "give an object")
+    try:
+        shapes = obj.get("mode_shapes")
+        x = v = None
+        if isinstance(shapes, dict):
+            x = np.asarray(shapes["x_m"], float)
+            v = np.asarray(shapes["values"], float)
+        elif shapes is not None:
+            raise InputError(
+                source,
+                "key 'mode_shapes'",
+                "is not an object with 'x_m' and 'values'",
+                "give the sampled mode shapes or leave the key out",
+            )
+        return ModalStructure(
+            span_m=float(obj["span_m"]),
+            frequencies_hz=np.asarray(obj["frequencies_hz"], float),
+            damping_ratios=np.asarray(obj["damping_ratios"], float),
+            modal_masses_kg=np.asarray(obj["modal_masses_kg"], float),
+            width_m=float(obj.get("width_m", 2.0)),
+            shape_x_m=x,
+            shape_values=v,
+        )
+    except KeyError as err:
+        raise InputError(
+            source,
+            f"key {err}",
+            "is missing",
+            "give span_m, frequencies_hz, damping_ratios and modal_masses_kg",
+        ) from None
+    except (TypeError, ValueError) as err:
+        raise InputError(
+            source, "whole file", f"has a value that is not a number ({err})", "fix it"
+        ) from None
+    except UsageError as err:
+        raise InputError(source, "whole file", str(err).rstrip("."), "fix the file") from None
