@@ -171,7 +171,8 @@ def _law_text(summary: dict[str, Any]) -> str:
         ilo, ihi = law["intercept_ci"]
         r = law["residuals"]
         lines.append(
-            f"{key:22s} = {law['slope']:.4f} f_p + {law['intercept']:.4f}  slope 95 % "
+            f"{key:22s} = {law['slope']:.4f} f_p {'-' if law['intercept'] < 0 else '+'} "
+            f"{abs(law['intercept']):.4f}  slope 95 % "
             f"[{lo:.4f}, {hi:.4f}], intercept [{ilo:.4f}, {ihi:.4f}], residual sd "
             f"{law['residual_sd']:.4g} (Shapiro p {r['shapiro_p']:.3g}, AD p "
             f"{r['anderson_darling_p']:.3g})"
@@ -196,6 +197,32 @@ def _cmd_population(args: argparse.Namespace) -> int:
     files = write_population(fit, args.out)
     obj = {**fit.summary, "files": files}
     _emit(args, obj, _law_text(fit.summary) + f"\nwritten to {args.out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# report
+# ---------------------------------------------------------------------------------------------
+def _cmd_report(args: argparse.Namespace) -> int:
+    from workbench.population.fit import fit_population
+    from workbench.reporting.population import population_report
+
+    results = read_results(args.results_dir)
+    fit = fit_population(
+        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+    )
+    files = write_population(fit, args.out)
+    files.update(population_report(results, fit, args.out, title=args.title))
+    obj = {
+        "report": files["html"],
+        "markdown": files["markdown"],
+        "files": files,
+        "records_used": fit.summary["records_used"],
+        "records_excluded": fit.summary["records_excluded"],
+        "laws": fit.summary["laws"],
+        "lognormal": fit.summary["lognormal"],
+    }
+    _emit(args, obj, _law_text(fit.summary) + f"\nreport {files['html']}")
     return 0
 
 
@@ -263,3 +290,24 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="also use records whose C or K is flagged not identified",
     )
     p.set_defaults(handler=_cmd_population)
+
+    p = sub.add_parser(
+        "report",
+        parents=[out_opts],
+        help="Table-2-style population report (HTML, Markdown, CSV tables, figures)",
+        description="Fit the population laws to a batch's results and write a report: the "
+        "seed's Table 2 beside this study, the laws with intervals and normality tests, "
+        "BLF2/BLF3 fits, figures like the seed's figs. 11-14; self-contained HTML, Markdown "
+        "and every table as CSV.",
+    )
+    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    p.add_argument("--out", required=True, metavar="DIR", help="report folder")
+    p.add_argument(
+        "--keep-not-identified",
+        action="store_true",
+        help="also use records whose C or K is flagged not identified",
+    )
+    p.add_argument(
+        "--title", default="Population laws of the SMD pedestrian model", help="report title"
+    )
+    p.set_defaults(handler=_cmd_report)
