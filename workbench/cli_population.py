@@ -119,6 +119,113 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------------------
+# population
+# ---------------------------------------------------------------------------------------------
+def read_results(path: str) -> Any:
+    """Read ``results.csv`` from a batch folder (or the file itself) as a DataFrame."""
+    import pandas as pd
+
+    p = Path(path)
+    file = p / "results.csv" if p.is_dir() else p
+    if not file.exists():
+        raise InputError(
+            file,
+            "whole file",
+            "there is no batch results table here",
+            "give the --out folder of 'workbench batch' (it holds results.csv)",
+        )
+    try:
+        return pd.read_csv(file)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(
+            file, "whole file", f"the table cannot be read ({err})", "rerun 'workbench batch'"
+        ) from None
+
+
+def write_population(fit: Any, out_dir: str | Path) -> dict[str, str]:
+    """Write ``population.json``, ``bands.csv``, ``residuals.csv``, ``excluded.csv``."""
+    from workbench.fileutil import atomic_path, atomic_write_json
+
+    out = Path(out_dir)
+    files = {
+        "population": out / "population.json",
+        "bands": out / "bands.csv",
+        "residuals": out / "residuals.csv",
+        "excluded": out / "excluded.csv",
+    }
+    atomic_write_json(files["population"], fit.summary)
+    for key, frame in (("bands", fit.bands), ("residuals", fit.used), ("excluded", fit.excluded)):
+        with atomic_path(files[key]) as tmp:
+            frame.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+    return {k: str(v) for k, v in files.items()}
+
+
+def _law_text(summary: dict[str, Any]) -> str:
+    lines = [
+        f"records used {summary['records_used']}, excluded {summary['records_excluded']} "
+        f"({summary['exclusion_rule']})"
+    ]
+    for key, law in summary["laws"].items():
+        lo, hi = law["slope_ci"]
+        ilo, ihi = law["intercept_ci"]
+        r = law["residuals"]
+        lines.append(
+            f"{key:22s} = {law['slope']:.4f} f_p {'-' if law['intercept'] < 0 else '+'} "
+            f"{abs(law['intercept']):.4f}  slope 95 % "
+            f"[{lo:.4f}, {hi:.4f}], intercept [{ilo:.4f}, {ihi:.4f}], residual sd "
+            f"{law['residual_sd']:.4g} (Shapiro p {r['shapiro_p']:.3g}, AD p "
+            f"{r['anderson_darling_p']:.3g})"
+        )
+    for key, ln in summary["lognormal"].items():
+        lines.append(
+            f"{key:22s} lognormal mu {ln['mu']:.4f} [{ln['mu_ci'][0]:.4f}, {ln['mu_ci'][1]:.4f}], "
+            f"sigma {ln['sigma']:.4f} [{ln['sigma_ci'][0]:.4f}, {ln['sigma_ci'][1]:.4f}]; "
+            f"KS p {ln['ks_p']:.3g}; AIC lognormal {ln['aic_lognormal']:.1f} vs GEV "
+            f"{ln['aic_gev'] if ln['aic_gev'] is None else round(ln['aic_gev'], 1)}"
+        )
+    return "\n".join(lines)
+
+
+def _cmd_population(args: argparse.Namespace) -> int:
+    from workbench.population.fit import fit_population
+
+    results = read_results(args.results_dir)
+    fit = fit_population(
+        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+    )
+    files = write_population(fit, args.out)
+    obj = {**fit.summary, "files": files}
+    _emit(args, obj, _law_text(fit.summary) + f"\nwritten to {args.out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# report
+# ---------------------------------------------------------------------------------------------
+def _cmd_report(args: argparse.Namespace) -> int:
+    from workbench.population.fit import fit_population
+    from workbench.reporting.population import population_report
+
+    results = read_results(args.results_dir)
+    fit = fit_population(
+        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+    )
+    files = write_population(fit, args.out)
+    files.update(population_report(results, fit, args.out, title=args.title))
+    obj = {
+        "report": files["html"],
+        "markdown": files["markdown"],
+        "files": files,
+        "records_used": fit.summary["records_used"],
+        "records_excluded": fit.summary["records_excluded"],
+        "laws": fit.summary["laws"],
+        "lognormal": fit.summary["lognormal"],
+    }
+    _emit(args, obj, _law_text(fit.summary) + f"\nreport {files['html']}")
+    return 0
+
+
 def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands."""
     p = sub.add_parser(
@@ -165,3 +272,42 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="TOML", help="identification settings file")
     p.add_argument("--seed", type=int, help="batch seed (default 0)")
     p.set_defaults(handler=_cmd_batch)
+
+    p = sub.add_parser(
+        "population",
+        parents=[out_opts],
+        help="fit population laws (f_n, zeta, BLF1 against pacing; lognormal BLF2/3)",
+        description="Fit the population laws to a batch's results: OLS of natural frequency, "
+        "damping ratio and BLF1 on pacing with confidence and prediction bands, normality "
+        "tests of the residuals, lognormal BLF2 and BLF3 beside GEV by AIC. Records whose C "
+        "or K is not identified are excluded (counted in the output).",
+    )
+    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--keep-not-identified",
+        action="store_true",
+        help="also use records whose C or K is flagged not identified",
+    )
+    p.set_defaults(handler=_cmd_population)
+
+    p = sub.add_parser(
+        "report",
+        parents=[out_opts],
+        help="Table-2-style population report (HTML, Markdown, CSV tables, figures)",
+        description="Fit the population laws to a batch's results and write a report: the "
+        "seed's Table 2 beside this study, the laws with intervals and normality tests, "
+        "BLF2/BLF3 fits, figures like the seed's figs. 11-14; self-contained HTML, Markdown "
+        "and every table as CSV.",
+    )
+    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    p.add_argument("--out", required=True, metavar="DIR", help="report folder")
+    p.add_argument(
+        "--keep-not-identified",
+        action="store_true",
+        help="also use records whose C or K is flagged not identified",
+    )
+    p.add_argument(
+        "--title", default="Population laws of the SMD pedestrian model", help="report title"
+    )
+    p.set_defaults(handler=_cmd_report)
