@@ -321,6 +321,14 @@ def test_cli_hsi(tmp_path: Path) -> None:
     ]
     assert main(args) == 0
     assert (out / "crossings.csv").exists() and (out / "crossing_0.png").exists()
+    hist = pd.read_csv(out / "crossing_0.csv")
+    summary = json.loads((out / "summary.json").read_text())
+    crossings = pd.read_csv(out / "crossings.csv")
+    assert len(crossings) == 3 and summary["crossings"] == 3
+    # Crossing 0's history is the one summarised in the table.
+    assert np.abs(hist["interaction_m_s2"]).max() == pytest.approx(
+        crossings["peak_interaction_m_s2"][0], rel=1e-6
+    )
     bad = tmp_path / "bad.csv"
     _crowd(2, seed=8).drop(columns="mass_kg").to_csv(bad, index=False)
     assert main(["hsi", "--pedestrians", str(bad), "--crossings", "2"]) == 2

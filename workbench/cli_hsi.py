@@ -202,6 +202,18 @@ def _write_outputs(
     }
     t = hist["interaction"].time_s
     x_at = float(hist["interaction"].response_x_m[0])
+    import pandas as pd
+
+    from workbench.hsi.metrics import running_rms
+
+    table = {"time_s": t}
+    for m, h in hist.items():
+        table[f"{m}_m_s2"] = h.acceleration_m_s2[0, 0]
+        table[f"{m}_rms1s_m_s2"] = running_rms(h.acceleration_m_s2[0, 0], spec.dt_s)
+    path = folder / "crossing_0.csv"
+    with atomic_path(path) as tmp:
+        pd.DataFrame(table).to_csv(tmp, index=False, float_format="%.8g", lineterminator="\n")
+    files.append(path)
     fig = history_figure(
         t,
         {m: h.acceleration_m_s2[0, 0] for m, h in hist.items()},
