@@ -336,6 +336,12 @@ def build_parser() -> argparse.ArgumentParser:
     from workbench.simulate_cli import add_simulate_parser
 
     add_simulate_parser(sub, out_opts)
+    from workbench.cli_hsi import add_hsi_parser
+
+    add_hsi_parser(sub, out_opts)
+    from workbench.cli_population import add_population_parser
+
+    add_population_parser(sub, out_opts)
 
     p = sub.add_parser(
         "demo",

@@ -1,0 +1,164 @@
+"""Batch engine: faults, kill and resume, worker count, Dask (issue: population)."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from workbench.cli import main
+from workbench.population.batch import RESULT_COLUMNS, TIMING_COLUMNS, record_seed
+from workbench.population.study import StudyDesign, study_plan, write_study
+
+pytestmark = pytest.mark.slow
+
+SETTINGS_TOML = """harmonics = 3
+pieces = "whole"
+time_basis = "absolute"
+highpass_hz = 0.0
+observe = "acc"
+force_check = false
+particles = 32
+"""
+N_GOOD = 5
+BAD = ("records/missing.csv", "records/corrupt.csv", "records/withnan.csv")
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("study")
+    design = StudyDesign(n_male=1, n_female=1, n_records=None, duration_s=3.0)
+    plan = study_plan(design, seed=11).iloc[:N_GOOD]
+    manifest = write_study(plan, root, design)
+    good = manifest.read_text().splitlines()
+    (root / "records" / "corrupt.csv").write_bytes(bytes(range(256)) * 2)
+    first = root / "records" / f"{plan.record.iloc[0]}.csv"
+    lines = first.read_text().splitlines()
+    lines[40] = lines[40].split(",")[0] + ",nan"
+    (root / "records" / "withnan.csv").write_text("\n".join(lines) + "\n")
+    (root / "records" / "withnan.json").write_text(json.dumps({"mass_kg": 70.0}))
+    # Bad records in the middle, so a run killed half-way has both kinds still to do.
+    rows = [good[0], *good[1:3], f"{BAD[0]},70,1.5,X", f"{BAD[1]},70,1.5,X", f"{BAD[2]},,,"]
+    rows += good[3:]
+    (root / "manifest.csv").write_text("\n".join(rows) + "\n")
+    (root / "study.toml").write_text(SETTINGS_TOML)
+    return root
+
+
+def _batch(study, out, *extra):
+    argv = ["batch", str(study / "manifest.csv"), "--out", str(out), "--config"]
+    return main([*argv, str(study / "study.toml"), "--json", *extra])
+
+
+def _without_timing(path: Path) -> str:
+    table = pd.read_csv(path, dtype=str, keep_default_na=False)
+    return table.drop(columns=list(TIMING_COLUMNS)).to_csv(index=False)
+
+
+@pytest.fixture(scope="module")
+def reference(study, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref")
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert _batch(study, out) == 0
+    return out, json.loads(buf.getvalue())
+
+
+def test_faults_reported_and_rest_complete(study, reference):
+    out, summary = reference
+    assert (summary["done"], summary["failed"], summary["skipped"]) == (N_GOOD, 3, 0)
+    failures = pd.read_csv(out / "failures.csv")
+    assert list(failures.columns) == ["path", "reason"]
+    assert sorted(failures.path) == sorted(BAD)
+    reasons = dict(zip(failures.path, failures.reason, strict=True))
+    assert "does not exist" in reasons[BAD[0]]
+    assert "binary data" in reasons[BAD[1]]
+    assert "NaN" in reasons[BAD[2]]
+    results = pd.read_csv(out / "results.csv")
+    assert tuple(results.columns) == RESULT_COLUMNS
+    assert len(results) == N_GOOD and results.path.is_monotonic_increasing
+    truth = pd.read_csv(study / "truth.csv")
+    truth["path"] = "records/" + truth.record + ".csv"
+    merged = results.merge(truth, on="path", suffixes=("", "_true"))
+    assert len(merged) == N_GOOD
+    # In the model class the records come from, the posterior bands hold the truth
+    # (4 sd: five records, two parameters each).
+    for col in ("natural_frequency_hz", "damping_ratio"):
+        z = (merged[col] - merged[f"{col}_true"]) / merged[f"{col}_sd"]
+        assert (z.abs() < 4).all(), (col, z.tolist())
+    assert (merged.identifiability == "well identified").all()
+    # Seeds come from path and content, not position.
+    p = merged.path.iloc[0]
+    content = (study / p).read_bytes()
+    assert merged.seed.iloc[0] == record_seed(0, p, content)
+    assert record_seed(0, p, content) != record_seed(0, p, content + b" ")
+
+
+def test_two_workers_give_identical_results(study, reference, tmp_path, capsys):
+    assert _batch(study, tmp_path, "--workers", "2") == 0
+    ref, _ = reference
+    assert _without_timing(tmp_path / "results.csv") == _without_timing(ref / "results.csv")
+    assert (tmp_path / "failures.csv").read_bytes() == (ref / "failures.csv").read_bytes()
+
+
+def test_kill_and_resume_equals_uninterrupted(study, reference, tmp_path, capsys):
+    cmd = [sys.executable, "-m", "workbench", "batch", str(study / "manifest.csv")]
+    cmd += ["--out", str(tmp_path), "--config", str(study / "study.toml"), "--json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rec = tmp_path / "records"
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline:
+            if rec.exists() and len(list(rec.glob("*.json"))) >= 2:
+                break
+            if proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the batch ended before it could be killed"
+        os.kill(proc.pid, signal.SIGKILL)
+    finally:
+        proc.wait()
+    finished = len(list(rec.glob("*.json")))
+    assert 2 <= finished < N_GOOD + 3
+    assert not (tmp_path / "results.csv").exists()
+    # Without --resume the folder is refused rather than overwritten.
+    assert _batch(study, tmp_path) == 2
+    capsys.readouterr()
+    assert _batch(study, tmp_path, "--resume") == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["done"] + summary["failed"] + summary["skipped"] == N_GOOD + 3
+    assert summary["skipped"] >= 1 and summary["failed"] == 3
+    ref, _ = reference
+    assert _without_timing(tmp_path / "results.csv") == _without_timing(ref / "results.csv")
+    assert (tmp_path / "failures.csv").read_bytes() == (ref / "failures.csv").read_bytes()
+    # A second resume has nothing left to identify; other settings are refused.
+    assert _batch(study, tmp_path, "--resume") == 0
+    again = json.loads(capsys.readouterr().out)
+    assert (again["done"], again["skipped"]) == (0, N_GOOD)
+    assert _batch(study, tmp_path, "--resume", "--particles", "40") == 2
+
+
+def test_dask_local_cluster(study, reference, tmp_path, capsys):
+    distributed = pytest.importorskip("distributed")
+    with (
+        distributed.LocalCluster(
+            n_workers=1,
+            threads_per_worker=1,
+            processes=False,
+            protocol="tcp",
+            dashboard_address=None,
+        ) as cluster,
+    ):
+        assert _batch(study, tmp_path, "--scheduler", cluster.scheduler_address) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["done"], summary["failed"]) == (N_GOOD, 3)
+    ref, _ = reference
+    assert _without_timing(tmp_path / "results.csv") == _without_timing(ref / "results.csv")

@@ -1,0 +1,341 @@
+"""``workbench hsi``: footbridge response to pedestrians with and without interaction."""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.errors import UsageError
+
+__all__ = ["add_hsi_parser"]
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a comma-separated list of numbers"
+        ) from None
+
+
+def _positive(args: argparse.Namespace, *names: str) -> None:
+    for name in names:
+        value = getattr(args, name)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag} must be a positive number, got {value:g}")
+
+
+def _sampler(args: argparse.Namespace) -> tuple[Any, str]:
+    from functools import partial
+
+    from workbench.hsi.pedestrians import TableSampler, read_pedestrians
+
+    if args.pedestrians is not None:
+        if args.laws is not None:
+            raise UsageError("give either --pedestrians or --laws, not both")
+        table = read_pedestrians(args.pedestrians)
+        return TableSampler(table, str(args.pedestrians)), str(args.pedestrians)
+    from workbench.cli_population import _read_laws
+    from workbench.population.sampler import sample_pedestrians
+
+    laws = _read_laws(args.laws)
+    return partial(sample_pedestrians, laws=laws), f"population sampler ({laws.source})"
+
+
+def _summary(results: Any, model: str, limits: tuple[float, ...]) -> dict[str, Any]:
+    from workbench.hsi.metrics import COMFORT_CLASSES
+
+    peak = results[f"peak_{model}_m_s2"].to_numpy()
+    rms = results[f"rms1s_{model}_m_s2"].to_numpy()
+    counts = results[f"comfort_{model}"].value_counts()
+    return {
+        "peak_mean_m_s2": float(peak.mean()),
+        "peak_p95_m_s2": float(np.quantile(peak, 0.95)),
+        "peak_max_m_s2": float(peak.max()),
+        "rms1s_max_mean_m_s2": float(rms.mean()),
+        "comfort_counts": {c: int(counts.get(c, 0)) for c in COMFORT_CLASSES},
+    }
+
+
+def _structure(args: argparse.Namespace) -> Any:
+    import json
+
+    from workbench.errors import InputError
+    from workbench.hsi.structure import simply_supported_beam, structure_from_json
+
+    if args.structure is None:
+        return simply_supported_beam(
+            args.span,
+            args.mass_per_m,
+            args.frequency,
+            args.damping,
+            n_modes=args.modes,
+            width_m=args.width,
+        )
+    try:
+        obj = json.loads(Path(args.structure).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(args.structure, "whole file", "does not exist", "check the path") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(
+            args.structure, "whole file", f"is not JSON ({err})", "give a JSON object"
+        ) from None
+    return structure_from_json(obj, str(args.structure))
+
+
+def _cmd_hsi(args: argparse.Namespace) -> int:
+    from workbench.cli import _emit
+    from workbench.hsi.loads import setra_crowd_load
+    from workbench.hsi.metrics import SETRA_LIMITS_M_S2
+    from workbench.hsi.montecarlo import CrossingSpec, run_monte_carlo
+
+    _positive(args, "span", "mass_per_m", "frequency", "width", "dt", "duration", "density", "flow")
+    if args.crossings < 1:
+        raise UsageError(f"--crossings {args.crossings}: give at least one crossing")
+    if args.dt > 0.02:
+        raise UsageError(f"--dt {args.dt:g} s is too coarse for 2 Hz walking; use 0.01 or less")
+    structure = _structure(args)
+    sampler, source = _sampler(args)
+    limits = tuple(args.comfort_limits) if args.comfort_limits else SETRA_LIMITS_M_S2
+    if args.at is not None and not 0 <= args.at <= structure.span_m:
+        raise UsageError(f"--at {args.at:g} m is off the {structure.span_m:g} m span")
+    if args.crowd == "single" and (args.density is not None or args.flow is not None):
+        raise UsageError("--density and --flow describe a crowd; add --crowd stream")
+    spec = CrossingSpec(
+        structure=structure,
+        sampler=sampler,
+        crowd=args.crowd,
+        density_per_m2=args.density,
+        flow_per_s=args.flow,
+        duration_s=args.duration,
+        dt_s=args.dt,
+        comfort_limits_m_s2=limits,
+        static_weight=args.static_weight,
+        response_x_m=args.at,
+    )
+    t0 = time.perf_counter()
+    results = run_monte_carlo(
+        spec,
+        args.crossings,
+        seed=args.seed,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        progress=not args.json,
+    )
+    elapsed = time.perf_counter() - t0
+    ratio = results["interaction_ratio"].to_numpy()
+    out: dict[str, Any] = {
+        "structure": structure.to_json(),
+        "pedestrians": source,
+        "crowd": args.crowd,
+        "crossings": int(args.crossings),
+        "seed": args.seed,
+        "dt_s": args.dt,
+        "integrator": "Newmark average acceleration (unconditionally stable, second order)",
+        "comfort_limits_m_s2": list(limits),
+        "interaction": _summary(results, "interaction", limits),
+        "moving_force": _summary(results, "moving_force", limits),
+        "interaction_ratio": {
+            "mean": float(ratio.mean()),
+            "p05": float(np.quantile(ratio, 0.05)),
+            "p95": float(np.quantile(ratio, 0.95)),
+        },
+        "apparent_frequency_hz": float(results["apparent_frequency_hz"].mean()),
+        "apparent_damping_ratio": float(results["apparent_damping_ratio"].mean()),
+        "elapsed_s": elapsed,
+        "crossings_per_s": args.crossings / elapsed,
+    }
+    if args.crowd == "stream":
+        out["arrival_rate_per_s"] = spec.arrival_rate_per_s
+        dens = (
+            args.density
+            if args.density is not None
+            else (spec.arrival_rate_per_s / (structure.width_m * spec.mean_speed_m_s))
+        )
+        setra = setra_crowd_load(structure, dens)
+        out["setra"] = {
+            "density_per_m2": dens,
+            "equivalent_pedestrians": setra.equivalent_pedestrians,
+            "load_n_per_m2": setra.load_n_per_m2,
+            "peak_acceleration_m_s2": setra.peak_acceleration_m_s2,
+        }
+    if args.out:
+        out["files"] = _write_outputs(Path(args.out), spec, args.seed, results, out)
+    _emit(args, out, _text(out))
+    return 0
+
+
+def _write_outputs(
+    folder: Path, spec: Any, seed: int, results: Any, summary: dict[str, Any]
+) -> list[str]:
+    from workbench.fileutil import atomic_path, atomic_write_json
+    from workbench.hsi.montecarlo import draw_crossing
+    from workbench.hsi.simulate import CrowdBatch, integrate
+    from workbench.reporting.figures import save_figure
+    from workbench.reporting.hsi import history_figure, monte_carlo_figure
+
+    folder.mkdir(parents=True, exist_ok=True)
+    files = []
+    path = folder / "crossings.csv"
+    with atomic_path(path) as tmp:
+        results.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+    files.append(path)
+    frame, x0, v, duration = draw_crossing(spec, seed, 0)
+    batch = CrowdBatch.from_scenarios([(frame, x0, v)])
+    hist = {
+        m: integrate(
+            spec.structure,
+            batch,
+            duration_s=duration,
+            dt_s=spec.dt_s,
+            model=m,
+            static_weight=spec.static_weight,
+            response_x_m=spec.response_x_m,
+        )
+        for m in ("interaction", "moving_force")
+    }
+    t = hist["interaction"].time_s
+    x_at = float(hist["interaction"].response_x_m[0])
+    import pandas as pd
+
+    from workbench.hsi.metrics import running_rms
+
+    table = {"time_s": t}
+    for m, h in hist.items():
+        table[f"{m}_m_s2"] = h.acceleration_m_s2[0, 0]
+        table[f"{m}_rms1s_m_s2"] = running_rms(h.acceleration_m_s2[0, 0], spec.dt_s)
+    path = folder / "crossing_0.csv"
+    with atomic_path(path) as tmp:
+        pd.DataFrame(table).to_csv(tmp, index=False, float_format="%.8g", lineterminator="\n")
+    files.append(path)
+    fig = history_figure(
+        t,
+        {m: h.acceleration_m_s2[0, 0] for m, h in hist.items()},
+        spec.dt_s,
+        limits_m_s2=spec.comfort_limits_m_s2,
+        title=f"crossing 0: {len(frame)} pedestrian(s), x = {x_at:g} m",
+    )
+    files.append(save_figure(fig, folder / "crossing_0.png"))
+    files.append(
+        save_figure(
+            monte_carlo_figure(results, limits_m_s2=spec.comfort_limits_m_s2),
+            folder / "monte_carlo.png",
+        )
+    )
+    files.append(atomic_write_json(folder / "summary.json", summary))
+    return [str(f) for f in files]
+
+
+def _text(o: dict[str, Any]) -> str:
+    s = o["structure"]
+    lines = [
+        f"{o['crossings']} {o['crowd']} crossing(s) of a {s['span_m']:g} m span "
+        f"({', '.join(f'{f:g}' for f in s['frequencies_hz'])} Hz), pedestrians from "
+        f"{o['pedestrians']}, seed {o['seed']}, dt {o['dt_s']:g} s",
+    ]
+    for m in ("interaction", "moving_force"):
+        r = o[m]
+        lines.append(
+            f"  {m:13s} peak mean {r['peak_mean_m_s2']:.3f}  p95 {r['peak_p95_m_s2']:.3f}  "
+            f"max {r['peak_max_m_s2']:.3f} m/s^2; comfort "
+            + ", ".join(f"{k} {v}" for k, v in r["comfort_counts"].items())
+        )
+    ir = o["interaction_ratio"]
+    lines.append(
+        f"  interaction / moving force: mean {ir['mean']:.3f} (5-95 %: {ir['p05']:.3f}-"
+        f"{ir['p95']:.3f})"
+    )
+    lines.append(
+        f"  occupied structure: {o['apparent_frequency_hz']:.4f} Hz, damping "
+        f"{100 * o['apparent_damping_ratio']:.2f} %"
+    )
+    if "setra" in o:
+        lines.append(
+            f"  Setra/HiVoSS at {o['setra']['density_per_m2']:.3g} P/m^2: "
+            f"{o['setra']['peak_acceleration_m_s2']:.3f} m/s^2"
+        )
+    lines.append(f"  {o['crossings_per_s']:.1f} crossings/s")
+    lines.extend(f"  wrote {f}" for f in o.get("files", []))
+    return "\n".join(lines)
+
+
+def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
+    """Register the ``hsi`` subcommand on the ``workbench`` parser."""
+    p = sub.add_parser(
+        "hsi",
+        parents=[out_opts],
+        help="footbridge response to pedestrians, with and without interaction",
+        description="Monte Carlo of pedestrians (single walkers or Poisson crowd streams) "
+        "crossing a simply supported footbridge: deck acceleration with the pedestrians as "
+        "coupled SMDs (interaction) and as moving forces, peak and 1 s RMS, Setra comfort "
+        "class, apparent frequency and damping of the occupied structure.",
+    )
+    g = p.add_argument_group("structure (simply supported beam)")
+    g.add_argument("--span", type=float, default=50.0, metavar="M", help="span (50 m)")
+    g.add_argument(
+        "--mass-per-m", type=float, default=500.0, metavar="KG", help="mass per length (500 kg/m)"
+    )
+    g.add_argument(
+        "--frequency", type=float, default=2.0, metavar="HZ", help="first bending frequency (2 Hz)"
+    )
+    g.add_argument(
+        "--damping", type=float, default=0.005, metavar="ZETA", help="modal damping ratio (0.005)"
+    )
+    g.add_argument("--modes", type=int, default=1, metavar="N", help="modes kept (1)")
+    g.add_argument("--width", type=float, default=2.0, metavar="M", help="deck width (2 m)")
+    g.add_argument(
+        "--structure",
+        metavar="FILE.json",
+        help="user-given modes instead of the beam: span_m, frequencies_hz, damping_ratios, "
+        "modal_masses_kg, optional width_m and mode_shapes {x_m, values}",
+    )
+    g = p.add_argument_group("pedestrians")
+    g.add_argument(
+        "--pedestrians",
+        metavar="FILE.csv",
+        help="table written by 'workbench sample' (rows are drawn with replacement)",
+    )
+    g.add_argument(
+        "--laws",
+        metavar="POPULATION.json",
+        help="draw pedestrians from these laws (default: the seed's laws)",
+    )
+    g.add_argument(
+        "--crowd",
+        choices=["single", "stream"],
+        default="single",
+        help="one walker per crossing (default) or a Poisson stream",
+    )
+    g.add_argument(
+        "--density", type=float, metavar="P_PER_M2", help="stream: mean density on the deck"
+    )
+    g.add_argument("--flow", type=float, metavar="P_PER_S", help="stream: arrivals per second")
+    g.add_argument(
+        "--duration", type=float, default=120.0, metavar="S", help="stream: simulated time (120 s)"
+    )
+    g = p.add_argument_group("run")
+    g.add_argument("--crossings", type=int, default=20, metavar="N", help="Monte Carlo size")
+    g.add_argument("--dt", type=float, default=0.005, metavar="S", help="time step (0.005 s)")
+    g.add_argument(
+        "--comfort-limits",
+        type=_floats,
+        metavar="A,B,C",
+        help="comfort limits in m/s^2 (Setra 0.5,1.0,2.5)",
+    )
+    g.add_argument(
+        "--at", type=float, metavar="M", help="where the acceleration is taken (midspan)"
+    )
+    g.add_argument(
+        "--static-weight", action="store_true", help="add the walkers' weight as a moving load"
+    )
+    g.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    g.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler")
+    p.add_argument("--out", metavar="DIR", help="write crossings.csv, figures, summary.json")
+    p.set_defaults(handler=_cmd_hsi)

@@ -1,0 +1,313 @@
+"""``workbench sample``, ``batch``, ``population`` and ``report``: the population subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from workbench.errors import InputError, UsageError
+
+__all__ = ["add_population_parser"]
+
+
+def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
+    from workbench.cli import _emit as emit
+
+    emit(args, obj, text)
+
+
+def _read_laws(path: str | None) -> Any:
+    from workbench.population.laws import PopulationLaws
+
+    if path is None:
+        return PopulationLaws()
+    try:
+        obj = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(
+            path, "whole file", "the file does not exist", "give the path of a population JSON"
+        ) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(
+            path,
+            "whole file",
+            f"the file is not JSON ({err})",
+            "give the file that 'workbench population --out DIR' writes (DIR/population.json)",
+        ) from None
+    if not isinstance(obj, dict):
+        raise InputError(
+            path, "whole file", "the JSON is not an object", "give a population JSON object"
+        )
+    try:
+        return PopulationLaws.from_json(obj, source=str(path))
+    except UsageError as err:
+        raise InputError(path, "whole file", str(err).rstrip("."), "fix or regenerate it") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# sample
+# ---------------------------------------------------------------------------------------------
+def _cmd_sample(args: argparse.Namespace) -> int:
+    from workbench.fileutil import atomic_path
+    from workbench.population.sampler import sample_pedestrians
+
+    if args.n < 1:
+        raise UsageError(f"--n {args.n}: give at least one pedestrian")
+    if Path(args.out).suffix.lower() != ".csv":
+        raise UsageError(f"--out {args.out}: the pedestrians are written as CSV; end it in .csv")
+    laws = _read_laws(args.laws)
+    table = sample_pedestrians(args.n, seed=args.seed, laws=laws)
+    with atomic_path(args.out) as tmp:
+        table.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+    summary = {
+        "out": str(args.out),
+        "n": int(args.n),
+        "seed": args.seed,
+        "laws": laws.source,
+        "means": {c: float(table[c].mean()) for c in table.columns if not c.startswith("phase")},
+    }
+    text = (
+        f"{args.n} pedestrians from {laws.source} (seed {args.seed}) -> {args.out}\n"
+        + "\n".join(f"  mean {k:22s} {v:.4g}" for k, v in summary["means"].items())
+    )
+    _emit(args, summary, text)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# batch
+# ---------------------------------------------------------------------------------------------
+def _batch_settings(args: argparse.Namespace) -> Any:
+    from workbench.inference.settings import IdentifySettings
+
+    overrides = {
+        "method": args.method,
+        "particles": args.particles,
+        "harmonics": args.harmonics,
+        "obs_noise": args.obs_noise,
+        "seed": args.seed,
+        "force_check": False if args.no_force_check else None,
+    }
+    if args.config:
+        return IdentifySettings.from_toml(args.config, **overrides)
+    return IdentifySettings().replace(**overrides)
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from workbench.population.batch import run_batch
+
+    summary = run_batch(
+        args.manifest,
+        args.out,
+        settings=_batch_settings(args),
+        workers=args.workers,
+        scheduler=args.scheduler,
+        resume=args.resume,
+        progress=not args.json,
+    )
+    obj = summary.to_json()
+    lines = [
+        f"{summary.done} identified, {summary.failed} failed, {summary.skipped} skipped "
+        f"(finished earlier) in {summary.elapsed_s:.1f} s",
+        f"results  {summary.results_csv}",
+        f"failures {summary.failures_csv}",
+    ]
+    lines += [f"failed: {f['path']}: {f['reason']}" for f in summary.failures]
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# population
+# ---------------------------------------------------------------------------------------------
+def read_results(path: str) -> Any:
+    """Read ``results.csv`` from a batch folder (or the file itself) as a DataFrame."""
+    import pandas as pd
+
+    p = Path(path)
+    file = p / "results.csv" if p.is_dir() else p
+    if not file.exists():
+        raise InputError(
+            file,
+            "whole file",
+            "there is no batch results table here",
+            "give the --out folder of 'workbench batch' (it holds results.csv)",
+        )
+    try:
+        return pd.read_csv(file)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(
+            file, "whole file", f"the table cannot be read ({err})", "rerun 'workbench batch'"
+        ) from None
+
+
+def write_population(fit: Any, out_dir: str | Path) -> dict[str, str]:
+    """Write ``population.json``, ``bands.csv``, ``residuals.csv``, ``excluded.csv``."""
+    from workbench.fileutil import atomic_path, atomic_write_json
+
+    out = Path(out_dir)
+    files = {
+        "population": out / "population.json",
+        "bands": out / "bands.csv",
+        "residuals": out / "residuals.csv",
+        "excluded": out / "excluded.csv",
+    }
+    atomic_write_json(files["population"], fit.summary)
+    for key, frame in (("bands", fit.bands), ("residuals", fit.used), ("excluded", fit.excluded)):
+        with atomic_path(files[key]) as tmp:
+            frame.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+    return {k: str(v) for k, v in files.items()}
+
+
+def _law_text(summary: dict[str, Any]) -> str:
+    lines = [
+        f"records used {summary['records_used']}, excluded {summary['records_excluded']} "
+        f"({summary['exclusion_rule']})"
+    ]
+    for key, law in summary["laws"].items():
+        lo, hi = law["slope_ci"]
+        ilo, ihi = law["intercept_ci"]
+        r = law["residuals"]
+        lines.append(
+            f"{key:22s} = {law['slope']:.4f} f_p {'-' if law['intercept'] < 0 else '+'} "
+            f"{abs(law['intercept']):.4f}  slope 95 % "
+            f"[{lo:.4f}, {hi:.4f}], intercept [{ilo:.4f}, {ihi:.4f}], residual sd "
+            f"{law['residual_sd']:.4g} (Shapiro p {r['shapiro_p']:.3g}, AD p "
+            f"{r['anderson_darling_p']:.3g})"
+        )
+    for key, ln in summary["lognormal"].items():
+        lines.append(
+            f"{key:22s} lognormal mu {ln['mu']:.4f} [{ln['mu_ci'][0]:.4f}, {ln['mu_ci'][1]:.4f}], "
+            f"sigma {ln['sigma']:.4f} [{ln['sigma_ci'][0]:.4f}, {ln['sigma_ci'][1]:.4f}]; "
+            f"KS p {ln['ks_p']:.3g}; AIC lognormal {ln['aic_lognormal']:.1f} vs GEV "
+            f"{ln['aic_gev'] if ln['aic_gev'] is None else round(ln['aic_gev'], 1)}"
+        )
+    return "\n".join(lines)
+
+
+def _cmd_population(args: argparse.Namespace) -> int:
+    from workbench.population.fit import fit_population
+
+    results = read_results(args.results_dir)
+    fit = fit_population(
+        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+    )
+    files = write_population(fit, args.out)
+    obj = {**fit.summary, "files": files}
+    _emit(args, obj, _law_text(fit.summary) + f"\nwritten to {args.out}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# report
+# ---------------------------------------------------------------------------------------------
+def _cmd_report(args: argparse.Namespace) -> int:
+    from workbench.population.fit import fit_population
+    from workbench.reporting.population import population_report
+
+    results = read_results(args.results_dir)
+    fit = fit_population(
+        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+    )
+    files = write_population(fit, args.out)
+    files.update(population_report(results, fit, args.out, title=args.title))
+    obj = {
+        "report": files["html"],
+        "markdown": files["markdown"],
+        "files": files,
+        "records_used": fit.summary["records_used"],
+        "records_excluded": fit.summary["records_excluded"],
+        "laws": fit.summary["laws"],
+        "lognormal": fit.summary["lognormal"],
+    }
+    _emit(args, obj, _law_text(fit.summary) + f"\nreport {files['html']}")
+    return 0
+
+
+def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
+    """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands."""
+    p = sub.add_parser(
+        "sample",
+        parents=[out_opts],
+        help="draw stochastic pedestrians from population laws",
+        description="Draw stochastic pedestrians (mass, pacing, step length, speed, f_n, zeta, "
+        "K, C, BLF1-3, phases) from fitted population laws or the seed's defaults, as CSV.",
+    )
+    p.add_argument("--n", type=int, required=True, metavar="N", help="number of pedestrians")
+    p.add_argument("--out", required=True, metavar="FILE.csv", help="output CSV")
+    p.add_argument(
+        "--laws",
+        metavar="POPULATION.json",
+        help="laws written by 'workbench population' (default: the seed's laws)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.set_defaults(handler=_cmd_sample)
+
+    p = sub.add_parser(
+        "batch",
+        parents=[out_opts],
+        help="identify every record of a manifest (process pool or Dask cluster)",
+        description="Identify every record listed in a manifest CSV (path, optional mass_kg, "
+        "pacing_hz, subject). Writes DIR/results.csv (one row per identified record), "
+        "DIR/failures.csv (path, reason) and one JSON file per record, atomically; --resume "
+        "skips finished records. Each record's seed comes from the batch seed, its path and "
+        "its bytes, so the worker count does not change the results.",
+    )
+    p.add_argument("manifest", help="manifest CSV")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS", help="run on a Dask distributed scheduler instead"
+    )
+    p.add_argument("--resume", action="store_true", help="continue a batch in DIR")
+    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default rbpf)")
+    p.add_argument("--particles", type=int, metavar="N", help="particles per record")
+    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
+    p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")
+    p.add_argument(
+        "--no-force-check", action="store_true", help="skip the force-model check (faster)"
+    )
+    p.add_argument("--config", metavar="TOML", help="identification settings file")
+    p.add_argument("--seed", type=int, help="batch seed (default 0)")
+    p.set_defaults(handler=_cmd_batch)
+
+    p = sub.add_parser(
+        "population",
+        parents=[out_opts],
+        help="fit population laws (f_n, zeta, BLF1 against pacing; lognormal BLF2/3)",
+        description="Fit the population laws to a batch's results: OLS of natural frequency, "
+        "damping ratio and BLF1 on pacing with confidence and prediction bands, normality "
+        "tests of the residuals, lognormal BLF2 and BLF3 beside GEV by AIC. Records whose C "
+        "or K is not identified are excluded (counted in the output).",
+    )
+    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--keep-not-identified",
+        action="store_true",
+        help="also use records whose C or K is flagged not identified",
+    )
+    p.set_defaults(handler=_cmd_population)
+
+    p = sub.add_parser(
+        "report",
+        parents=[out_opts],
+        help="Table-2-style population report (HTML, Markdown, CSV tables, figures)",
+        description="Fit the population laws to a batch's results and write a report: the "
+        "seed's Table 2 beside this study, the laws with intervals and normality tests, "
+        "BLF2/BLF3 fits, figures like the seed's figs. 11-14; self-contained HTML, Markdown "
+        "and every table as CSV.",
+    )
+    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    p.add_argument("--out", required=True, metavar="DIR", help="report folder")
+    p.add_argument(
+        "--keep-not-identified",
+        action="store_true",
+        help="also use records whose C or K is flagged not identified",
+    )
+    p.add_argument(
+        "--title", default="Population laws of the SMD pedestrian model", help="report title"
+    )
+    p.set_defaults(handler=_cmd_report)

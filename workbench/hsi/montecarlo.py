@@ -1,0 +1,317 @@
+"""Crowds and Monte Carlo crossings, on a local process pool or a Dask cluster.
+
+A *crossing* is one random scenario: either a single pedestrian walking over the span
+(``crowd="single"``) or a stream of pedestrians over a time window (``crowd="stream"``),
+with Poisson arrivals at the entry at a given flow, or at the flow ``density * width *
+mean_speed`` that keeps the given mean density on the deck. Every crossing is simulated
+twice: with interaction (coupled SMDs) and with the moving-force model of the same
+pedestrians.
+
+Determinism: crossing ``i`` draws everything from ``SeedSequence(seed, spawn_key=(i,))``,
+and crossings are integrated in fixed chunks, so the results do not depend on the number of
+workers or on where the chunks run.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+from tqdm.auto import tqdm
+
+from workbench.errors import UsageError
+from workbench.hsi.metrics import SETRA_LIMITS_M_S2, comfort_class, running_rms
+from workbench.hsi.modes import apparent_structure_modes
+from workbench.hsi.pedestrians import PedestrianSampler, validate_pedestrians
+from workbench.hsi.simulate import CrowdBatch, Model, integrate
+from workbench.hsi.structure import ModalStructure
+
+__all__ = ["CrossingSpec", "crossing_metrics", "draw_crossing", "run_monte_carlo"]
+
+Crowd = Literal["single", "stream"]
+MODELS_COMPARED: tuple[Model, ...] = ("interaction", "moving_force")
+
+
+@dataclass(frozen=True)
+class CrossingSpec:
+    """What a Monte Carlo crossing is.
+
+    Parameters
+    ----------
+    structure : ModalStructure
+        The footbridge.
+    sampler : callable
+        ``sampler(n, seed=int) -> DataFrame`` of pedestrians (for example
+        :func:`workbench.population.sampler.sample_pedestrians`).
+    crowd : {"single", "stream"}
+        One walker per crossing, or a Poisson stream.
+    density_per_m2 : float, optional
+        Mean crowd density on the deck (stream).
+    flow_per_s : float, optional
+        Arrival rate at the entry (stream); overrides the density.
+    mean_speed_m_s : float
+        Converts a density to a flow.
+    duration_s : float
+        Simulated time of a stream (single: until the walker leaves).
+    dt_s : float
+        Time step.
+    response_x_m : float, optional
+        Where the acceleration is evaluated (default midspan).
+    comfort_limits_m_s2 : sequence of float
+        The three comfort limits.
+    static_weight : bool
+        Add the walkers' weight as a moving load.
+    """
+
+    structure: ModalStructure
+    sampler: PedestrianSampler
+    crowd: Crowd = "single"
+    density_per_m2: float | None = None
+    flow_per_s: float | None = None
+    mean_speed_m_s: float = 1.3
+    duration_s: float = 120.0
+    dt_s: float = 0.005
+    response_x_m: float | None = None
+    comfort_limits_m_s2: Sequence[float] = field(default=SETRA_LIMITS_M_S2)
+    static_weight: bool = False
+
+    def __post_init__(self) -> None:
+        if self.crowd not in ("single", "stream"):
+            raise UsageError(f"crowd must be 'single' or 'stream', got {self.crowd!r}")
+        if self.crowd == "stream":
+            rate = self.arrival_rate_per_s
+            if not (np.isfinite(rate) and rate > 0):
+                raise UsageError(
+                    "a crowd stream needs a positive --density (pedestrians per m^2) or --flow "
+                    "(pedestrians per s)"
+                )
+            if not (np.isfinite(self.duration_s) and self.duration_s > 0):
+                raise UsageError(f"the duration must be positive, got {self.duration_s}")
+        comfort_class(0.0, self.comfort_limits_m_s2)  # checks the limits
+
+    @property
+    def arrival_rate_per_s(self) -> float:
+        """Poisson arrival rate at the entry [pedestrians/s]."""
+        if self.flow_per_s is not None:
+            return float(self.flow_per_s)
+        if self.density_per_m2 is None:
+            return float("nan")
+        return float(self.density_per_m2 * self.structure.width_m * self.mean_speed_m_s)
+
+
+def _child(seed: int, index: int) -> np.random.SeedSequence:
+    return np.random.SeedSequence(seed, spawn_key=(index,))
+
+
+def draw_crossing(
+    spec: CrossingSpec, seed: int, index: int
+) -> tuple[pd.DataFrame, NDArray[np.float64], NDArray[np.float64], float]:
+    """Draw crossing ``index``: pedestrians, start positions, speeds and the duration."""
+    ss = _child(seed, index)
+    rng = np.random.default_rng(ss)
+    table_seed = int(ss.generate_state(1)[0])
+    span = spec.structure.span_m
+    if spec.crowd == "single":
+        frame = validate_pedestrians(spec.sampler(1, seed=table_seed), "the sampler's table")
+        v = frame["speed_m_s"].to_numpy(float)
+        return frame, np.zeros(1), v, float(span / v[0])
+    # Arrivals start one slow crossing before t = 0 so the deck is already populated.
+    lead_s = span / 0.5
+    rate = spec.arrival_rate_per_s
+    n = int(rng.poisson(rate * (spec.duration_s + lead_s)))
+    if n == 0:
+        return empty_table(), np.zeros(0), np.zeros(0), spec.duration_s
+    entry = rng.uniform(-lead_s, spec.duration_s, size=n)
+    frame = validate_pedestrians(spec.sampler(n, seed=table_seed), "the sampler's table")
+    v = frame["speed_m_s"].to_numpy(float)
+    keep = (entry + span / v > 0) & (entry < spec.duration_s)
+    frame = frame[keep].reset_index(drop=True)
+    return frame, -v[keep] * entry[keep], v[keep], spec.duration_s
+
+
+def empty_table() -> pd.DataFrame:
+    """Return an empty pedestrian table (a stream in which nobody arrived)."""
+    from workbench.hsi.pedestrians import PEDESTRIAN_COLUMNS
+
+    return pd.DataFrame({c: pd.Series(dtype=float) for c in PEDESTRIAN_COLUMNS})
+
+
+def crossing_metrics(
+    structure: ModalStructure,
+    batch: CrowdBatch,
+    durations_s: NDArray[np.float64],
+    *,
+    dt_s: float,
+    response_x_m: float | None = None,
+    comfort_limits_m_s2: Sequence[float] = SETRA_LIMITS_M_S2,
+    static_weight: bool = False,
+) -> pd.DataFrame:
+    """Simulate a batch with and without interaction and summarise each scenario."""
+    duration = float(np.max(durations_s))
+    hist = {
+        m: integrate(
+            structure,
+            batch,
+            duration_s=duration,
+            dt_s=dt_s,
+            model=m,
+            response_x_m=response_x_m,
+            static_weight=static_weight,
+        )
+        for m in MODELS_COMPARED
+    }
+    t = hist["interaction"].time_s
+    rows = []
+    for b in range(batch.mass_kg.shape[0]):
+        own = t <= durations_s[b] + 1e-9
+        row: dict[str, Any] = {"n_pedestrians": int(batch.active[b].sum())}
+        for m, h in hist.items():
+            a = h.acceleration_m_s2[b, 0, own]
+            peak_at = int(np.argmax(np.abs(a)))
+            row[f"peak_{m}_m_s2"] = float(np.abs(a[peak_at]))
+            row[f"rms1s_{m}_m_s2"] = float(np.max(running_rms(a, dt_s)))
+            row[f"comfort_{m}"] = comfort_class(row[f"peak_{m}_m_s2"], comfort_limits_m_s2)
+            if m == "interaction":
+                t_peak = float(t[own][peak_at])
+        row["interaction_ratio"] = row["peak_interaction_m_s2"] / row["peak_moving_force_m_s2"]
+        act = batch.active[b]
+        x = batch.positions(t_peak)[b][act]
+        on = (x >= 0) & (x <= structure.span_m)
+        mode = apparent_structure_modes(
+            structure,
+            batch.mass_kg[b][act][on],
+            batch.stiffness_n_per_m[b][act][on],
+            batch.damping_ns_per_m[b][act][on],
+            x[on],
+        )[0]
+        row["apparent_frequency_hz"] = mode.frequency_hz
+        row["apparent_damping_ratio"] = mode.damping_ratio
+        row["on_deck_at_peak"] = int(on.sum())
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _run_chunk(spec: CrossingSpec, seed: int, indices: Sequence[int]) -> pd.DataFrame:
+    draws = [draw_crossing(spec, seed, i) for i in indices]
+    batch = CrowdBatch.from_scenarios([(f, x0, v) for f, x0, v, _ in draws])
+    durations = np.array([d for *_, d in draws])
+    out = crossing_metrics(
+        spec.structure,
+        batch,
+        durations,
+        dt_s=spec.dt_s,
+        response_x_m=spec.response_x_m,
+        comfort_limits_m_s2=spec.comfort_limits_m_s2,
+        static_weight=spec.static_weight,
+    )
+    out.insert(0, "crossing", list(indices))
+    frames = [f for f, *_ in draws]
+    out["mean_pacing_hz"] = [
+        float(f["pacing_hz"].mean()) if len(f) else float("nan") for f in frames
+    ]
+    return out
+
+
+def run_monte_carlo(
+    spec: CrossingSpec,
+    n_crossings: int,
+    *,
+    seed: int,
+    workers: int = 1,
+    scheduler: str | None = None,
+    chunk_size: int = 50,
+    progress: bool = False,
+) -> pd.DataFrame:
+    """Simulate ``n_crossings`` random crossings, with and without interaction.
+
+    Parameters
+    ----------
+    spec : CrossingSpec
+        What a crossing is.
+    n_crossings : int
+        Number of crossings.
+    seed : int
+        Fixes every result, whatever ``workers``, ``scheduler`` or the order of completion.
+    workers : int
+        Local processes (1: in this process).
+    scheduler : str, optional
+        Address of a Dask distributed scheduler; the chunks run there instead.
+    chunk_size : int
+        Crossings integrated side by side in one task.
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per crossing (``crossing`` index order) with the peak and the largest 1 s
+        RMS acceleration and comfort class of each model, their ratio, and the apparent
+        frequency and damping ratio of the first structural mode with the pedestrians on the
+        deck when the interaction response peaks.
+    """
+    if int(n_crossings) != n_crossings or n_crossings < 1:
+        raise UsageError(f"the number of crossings must be a positive integer, got {n_crossings}")
+    if int(workers) != workers or workers < 1:
+        raise UsageError(f"--workers must be a positive integer, got {workers}")
+    chunks = [
+        list(range(i, min(i + chunk_size, n_crossings))) for i in range(0, n_crossings, chunk_size)
+    ]
+    results: list[pd.DataFrame] = []
+    bar = tqdm(total=n_crossings, disable=not progress, unit="crossing", desc="hsi")
+    try:
+        if scheduler is not None:
+            results = _run_dask(spec, seed, chunks, scheduler, bar.update)
+        elif workers == 1 or len(chunks) == 1:
+            for c in chunks:
+                results.append(_run_chunk(spec, seed, c))
+                bar.update(len(c))
+        else:
+            # Spawned workers share no state (threads, generators) with this process.
+            ctx = multiprocessing.get_context("spawn")
+            n_proc = min(workers, os.cpu_count() or 1, len(chunks))
+            with ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx) as pool:
+                futs = [pool.submit(_run_chunk, spec, seed, c) for c in chunks]
+                for f, c in zip(futs, chunks, strict=True):
+                    results.append(f.result())
+                    bar.update(len(c))
+    finally:
+        bar.close()
+    return pd.concat(results, ignore_index=True).sort_values("crossing", ignore_index=True)
+
+
+def _run_dask(
+    spec: CrossingSpec,
+    seed: int,
+    chunks: list[list[int]],
+    scheduler: str,
+    update: Callable[[int], Any],
+) -> list[pd.DataFrame]:
+    try:
+        from distributed import Client
+    except ImportError:
+        raise UsageError(
+            "--scheduler needs Dask distributed; install the workbench with the 'dask' extra"
+        ) from None
+    try:
+        client = Client(scheduler, timeout=10, set_as_default=False)
+    except (OSError, TimeoutError) as err:
+        raise UsageError(
+            f"could not reach the Dask scheduler at {scheduler} ({err}); start it or check "
+            "the address"
+        ) from None
+    try:
+        futs = client.map(
+            _run_chunk, [spec] * len(chunks), [seed] * len(chunks), chunks, pure=False
+        )
+        out = client.gather(futs)
+        update(sum(len(c) for c in chunks))
+        return list(out)
+    finally:
+        client.close()

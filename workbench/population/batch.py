@@ -1,0 +1,483 @@
+"""Batch identification: every record of a manifest, fault-tolerant, resumable, scalable.
+
+``run_batch(manifest, out_dir)`` identifies each record with
+:func:`workbench.inference.identify.identify` and writes
+
+- ``OUT/records/<key>.json``: one file per record, written atomically (temporary file in the
+  same folder, then rename; :mod:`workbench.fileutil`) as soon as the record is finished,
+  with ``status`` ``"done"`` (and the result row) or ``"failed"`` (and the reason);
+- ``OUT/results.csv``: one row per identified record (:data:`RESULT_COLUMNS`), sorted by
+  the record's path, assembled from the record files at the end, so its bytes depend only
+  on the records and the settings -- never on worker count, scheduling or interruptions
+  (apart from the timing column ``elapsed_s``);
+- ``OUT/failures.csv``: ``path, reason`` for every record that could not be identified
+  (missing file, unreadable file, NaN samples, ...), sorted by path;
+- ``OUT/batch.json``: the settings, so that ``--resume`` refuses to mix settings.
+
+Determinism: the seed of each record is derived from the batch seed, the record's path as
+written in the manifest and the bytes of the file (SHA-256), not from its position, so one
+worker, two workers or a Dask cluster give the same numbers.
+
+Resume: records with a ``done`` file are skipped; failed records are tried again (a failure
+is cheap, and the file may have been fixed in between). Leftover temporary files of a killed
+run are ignored and removed.
+
+Execution: in this process for one worker; a local process pool (``spawn`` start method, so
+no state leaks from the parent) for more; a Dask distributed cluster when a scheduler
+address is given (``dask[distributed]``, the ``dask`` extra). The parent writes every
+record's file, so the workers need no access to the output folder.
+
+Pacing: when the settings identify the record as one piece (``pieces = "whole"``) and give
+no pacing, the pacing stated in the manifest or sidecar is used (a known metronome rate
+fixes the Fourier basis better than a spectral estimate); otherwise the record's own
+estimate, as ``workbench identify`` does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+import time
+import warnings
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from workbench.errors import UsageError, WorkbenchError
+from workbench.fileutil import atomic_path, atomic_write_json
+from workbench.inference.settings import IdentifySettings
+
+__all__ = [
+    "FAILURE_COLUMNS",
+    "RESULT_COLUMNS",
+    "BatchSummary",
+    "BatchTask",
+    "record_seed",
+    "result_row",
+    "run_batch",
+    "run_task",
+]
+
+SCALARS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", "damping_ratio")
+#: Columns of ``results.csv``; ``elapsed_s`` is the only timing column.
+RESULT_COLUMNS: tuple[str, ...] = (
+    "path",
+    "subject",
+    "mass_kg",
+    "pacing_hz",
+    "method",
+    "steps",
+    *(c for s in SCALARS for c in (s, f"{s}_sd")),
+    *(c for i in (1, 2, 3) for c in (f"blf{i}", f"blf{i}_sd")),
+    "identifiability",
+    "identified_damping",
+    "identified_stiffness",
+    "trustworthy",
+    "seed",
+    "elapsed_s",
+)
+TIMING_COLUMNS = ("elapsed_s",)
+FAILURE_COLUMNS = ("path", "reason")
+
+
+@dataclass(frozen=True)
+class BatchTask:
+    """One record to identify (picklable: it travels to process-pool and Dask workers).
+
+    Parameters
+    ----------
+    key : str
+        File-name-safe unique key of the record (from its manifest path).
+    path : str
+        The record file as given in the manifest (relative to the manifest's folder).
+    file : str
+        The record file to open.
+    mass_kg, pacing_hz : float or None
+        Metadata from the manifest (override the sidecar).
+    subject : str or None
+        Subject from the manifest.
+    seed : int
+        The record's seed (:func:`record_seed`).
+    settings : dict
+        :class:`~workbench.inference.settings.IdentifySettings` as JSON.
+    """
+
+    key: str
+    path: str
+    file: str
+    mass_kg: float | None
+    pacing_hz: float | None
+    subject: str | None
+    seed: int
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class BatchSummary:
+    """What a batch did: counts and the files it wrote.
+
+    ``done`` counts records identified in this run, ``skipped`` records finished by an
+    earlier run (``--resume``), ``failed`` records that could not be identified; the three
+    add up to the manifest's records.
+    """
+
+    done: int
+    failed: int
+    skipped: int
+    results_csv: Path
+    failures_csv: Path
+    elapsed_s: float
+    failures: list[dict[str, str]]
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the ``workbench batch --json`` object."""
+        return {
+            "done": self.done,
+            "failed": self.failed,
+            "skipped": self.skipped,
+            "results": str(self.results_csv),
+            "failures": str(self.failures_csv),
+            "failed_records": self.failures,
+            "elapsed_s": round(self.elapsed_s, 3),
+        }
+
+
+def record_seed(base_seed: int, path: str, content: bytes | None) -> int:
+    """Seed of one record: SHA-256 of the batch seed, the manifest path and the file bytes.
+
+    Parameters
+    ----------
+    base_seed : int
+        The batch seed (``--seed``).
+    path : str
+        The record's path as written in the manifest.
+    content : bytes or None
+        The file's bytes (None when it cannot be read; the record then fails anyway).
+
+    Returns
+    -------
+    int
+        A seed in ``[0, 2**32)``.
+    """
+    h = hashlib.sha256()
+    h.update(str(int(base_seed)).encode())
+    h.update(b"\0")
+    h.update(path.encode("utf-8"))
+    h.update(b"\0")
+    h.update(content if content is not None else b"<unreadable>")
+    return int.from_bytes(h.digest()[:4], "little")
+
+
+def _key(path: str) -> str:
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(path).stem)[:60] or "record"
+    return f"{stem}-{hashlib.sha1(path.encode('utf-8')).hexdigest()[:10]}"
+
+
+def _num(x: Any) -> float:
+    x = float(x)
+    return x if math.isfinite(x) else math.nan
+
+
+def result_row(result: Any, path: str, subject: str | None, seed: int) -> dict[str, Any]:
+    """Turn an :class:`~workbench.inference.results.IdentificationResult` into a table row.
+
+    Parameters
+    ----------
+    result : IdentificationResult
+        The identification.
+    path : str
+        The record's manifest path.
+    subject : str or None
+        Subject identifier.
+    seed : int
+        Seed the record was identified with.
+
+    Returns
+    -------
+    dict
+        Keys :data:`RESULT_COLUMNS` without ``elapsed_s``.
+    """
+    est, sd = result.estimates, result.posterior_sd
+    ident = result.identifiability
+    row: dict[str, Any] = {
+        "path": path,
+        "subject": subject or "",
+        "mass_kg": _num(result.mass_kg),
+        "pacing_hz": _num(result.problem.pacing_hz),
+        "method": result.method,
+        "steps": int(result.problem.n_pieces),
+    }
+    for s in SCALARS:
+        row[s] = _num(est[s])
+        row[f"{s}_sd"] = _num(sd[s])
+    blf, blf_sd = list(result.blf), list(result.blf_sd)
+    for i in (1, 2, 3):
+        row[f"blf{i}"] = _num(blf[i - 1]) if i <= len(blf) else math.nan
+        row[f"blf{i}_sd"] = _num(blf_sd[i - 1]) if i <= len(blf_sd) else math.nan
+    row["identifiability"] = str(ident.get("level", "not assessed"))
+    row["identified_damping"] = bool(ident.get("identified_damping", False))
+    row["identified_stiffness"] = bool(ident.get("identified_stiffness", False))
+    row["trustworthy"] = bool(result.trustworthy)
+    row["seed"] = int(seed)
+    return row
+
+
+def run_task(task: BatchTask) -> dict[str, Any]:
+    """Identify one record; never raises for a bad record (the reason is returned).
+
+    Parameters
+    ----------
+    task : BatchTask
+        The record.
+
+    Returns
+    -------
+    dict
+        ``key, path, status`` (``"done"`` or ``"failed"``), ``row`` or ``reason``,
+        ``warnings`` (messages raised while identifying) and ``elapsed_s``.
+    """
+    from workbench.inference.identify import identify
+    from workbench.records.io import load_record
+
+    start = time.perf_counter()
+    out: dict[str, Any] = {"key": task.key, "path": task.path}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            record = load_record(
+                task.file,
+                mass_kg=task.mass_kg,
+                pacing_hz=task.pacing_hz,
+                subject=task.subject,
+            )
+            settings = IdentifySettings(**{**task.settings, "seed": task.seed})
+            if settings.pieces == "whole" and settings.pacing_hz is None and record.pacing_hz:
+                settings = settings.replace(pacing_hz=float(record.pacing_hz))
+            result = identify(record, settings)
+            out["row"] = result_row(result, task.path, record.subject, task.seed)
+            out["status"] = "done"
+        except WorkbenchError as err:
+            out.update(status="failed", reason=str(err))
+        except Exception as err:  # one bad record must not stop the batch
+            out.update(status="failed", reason=f"internal error ({type(err).__name__}: {err})")
+    out["warnings"] = sorted({str(w.message) for w in caught})
+    out["elapsed_s"] = round(time.perf_counter() - start, 3)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# executors: each yields task results as they finish
+# ---------------------------------------------------------------------------------------------
+def _run_serial(tasks: list[BatchTask]) -> Iterator[dict[str, Any]]:
+    for task in tasks:
+        yield run_task(task)
+
+
+def _run_pool(tasks: list[BatchTask], workers: int) -> Iterator[dict[str, Any]]:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(run_task, t) for t in tasks]
+        for fut in as_completed(futures):
+            yield fut.result()
+
+
+def _run_dask(tasks: list[BatchTask], address: str) -> Iterator[dict[str, Any]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise UsageError(
+            "--scheduler needs Dask distributed; install it with pip install 'workbench[dask]'"
+        ) from None
+    try:
+        client = Client(address, timeout="20s")
+    except (OSError, TimeoutError) as err:
+        raise UsageError(
+            f"--scheduler {address}: cannot reach a Dask scheduler there ({err}); start one "
+            "(dask scheduler) or check the address"
+        ) from None
+    try:
+        futures = client.map(run_task, tasks, key=[f"workbench-batch-{t.key}" for t in tasks])
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+
+
+# ---------------------------------------------------------------------------------------------
+def _read_json(p: Path) -> dict[str, Any] | None:
+    try:
+        obj = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError):
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+def _clean_json(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _clean_json(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_clean_json(v) for v in obj]
+    return obj
+
+
+def _write_csv(path: Path, frame: pd.DataFrame) -> None:
+    with atomic_path(path) as tmp:
+        frame.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+
+
+def run_batch(
+    manifest: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    settings: IdentifySettings | None = None,
+    workers: int = 1,
+    scheduler: str | None = None,
+    resume: bool = False,
+    progress: bool = False,
+    on_record: Callable[[dict[str, Any]], None] | None = None,
+) -> BatchSummary:
+    """Identify every record of a manifest (see the module docstring for the files).
+
+    Parameters
+    ----------
+    manifest : path-like
+        Batch manifest (DESIGN.md 4.1): ``path`` column, optional ``mass_kg``,
+        ``pacing_hz``, ``subject``.
+    out_dir : path-like
+        Output folder.
+    settings : IdentifySettings, optional
+        Identification settings; ``settings.seed`` is the batch seed from which every
+        record's seed is derived.
+    workers : int, default 1
+        Local worker processes (1: in this process).
+    scheduler : str, optional
+        Address of a Dask distributed scheduler; overrides ``workers``.
+    resume : bool, default False
+        Continue a batch in ``out_dir``: skip records already done.
+    progress : bool, default False
+        Show a tqdm progress bar on stderr.
+    on_record : callable, optional
+        Called with each record's outcome after its file is written.
+
+    Returns
+    -------
+    BatchSummary
+    """
+    from tqdm import tqdm
+
+    from workbench.records.io import load_manifest
+
+    t0 = time.perf_counter()
+    settings = settings or IdentifySettings()
+    if int(workers) < 1:
+        raise UsageError(f"--workers {workers}: give at least 1 worker")
+    entries = load_manifest(manifest)
+    out = Path(out_dir)
+    rec_dir = out / "records"
+    meta_path = out / "batch.json"
+    settings_json = settings.to_json()
+    meta = {"manifest": str(manifest), "settings": settings_json}
+    if meta_path.exists() or (rec_dir.exists() and any(rec_dir.glob("*.json"))):
+        if not resume:
+            raise UsageError(
+                f"--out {out}: the folder already holds a batch; pass --resume to continue it, "
+                "or choose an empty folder"
+            )
+        old = _read_json(meta_path)
+        if old is not None and old.get("settings") != _clean_json(settings_json):
+            raise UsageError(
+                f"--resume: the batch in {out} was run with other identification settings; "
+                "use the same flags, or a new --out folder"
+            )
+    rec_dir.mkdir(parents=True, exist_ok=True)
+    for stale in rec_dir.glob(".*.tmp"):  # a killed run's half-written file
+        stale.unlink(missing_ok=True)
+    atomic_write_json(meta_path, _clean_json(meta))
+
+    manifest_dir = Path(manifest).parent
+    tasks: list[BatchTask] = []
+    skipped = 0
+    keys: dict[str, str] = {}
+    for e in entries:
+        try:
+            rel = e.path.relative_to(manifest_dir).as_posix()
+        except ValueError:
+            rel = e.path.as_posix()
+        key = _key(rel)
+        keys[rel] = key
+        if resume:
+            prev = _read_json(rec_dir / f"{key}.json")
+            if prev is not None and prev.get("status") == "done":
+                skipped += 1
+                continue
+        try:
+            content: bytes | None = e.path.read_bytes()
+        except OSError:
+            content = None
+        tasks.append(
+            BatchTask(
+                key=key,
+                path=rel,
+                file=str(e.path),
+                mass_kg=e.mass_kg,
+                pacing_hz=e.pacing_hz,
+                subject=e.subject,
+                seed=record_seed(settings.seed, rel, content),
+                settings=settings_json,
+            )
+        )
+
+    results: Iterable[dict[str, Any]]
+    if not tasks:
+        results = []
+    elif scheduler:
+        results = _run_dask(tasks, scheduler)
+    elif workers == 1 or len(tasks) == 1:
+        results = _run_serial(tasks)
+    else:
+        results = _run_pool(tasks, min(int(workers), len(tasks)))
+    done = 0
+    bar = tqdm(total=len(tasks), desc="batch", unit="record", disable=not progress)
+    try:
+        for res in results:
+            atomic_write_json(rec_dir / f"{res['key']}.json", _clean_json(res))
+            done += res["status"] == "done"
+            bar.update(1)
+            if on_record is not None:
+                on_record(res)
+    finally:
+        bar.close()
+
+    rows: list[dict[str, Any]] = []
+    failures: list[dict[str, str]] = []
+    for rel in sorted(keys):
+        stored = _read_json(rec_dir / f"{keys[rel]}.json")
+        if stored is None:
+            failures.append({"path": rel, "reason": "no result was written (interrupted?)"})
+        elif stored.get("status") == "done":
+            rows.append({**stored["row"], "elapsed_s": stored.get("elapsed_s", math.nan)})
+        else:
+            failures.append({"path": rel, "reason": str(stored.get("reason", "unknown"))})
+    table = pd.DataFrame(rows, columns=list(RESULT_COLUMNS))
+    _write_csv(out / "results.csv", table)
+    _write_csv(out / "failures.csv", pd.DataFrame(failures, columns=list(FAILURE_COLUMNS)))
+    return BatchSummary(
+        done=done,
+        failed=len(failures),
+        skipped=skipped,
+        results_csv=out / "results.csv",
+        failures_csv=out / "failures.csv",
+        elapsed_s=time.perf_counter() - t0,
+        failures=failures,
+    )

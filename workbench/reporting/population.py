@@ -1,0 +1,477 @@
+"""Population report: Table-2-style comparison, fitted laws, figures like seed figs. 11-14.
+
+:func:`population_report` writes, into one folder, a self-contained HTML page (figures
+embedded as data URIs), the same report as Markdown (figures as PNG files beside it), and
+every table as CSV:
+
+- ``table2.csv``: the seed's Table 2 literature rows (DESIGN.md 6) beside "this study", the
+  fitted laws with their natural-frequency and damping-ratio ranges at f_p 1.5-2.5 Hz;
+- ``laws.csv``: slope and intercept with 95 % intervals, residual sd, R^2, normality tests;
+- ``lognormal.csv``: BLF2 and BLF3 lognormal parameters with intervals, goodness of fit, AIC
+  beside GEV;
+- figures: parameters against pacing with the fitted law, its confidence and prediction
+  bands and the seed's laws (seed fig. 12; per-participant colours as fig. 11), residual
+  histograms with normal fits and QQ plots (fig. 13), BLF2/BLF3 histograms with the lognormal
+  and GEV fits (fig. 14).
+
+:func:`run_population_demo` runs the whole chain (synthetic study subset, optional embedded
+real records, batch, population laws, this report) for ``workbench demo``.
+"""
+
+from __future__ import annotations
+
+import base64
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+from scipy import stats
+
+from workbench.fileutil import atomic_path, atomic_write_text
+from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, PopulationFit
+from workbench.population.laws import PopulationLaws
+from workbench.reporting.document import Report, Section, Table
+from workbench.reporting.figures import save_figure
+
+__all__ = ["SEED_TABLE2", "population_report", "run_population_demo", "table2_rows"]
+
+#: The seed's Table 2 (DESIGN.md 6): reference, posture, natural frequency, damping ratio.
+SEED_TABLE2: tuple[tuple[str, str, str, str], ...] = (
+    ("Wei 1998", "sitting", "5.0", "0.45"),
+    ("Falati 1999", "sitting", "10.43", "0.45-0.55"),
+    ("Sachse 2002", "sitting", "5.5-8.3", "0.33-0.35"),
+    ("Brownjohn 1999", "standing", "5.1", "0.38"),
+    ("Zheng 2001", "standing", "5.24", "0.39"),
+    ("Matsumoto 2003", "standing", "5.74", "0.695"),
+    ("Shahabpoor 2016", "walking", "2.75-3", "0.275-0.30"),
+    ("Van Nimmen 2015", "walking", "3.34", "0.26"),
+    ("Zhang 2015", "walking", "1.1043 f_p", "0.30"),
+    (
+        "Wang et al. (seed study)",
+        "walking",
+        "0.3049 f_p + 1.3670 (1.82-2.13 at f_p 1.5-2.5 Hz)",
+        "-0.2116 f_p + 0.8737 (0.56-0.34)",
+    ),
+)
+LABELS = {
+    "natural_frequency_hz": "natural frequency f_n [Hz]",
+    "damping_ratio": "damping ratio zeta",
+    "blf1": "BLF1",
+    "blf2": "BLF2",
+    "blf3": "BLF3",
+}
+
+
+def _law_text(law: dict[str, Any], digits: int = 4) -> str:
+    sign = "+" if law["intercept"] >= 0 else "-"
+    return f"{law['slope']:.{digits}f} f_p {sign} {abs(law['intercept']):.{digits}f}"
+
+
+def table2_rows(summary: dict[str, Any]) -> list[list[str]]:
+    """Rows of the Table-2-style comparison: the seed's rows, then "this study"."""
+    laws = summary["laws"]
+    rng = summary["ranges_at_pacing_hz"]
+    lo, hi = rng["pacing_hz"]
+    fn, zeta = rng["natural_frequency_hz"], rng["damping_ratio"]
+    this = [
+        "This study",
+        "walking",
+        f"{_law_text(laws['natural_frequency_hz'])} ({fn[0]:.2f}-{fn[1]:.2f} at f_p "
+        f"{lo:g}-{hi:g} Hz)",
+        f"{_law_text(laws['damping_ratio'])} ({zeta[0]:.2f}-{zeta[1]:.2f})",
+    ]
+    return [list(r) for r in SEED_TABLE2] + [this]
+
+
+def _ci(pair: list[float], digits: int = 4) -> str:
+    return f"[{pair[0]:.{digits}f}, {pair[1]:.{digits}f}]"
+
+
+def _laws_table(summary: dict[str, Any]) -> Table:
+    rows = []
+    for key in LAW_COLUMNS:
+        law = summary["laws"][key]
+        r = law["residuals"]
+        rows.append(
+            [
+                LABELS[key],
+                f"{law['slope']:.4f}",
+                _ci(law["slope_ci"]),
+                f"{law['intercept']:.4f}",
+                _ci(law["intercept_ci"]),
+                f"{law['residual_sd']:.4g}",
+                f"{law['r_squared']:.3f}",
+                f"{r['shapiro_p']:.3g}",
+                f"{r['anderson_darling_p']:.3g}",
+                str(law["n"]),
+            ]
+        )
+    return Table(
+        [
+            "law",
+            "slope",
+            "slope 95 %",
+            "intercept",
+            "intercept 95 %",
+            "residual sd",
+            "R^2",
+            "Shapiro-Wilk p",
+            "Anderson-Darling p",
+            "records",
+        ],
+        rows,
+        "Mean laws y = slope f_p + intercept (OLS) and the normality tests of their residuals.",
+    )
+
+
+def _lognormal_table(summary: dict[str, Any]) -> Table:
+    rows = []
+    for key in LOGNORMAL_COLUMNS:
+        ln = summary["lognormal"][key]
+        gev = ln["aic_gev"]
+        rows.append(
+            [
+                LABELS[key],
+                f"{ln['mu']:.4f}",
+                _ci(ln["mu_ci"]),
+                f"{ln['sigma']:.4f}",
+                _ci(ln["sigma_ci"]),
+                f"{ln['median']:.4f}",
+                f"{ln['ks_p']:.3g}",
+                f"{ln['aic_lognormal']:.1f}",
+                "n/a" if gev is None else f"{gev:.1f}",
+                ln["preferred_by_aic"],
+            ]
+        )
+    return Table(
+        [
+            "load factor",
+            "mu",
+            "mu 95 %",
+            "sigma",
+            "sigma 95 %",
+            "median",
+            "KS p",
+            "AIC lognormal",
+            "AIC GEV",
+            "preferred",
+        ],
+        rows,
+        "BLF2 and BLF3: lognormal (log BLF ~ N(mu, sigma^2)) with goodness of fit, beside GEV.",
+    )
+
+
+def _write_table_csv(table: Table, path: Path) -> Path:
+    with atomic_path(path) as tmp:
+        pd.DataFrame(table.rows, columns=table.columns).to_csv(
+            tmp, index=False, lineterminator="\n"
+        )
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# figures
+# ---------------------------------------------------------------------------------------------
+def laws_figure(fit: PopulationFit, reference: PopulationLaws | None = None) -> Figure:
+    """Parameters against pacing with the fitted laws and bands (seed figs. 11-12)."""
+    ref = reference or PopulationLaws()
+    fig = Figure(figsize=(13, 4))
+    axes = fig.subplots(1, 3)
+    used = fit.used
+    subjects = used["subject"].astype(str) if "subject" in used else pd.Series([""] * len(used))
+    codes = pd.factorize(subjects)[0]
+    for ax, key in zip(axes, LAW_COLUMNS, strict=True):
+        b = fit.bands[fit.bands.law == key]
+        ax.fill_between(b.pacing_hz, b.pi_low, b.pi_high, color="0.85", label="95 % prediction")
+        ax.fill_between(b.pacing_hz, b.ci_low, b.ci_high, color="C1", alpha=0.35, label="95 % CI")
+        ax.scatter(used.pacing_hz, used[key], c=codes, cmap="tab20", s=9, alpha=0.7, lw=0)
+        ax.plot(b.pacing_hz, b["mean"], color="C1", lw=2, label="fitted law")
+        ref_law = getattr(ref, key)
+        name = "Young (assumed)" if key == "blf1" else "seed's law"
+        ax.plot(b.pacing_hz, ref_law.mean(b.pacing_hz), "k--", lw=1.2, label=name)
+        ax.set_xlabel("pacing frequency f_p [Hz]")
+        ax.set_ylabel(LABELS[key])
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, loc="upper left")
+    fig.suptitle("Identified parameters against pacing (colour: participant)")
+    fig.tight_layout()
+    return fig
+
+
+def residuals_figure(fit: PopulationFit) -> Figure:
+    """Residual histograms with the fitted normal, and normal QQ plots (seed fig. 13)."""
+    fig = Figure(figsize=(13, 7))
+    axes = fig.subplots(2, 3)
+    for j, key in enumerate(LAW_COLUMNS):
+        r = fit.used[f"{key}_residual"].to_numpy(float)
+        res = fit.summary["laws"][key]["residuals"]
+        ax = axes[0, j]
+        ax.hist(r, bins="auto", density=True, color="C0", alpha=0.6)
+        x = np.linspace(r.min(), r.max(), 200)
+        ax.plot(x, stats.norm.pdf(x, res["normal_mean"], res["normal_sd"]), "C3", lw=2)
+        ax.set_title(
+            f"{LABELS[key]}: N({res['normal_mean']:.2g}, {res['normal_sd']:.3g}^2)\n"
+            f"Shapiro p {res['shapiro_p']:.2g}, AD p {res['anderson_darling_p']:.2g}",
+            fontsize=9,
+        )
+        ax.set_xlabel("model error")
+        qq = axes[1, j]
+        (osm, osr), (slope, inter, _) = stats.probplot(r, dist="norm")
+        qq.plot(osm, osr, ".", ms=3)
+        qq.plot(osm, slope * np.asarray(osm) + inter, "C3")
+        qq.set_xlabel("normal quantile")
+        qq.set_ylabel("ordered residual")
+        qq.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig
+
+
+def blf_figure(fit: PopulationFit) -> Figure:
+    """BLF2 and BLF3 histograms with the lognormal and GEV fits (seed fig. 14)."""
+    fig = Figure(figsize=(10, 4))
+    axes = fig.subplots(1, 2)
+    for ax, key in zip(axes, LOGNORMAL_COLUMNS, strict=True):
+        x = fit.used[key].to_numpy(float)
+        ln = fit.summary["lognormal"][key]
+        ax.hist(x, bins="auto", density=True, color="C0", alpha=0.6)
+        grid = np.linspace(max(x.min() * 0.8, 1e-6), x.max() * 1.1, 300)
+        ax.plot(
+            grid,
+            stats.lognorm.pdf(grid, ln["sigma"], scale=math.exp(ln["mu"])),
+            "C3",
+            lw=2,
+            label=f"lognormal mu {ln['mu']:.3f}, sigma {ln['sigma']:.3f}",
+        )
+        g = ln["gev"]
+        ax.plot(
+            grid,
+            stats.genextreme.pdf(grid, g["shape_c"], loc=g["loc"], scale=g["scale"]),
+            "k--",
+            lw=1.2,
+            label="GEV",
+        )
+        ax.set_xlabel(LABELS[key])
+        ax.set_ylabel("density")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+# ---------------------------------------------------------------------------------------------
+def _embed_images(html_text: str, folder: Path) -> str:
+    def repl(m: re.Match[str]) -> str:
+        p = folder / m.group(1)
+        if not p.exists():
+            return m.group(0)
+        data = base64.b64encode(p.read_bytes()).decode("ascii")
+        return f'src="data:image/png;base64,{data}"'
+
+    return re.sub(r'src="([^"]+\.png)"', repl, html_text)
+
+
+def population_report(
+    results: pd.DataFrame,
+    fit: PopulationFit,
+    out_dir: str | Path,
+    *,
+    title: str = "Population laws of the SMD pedestrian model",
+    notes: list[str] | None = None,
+    reference: PopulationLaws | None = None,
+) -> dict[str, str]:
+    """Write the Table-2-style population report (HTML, Markdown, CSV tables, PNG figures).
+
+    Parameters
+    ----------
+    results : pandas.DataFrame
+        The batch results the laws were fitted to.
+    fit : PopulationFit
+        The fitted laws.
+    out_dir : path-like
+        Output folder.
+    title : str
+        Report title.
+    notes : list of str, optional
+        Extra bullet points (for example the generating laws of a synthetic study).
+    reference : PopulationLaws, optional
+        Laws drawn as dashed reference lines (default: the seed's).
+
+    Returns
+    -------
+    dict
+        Paths of ``html``, ``markdown``, the CSV tables and the figures.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    s = fit.summary
+    files: dict[str, str] = {}
+    report = Report(
+        title,
+        intro=f"{len(results)} identified records; {s['records_used']} used in the fits, "
+        f"{s['records_excluded']} excluded ({s['exclusion_rule']}).",
+    )
+    t2 = Table(
+        ["reference", "posture", "natural frequency [Hz]", "damping ratio"],
+        table2_rows(s),
+        "The seed's Table 2 with the laws fitted here (f_p: pacing frequency in Hz).",
+    )
+    laws_t, logn_t = _laws_table(s), _lognormal_table(s)
+    for name, table in (("table2", t2), ("laws", laws_t), ("lognormal", logn_t)):
+        files[f"{name}_csv"] = str(_write_table_csv(table, out / f"{name}.csv"))
+    sec = report.add(Section("Comparison with published SMD parameters (Table 2)"))
+    sec.table(t2)
+    sec = report.add(Section("Mean laws against pacing frequency"))
+    sec.table(laws_t)
+    for name, fig, caption in (
+        (
+            "population_laws.png",
+            laws_figure(fit, reference),
+            "Parameters against pacing with the fitted law, its 95 % confidence and "
+            "prediction bands (like seed figs. 11-12).",
+        ),
+        (
+            "population_residuals.png",
+            residuals_figure(fit),
+            "Model errors with the fitted normal and normal QQ plots (like seed fig. 13).",
+        ),
+    ):
+        save_figure(fig, out / name)
+        files[name] = str(out / name)
+        sec.figure(name, caption)
+    sec = report.add(Section("Higher load factors"))
+    sec.table(logn_t)
+    save_figure(blf_figure(fit), out / "population_blf.png")
+    files["population_blf.png"] = str(out / "population_blf.png")
+    sec.figure(
+        "population_blf.png", "BLF2 and BLF3 with lognormal and GEV fits (like seed fig. 14)."
+    )
+    sec = report.add(Section("Records and assumptions"))
+    bullets = [
+        f"Records used {s['records_used']}, excluded {s['records_excluded']}: "
+        f"{s['exclusion_rule']}.",
+        "Kolmogorov-Smirnov p-values use parameters fitted to the same data, so they are "
+        "conservative (a lognormal that fails them fits badly).",
+        *(notes or []),
+    ]
+    if s["excluded"]:
+        reasons = pd.Series([e["reason"] for e in s["excluded"]]).value_counts()
+        bullets += [f"{n} excluded: {why}" for why, n in reasons.items()]
+    sec.bullets(bullets)
+    atomic_write_text(out / "report.md", report.to_markdown())
+    files["markdown"] = str(out / "report.md")
+    html_text = _embed_images(report.to_html(), out)
+    files["html"] = str(atomic_write_text(out / "index.html", html_text))
+    return files
+
+
+def run_population_demo(
+    out_dir: str | Path,
+    seed: int,
+    *,
+    participants: tuple[int, int] = (4, 2),
+    include_real: bool = True,
+    workers: int = 1,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Run the population chain on a subset of the synthetic study (and the real records).
+
+    Generates ``participants`` (male, female) of the synthetic study, one record per pacing
+    case, writes them under ``out_dir/study``, identifies them in batch with the study's
+    settings, optionally identifies the embedded real records with the default settings in
+    a second batch, fits the laws to all results (records whose C or K is not identified
+    are excluded and counted) and writes the report to ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Output folder.
+    seed : int
+        Fixes the study and every identification.
+    participants : (int, int)
+        Male and female participants of the subset.
+    include_real : bool
+        Also identify the embedded real records (slower: minutes).
+    workers : int
+        Local worker processes of the batches.
+    progress : bool
+        Show progress bars.
+
+    Returns
+    -------
+    dict
+        Counts, the fitted laws, the report's files and one line of text.
+    """
+    from workbench.inference.settings import IdentifySettings
+    from workbench.population.batch import run_batch
+    from workbench.population.fit import fit_population
+    from workbench.population.study import STUDY_SETTINGS, StudyDesign, study_plan, write_study
+
+    out = Path(out_dir)
+    design = StudyDesign(n_male=participants[0], n_female=participants[1], n_records=None)
+    plan = study_plan(design, seed=seed)
+    manifest = write_study(plan, out / "study", design)
+    batch_dir = out / "batch_synthetic"
+    settings = IdentifySettings(**STUDY_SETTINGS, particles=64, seed=seed)
+    summaries = {
+        "synthetic": run_batch(
+            manifest,
+            batch_dir,
+            settings=settings,
+            workers=workers,
+            resume=batch_dir.exists(),
+            progress=progress,
+        )
+    }
+    frames = [pd.read_csv(batch_dir / "results.csv")]
+    if include_real:
+        from workbench.datasets import embedded_path
+
+        real_dir = out / "real"
+        real_dir.mkdir(parents=True, exist_ok=True)
+        rows = [str(embedded_path(k)) for k in ("treadmill", "insole")]
+        atomic_write_text(real_dir / "manifest.csv", "path\n" + "\n".join(rows) + "\n")
+        real_batch = out / "batch_real"
+        summaries["real"] = run_batch(
+            real_dir / "manifest.csv",
+            real_batch,
+            settings=IdentifySettings(seed=seed),
+            workers=workers,
+            resume=real_batch.exists(),
+            progress=progress,
+        )
+        frames.append(pd.read_csv(real_batch / "results.csv"))
+    results = pd.concat(frames, ignore_index=True)
+    fit = fit_population(results, source=str(out))
+    from workbench.fileutil import atomic_write_json
+
+    atomic_write_json(out / "population.json", fit.summary)
+    laws = PopulationLaws()
+    notes = [
+        f"Synthetic records: {len(plan)} ({participants[0]} male, {participants[1]} female "
+        "participants, 11 pacing cases) generated from the seed's f_n and zeta laws, Young's "
+        "BLF1 law and the assumed residual sds and lognormal BLF2/3 "
+        f"(mu {laws.blf2.mu:.3f} / {laws.blf3.mu:.3f}, sigma {laws.blf2.sigma:g}), periodic "
+        "force from rest, identified as one piece (workbench.population.study).",
+    ]
+    if include_real:
+        notes.append(
+            "Real records: the embedded treadmill and insole records, identified "
+            "per footfall step with the default settings."
+        )
+    files = population_report(results, fit, out, notes=notes)
+    fn = fit.summary["laws"]["natural_frequency_hz"]
+    return {
+        "records": len(results),
+        "records_used": fit.summary["records_used"],
+        "records_excluded": fit.summary["records_excluded"],
+        "failed": sum(s.failed for s in summaries.values()),
+        "laws": fit.summary["laws"],
+        "lognormal": fit.summary["lognormal"],
+        "report": files["html"],
+        "files": files,
+        "text": f"population: f_n = {_law_text(fn)} from {fit.summary['records_used']} records "
+        f"({fit.summary['records_excluded']} excluded); report {files['html']}",
+    }
