@@ -104,6 +104,8 @@ def main(argv: list[str] | None = None) -> dict:
             "force_check": not args.no_force_check,
         },
         "cpus": os.cpu_count(),
+        # Other work on the machine slows both runs and hides the second worker's gain.
+        "load_average_1min_after": round(os.getloadavg()[0], 2),
         "rows": rows,
         "speedup_2_workers": round(rows[0]["wall_s"] / rows[1]["wall_s"], 2),
         "failures_identical": same,
@@ -123,6 +125,7 @@ def main(argv: list[str] | None = None) -> dict:
                 f"{str(r['projected_study_min']) + ' min':>15}{r['peak_mb_largest_process']:>10.1f}"
             )
         print(f"speed-up of 2 workers over 1 (the reference): {result['speedup_2_workers']}x")
+        print(f"load average (1 min) after the runs: {result['load_average_1min_after']}")
     return result
 
 
