@@ -129,6 +129,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         }
         for c in ("natural_frequency_hz", "damping_ratio", "blf1", "blf2", "blf3")
     }
+    # Per record: does the posterior band (mean +- 1.96 sd) hold the generating value?
+    band_coverage = {
+        c: float(((merged[c] - merged[f"{c}_true"]).abs() < 1.96 * merged[f"{c}_sd"]).mean())
+        for c in ("natural_frequency_hz", "damping_ratio")
+    }
     for c, tc in zip(cov, truth_cov, strict=True):
         c["estimate_from_true_values"] = tc["estimate"]
         c["covered_from_true_values"] = tc["covered"]
@@ -152,6 +157,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "records_excluded": fit.summary["records_excluded"],
         "coverage": cov,
         "identification_error": errors,
+        "record_band_coverage": band_coverage,
         "all_covered": all(c["covered"] for c in cov),
         "settings": {"particles": args.particles, "force_check": not args.no_force_check},
         "elapsed_s": round(time.perf_counter() - t0, 1),
@@ -181,6 +187,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         print("identification error (estimate - generating value) over the records:")
         for k, e in errors.items():
             print(f"{k:28s} mean {e['mean']:+.4f}  sd {e['sd']:.4f}")
+        for k, v in band_coverage.items():
+            print(f"records whose 95 % posterior band holds the generating {k}: {100 * v:.1f} %")
         print(f"report {result['report']}")
     return result
 
