@@ -119,7 +119,7 @@ def test_synthetic_study_recovers_generating_laws(tmp_path):
     manifest = write_study(plan, tmp_path / "study", design)
     from workbench.inference.settings import IdentifySettings
 
-    settings = IdentifySettings(**STUDY_SETTINGS, particles=32, force_check=False, seed=1)
+    settings = IdentifySettings(**STUDY_SETTINGS, particles=16, force_check=False, seed=1)
     summary = run_batch(manifest, tmp_path / "batch", settings=settings, workers=2)
     assert summary.failed == 0
     results = pd.read_csv(summary.results_csv)

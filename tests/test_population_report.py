@@ -33,11 +33,12 @@ def test_report_cli_writes_table2_figures_and_self_contained_html(tmp_path, caps
     assert len(pd.read_csv(out / "lognormal.csv")) == 2
     html = (out / "index.html").read_text()
     md = (out / "report.md").read_text()
-    for png in ("population_laws.png", "population_residuals.png", "population_blf.png"):
+    pngs = ("population_laws.png", "population_residuals.png", "population_blf.png")
+    for png in (*pngs, "population_participant.png"):
         assert (out / png).stat().st_size > 10_000
         assert f"({png})" in md
         assert f'src="{png}"' not in html
-    assert html.count('src="data:image/png;base64,') == 3
+    assert html.count('src="data:image/png;base64,') == 4
     assert "7 excluded: C or K not identified" in md
     assert "Van Nimmen 2015" in md and "This study" in html
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.integrate import trapezoid
 
 from workbench.errors import UsageError
 
@@ -122,7 +123,7 @@ class ModalStructure:
     def abs_shape_integrals_m(self, n_points: int = 2001) -> NDArray[np.float64]:
         """``integral |phi_j(x)| dx`` over the span (for loads applied with the shape's sign)."""
         x = np.linspace(0.0, self.span_m, n_points)
-        return np.asarray(np.trapezoid(np.abs(self.shapes(x)), x, axis=0))
+        return np.asarray(trapezoid(np.abs(self.shapes(x)), x, axis=0))
 
     def to_json(self) -> dict[str, object]:
         """JSON description."""

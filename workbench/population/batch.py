@@ -25,7 +25,9 @@ run are ignored and removed.
 Execution: in this process for one worker; a local process pool (``spawn`` start method, so
 no state leaks from the parent) for more; a Dask distributed cluster when a scheduler
 address is given (``dask[distributed]``, the ``dask`` extra). The parent writes every
-record's file, so the workers need no access to the output folder.
+record's file, so the workers need no access to the output folder. With the ``spawn`` start
+method a script that calls :func:`run_batch` with several workers needs the usual
+``if __name__ == "__main__":`` guard (the workers import the main module).
 
 Pacing: when the settings identify the record as one piece (``pieces = "whole"``) and give
 no pacing, the pacing stated in the manifest or sidecar is used (a known metronome rate

@@ -11,7 +11,8 @@ every table as CSV:
   beside GEV;
 - figures: parameters against pacing with the fitted law, its confidence and prediction
   bands and the seed's laws (seed fig. 12; per-participant colours as fig. 11), residual
-  histograms with normal fits and QQ plots (fig. 13), BLF2/BLF3 histograms with the lognormal
+  histograms with normal fits and QQ plots (fig. 13), one participant's parameters against
+  pacing (fig. 11), BLF2/BLF3 histograms with the lognormal
   and GEV fits (fig. 14).
 
 :func:`run_population_demo` runs the whole chain (synthetic study subset, optional embedded
@@ -202,6 +203,40 @@ def laws_figure(fit: PopulationFit, reference: PopulationLaws | None = None) -> 
     return fig
 
 
+def participant_figure(fit: PopulationFit) -> Figure | None:
+    """One participant's f_n and zeta against pacing (seed fig. 11); None without subjects."""
+    used = fit.used
+    if "subject" not in used:
+        return None
+    subjects = used["subject"].dropna().astype(str)
+    subjects = subjects[subjects != ""]
+    if subjects.empty:
+        return None
+    who = subjects.value_counts().index[0]
+    rows = used[used["subject"].astype(str) == who].sort_values("pacing_hz")
+    fig = Figure(figsize=(10, 3.8))
+    axes = fig.subplots(1, 2)
+    for ax, key in zip(axes, ("natural_frequency_hz", "damping_ratio"), strict=True):
+        sd = rows.get(f"{key}_sd")
+        ax.errorbar(
+            rows.pacing_hz,
+            rows[key],
+            yerr=None if sd is None else 1.96 * sd.fillna(0).to_numpy(),
+            fmt="o",
+            ms=4,
+            capsize=2,
+        )
+        b = fit.bands[fit.bands.law == key]
+        ax.plot(b.pacing_hz, b["mean"], color="C1", lw=1.5, label="population law")
+        ax.set_xlabel("pacing frequency f_p [Hz]")
+        ax.set_ylabel(LABELS[key])
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"Participant {who}: {len(rows)} records (bars: 95 % posterior bands)")
+    fig.tight_layout()
+    return fig
+
+
 def residuals_figure(fit: PopulationFit) -> Figure:
     """Residual histograms with the fitted normal, and normal QQ plots (seed fig. 13)."""
     fig = Figure(figsize=(13, 7))
@@ -325,6 +360,15 @@ def population_report(
     sec.table(t2)
     sec = report.add(Section("Mean laws against pacing frequency"))
     sec.table(laws_t)
+    one = participant_figure(fit)
+    if one is not None:
+        save_figure(one, out / "population_participant.png")
+        files["population_participant.png"] = str(out / "population_participant.png")
+        sec.figure(
+            "population_participant.png",
+            "One participant's natural frequency and damping ratio against pacing (like seed "
+            "fig. 11).",
+        )
     for name, fig, caption in (
         (
             "population_laws.png",
