@@ -17,6 +17,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from workbench.errors import InputError
+from workbench.population.sampler import COLUMNS, GRAVITY_M_S2
 
 __all__ = [
     "PEDESTRIAN_COLUMNS",
@@ -27,24 +28,10 @@ __all__ = [
     "validate_pedestrians",
 ]
 
-G = 9.81
+# The table is the population sampler's (one definition of the contract).
+G = GRAVITY_M_S2
 HARMONICS = 3
-PEDESTRIAN_COLUMNS = (
-    "mass_kg",
-    "pacing_hz",
-    "step_length_m",
-    "speed_m_s",
-    "natural_frequency_hz",
-    "damping_ratio",
-    "stiffness_n_per_m",
-    "damping_ns_per_m",
-    "blf1",
-    "blf2",
-    "blf3",
-    "phase1_rad",
-    "phase2_rad",
-    "phase3_rad",
-)
+PEDESTRIAN_COLUMNS = COLUMNS
 #: Relative mismatch allowed between a derived column and the value the others imply
 #: (values read back from CSV carry rounding).
 _RTOL = 1e-2

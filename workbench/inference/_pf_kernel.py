@@ -210,6 +210,47 @@ def _resample_in_place(
 
 
 @_jit_hot
+def _exp_weights(
+    lw: np.ndarray,
+    top: float,
+    w: np.ndarray,
+    factor: np.ndarray,
+    use_factor: bool,
+    c: np.ndarray,
+    kk: np.ndarray,
+    shift_c: float,
+    shift_k: float,
+) -> tuple[float, float, float, float, float, float, float]:
+    """``w = exp(lw - top)`` with its sum and sum of squares, and the moments of C and K.
+
+    The moments use the weights ``w * factor`` when ``use_factor`` (the regression
+    proposal's correction), ``w`` otherwise, and are taken about ``shift`` against
+    cancellation. Returns ``(total, total_sq, weight_sum, s_c, s_k, q_c, q_k)``.
+    """
+    total = 0.0
+    total_sq = 0.0
+    t_est = 0.0
+    s_c = 0.0
+    s_k = 0.0
+    q_c = 0.0
+    q_k = 0.0
+    for p in range(lw.shape[0]):
+        e = math.exp(lw[p] - top)
+        w[p] = e
+        total += e
+        total_sq += e * e
+        we = e * factor[p] if use_factor else e
+        t_est += we
+        dc = c[p] - shift_c
+        dk = kk[p] - shift_k
+        s_c += we * dc
+        s_k += we * dk
+        q_c += we * dc * dc
+        q_k += we * dk * dk
+    return total, total_sq, t_est, s_c, s_k, q_c, q_k
+
+
+@_jit_hot
 def advance(
     k_start: int,
     k_stop: int,
@@ -396,40 +437,9 @@ def advance(
         shift_k = mean_tr[k - 1, 1] if k > 0 else kk[0]
         piece_end_corr = use_correction and is_end[k]
         est_corr = use_correction and not is_end[k]
-        total = 0.0
-        total_sq = 0.0
-        t_est = 0.0
-        s_c = 0.0
-        s_k = 0.0
-        q_c = 0.0
-        q_k = 0.0
-        if est_corr:
-            for p in range(n_part):
-                e = math.exp(lw[p] - top)
-                w[p] = e
-                total += e
-                total_sq += e * e
-                we = e * corr_exp[p]
-                t_est += we
-                dc = c[p] - shift_c
-                dk = kk[p] - shift_k
-                s_c += we * dc
-                s_k += we * dk
-                q_c += we * dc * dc
-                q_k += we * dk * dk
-        else:
-            for p in range(n_part):
-                e = math.exp(lw[p] - top)
-                w[p] = e
-                total += e
-                total_sq += e * e
-                dc = c[p] - shift_c
-                dk = kk[p] - shift_k
-                s_c += e * dc
-                s_k += e * dk
-                q_c += e * dc * dc
-                q_k += e * dk * dk
-            t_est = total
+        total, total_sq, t_est, s_c, s_k, q_c, q_k = _exp_weights(
+            lw, top, w, corr_exp, est_corr, c, kk, shift_c, shift_k
+        )
         log_incr = top + math.log(total)
         incr_tr[k] = log_incr + log_norm_const
         ess = total * total / total_sq
@@ -447,25 +457,9 @@ def advance(
                 lw[p] += corr_now[p]
                 if lw[p] > top:
                     top = lw[p]
-            total = 0.0
-            total_sq = 0.0
-            t_est = 0.0
-            s_c = 0.0
-            s_k = 0.0
-            q_c = 0.0
-            q_k = 0.0
-            for p in range(n_part):
-                e = math.exp(lw[p] - top)
-                w[p] = e
-                total += e
-                total_sq += e * e
-                t_est += e
-                dc = c[p] - shift_c
-                dk = kk[p] - shift_k
-                s_c += e * dc
-                s_k += e * dk
-                q_c += e * dc * dc
-                q_k += e * dk * dk
+            total, total_sq, t_est, s_c, s_k, q_c, q_k = _exp_weights(
+                lw, top, w, corr_exp, False, c, kk, shift_c, shift_k
+            )
             log_corr = top + math.log(total)
             incr_tr[k] += log_corr
             ess = total * total / total_sq
@@ -481,20 +475,9 @@ def advance(
                 w_aux[p] = val
                 if val > etop:
                     etop = val
-            t_est = 0.0
-            s_c = 0.0
-            s_k = 0.0
-            q_c = 0.0
-            q_k = 0.0
-            for p in range(n_part):
-                we = math.exp(w_aux[p] - etop)
-                t_est += we
-                dc = c[p] - shift_c
-                dk = kk[p] - shift_k
-                s_c += we * dc
-                s_k += we * dk
-                q_c += we * dc * dc
-                q_k += we * dk * dk
+            _, _, t_est, s_c, s_k, q_c, q_k = _exp_weights(
+                w_aux, etop, w_aux, corr_exp, False, c, kk, shift_c, shift_k
+            )
         ess_tr[k] = ess
         m_c = s_c / t_est
         m_k = s_k / t_est
