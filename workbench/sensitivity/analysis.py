@@ -62,7 +62,7 @@ _NAMES = {
 
 
 def truth_values(truth: dict[str, Any] | None) -> dict[str, float]:
-    """The known true outputs of a simulated record (empty for a measured one)."""
+    """Return the known true outputs of a simulated record (empty for a measured one)."""
     if not truth:
         return {}
     out = {
@@ -214,7 +214,8 @@ def effects_table(
 def recovered(summary: pd.DataFrame, truths: dict[str, dict[str, float]]) -> dict[str, Any]:
     """Whether each design point's 95 % band holds every known true output, per record.
 
-    Outputs without a posterior sd are left out. Returns ``{record: {point: {"all": bool, output: bool, ...}}}`` for records with a truth.
+    Outputs without a posterior sd are left out. Returns
+    ``{record: {point: {"all": bool, output: bool, ...}}}`` for records with a truth.
     """
     out: dict[str, Any] = {}
     for _, row in summary.iterrows():
@@ -251,12 +252,12 @@ def statements(
     defaults: dict[str, str],
     outputs: tuple[str, ...] = ("natural_frequency_hz", "damping_ratio"),
 ) -> list[dict[str, Any]]:
-    """A plain-words statement per record and design point.
+    """Write a plain-words statement per record and design point.
 
     It states the effect on each of ``outputs`` with its Monte Carlo uncertainty and verdict,
     then names any other output the point biases or distinguishably shifts.
     """
-    out = []
+    out: list[dict[str, Any]] = []
     if effects.empty:
         return out
     for (record, point), g in effects.groupby(["record", "point"], sort=True):

@@ -190,7 +190,7 @@ def _fmt(x: float) -> str:
 
 
 def default_levels(name: str, base: IdentifySettings) -> list[Level]:
-    """The default levels of a factor around the base settings (module docstring table).
+    """Return the default levels of a factor around the base settings (module docstring table).
 
     Parameters
     ----------
@@ -236,7 +236,7 @@ def _default_value(name: str, base: IdentifySettings) -> float | int | str:
     factor = _factor(name)
     if factor.kind == "scale":
         return 1.0
-    return {
+    values: dict[str, float | int | str] = {
         "state_noise": base.state_fraction,
         "highpass_hz": base.highpass_hz,
         "particles": 0 if base.method == "exact" else base.n_particles,
@@ -244,7 +244,8 @@ def _default_value(name: str, base: IdentifySettings) -> float | int | str:
         "pieces": base.pieces,
         "time_basis": base.time_basis,
         "method": base.method,
-    }[name]
+    }
+    return values[name]
 
 
 def _label(name: str, value: float | int | str) -> str:
@@ -362,7 +363,7 @@ class DesignPoint:
         return "; ".join(f"{k}={changed[k]}" for k in sorted(changed)) or "baseline"
 
     def configure(self, base: IdentifySettings) -> tuple[IdentifySettings, Overrides]:
-        """Settings and problem overrides of this point."""
+        """Return the settings and problem overrides of this point."""
         v = self.values
         settings = base
         overrides = Overrides()
@@ -389,7 +390,8 @@ class DesignPoint:
                 if int(value) > 0:
                     settings = settings.replace(particles=int(value))
             elif name in ("highpass_hz", "harmonics", "pieces", "time_basis"):
-                settings = dataclasses.replace(settings, **{name: value})
+                changes: dict[str, Any] = {name: value}
+                settings = dataclasses.replace(settings, **changes)
         # The method last: a method change keeps the other factors' explicit values.
         if "method" in v and v["method"] != settings.method:
             settings = dataclasses.replace(settings, method=str(v["method"]))

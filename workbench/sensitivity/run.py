@@ -26,7 +26,7 @@ from workbench.inference.settings import IdentifySettings
 from workbench.records.record import Record
 from workbench.sensitivity.design import DesignPoint, Overrides, point_seed
 
-__all__ = ["OUTPUTS", "SensitivityTask", "run_tasks", "make_tasks", "run_task"]
+__all__ = ["OUTPUTS", "SensitivityTask", "make_tasks", "run_task", "run_tasks"]
 
 #: Outputs the study follows, with units for statements.
 OUTPUTS: dict[str, str] = {

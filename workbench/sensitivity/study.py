@@ -46,7 +46,14 @@ from workbench.sensitivity.design import (
 )
 from workbench.sensitivity.run import OUTPUTS, make_tasks, run_tasks
 
-__all__ = ["SensitivityStudy", "run_sensitivity"]
+__all__ = [
+    "DEMO_LEVELS",
+    "SensitivityStudy",
+    "demo_record",
+    "demo_settings",
+    "demo_study",
+    "run_sensitivity",
+]
 
 
 @dataclass
@@ -74,7 +81,7 @@ class SensitivityStudy:
         return {n: next(lv.label for lv in lv_ if lv.is_default) for n, lv_ in self.levels.items()}
 
     def _setting_levels(self) -> list[tuple[str, str, bool, str]]:
-        """(setting, level, is_default, point key) in table order."""
+        """Return (setting, level, is_default, point key) in table order."""
         out = []
         if self.design == "oat":
             for name, lvls in self.levels.items():
@@ -87,7 +94,7 @@ class SensitivityStudy:
         return out
 
     def tidy(self) -> pd.DataFrame:
-        """The tidy table written as ``sensitivity.csv`` (module docstring)."""
+        """Return the tidy table written as ``sensitivity.csv`` (module docstring)."""
         frames = []
         for setting, level, is_default, point in self._setting_levels():
             for kind, frame in (("replicate", self.replicate_rows), ("summary", self.summary)):
@@ -149,7 +156,7 @@ class SensitivityStudy:
         return {rec: bool(p.get("baseline", {}).get("all")) for rec, p in self.recovered.items()}
 
     def to_json(self) -> dict[str, Any]:
-        """The ``workbench sensitivity --json`` object."""
+        """Return the ``workbench sensitivity --json`` object."""
         return {
             "design": self.design,
             "factors": self.factors,
@@ -248,7 +255,8 @@ def run_sensitivity(
     replicates : int
         Runs per design point with different seeds.
     seed : int
-        Study seed; each run's seed derives from it (:func:`~workbench.sensitivity.design.point_seed`).
+        Study seed; each run's seed derives from it
+        (:func:`~workbench.sensitivity.design.point_seed`).
     workers : int
         Local processes.
     scheduler : str, optional
@@ -271,7 +279,7 @@ def run_sensitivity(
     if len(set(keys)) != len(keys):
         raise UsageError("two records of the study have the same key; give each a unique name")
     chosen = {n: (levels or {}).get(n) or default_levels(n, base) for n in names}
-    baseline, points = build_design(design, chosen)
+    _, points = build_design(design, chosen)
     if design == "factorial" and len(points) * replicates * len(records) > 2000:
         raise UsageError(
             f"the factorial design has {len(points)} points x {replicates} replicates per "
@@ -299,4 +307,65 @@ def run_sensitivity(
         statements=statements(effects, desc, defaults),
         truths=truths,
         recovered=recovered(summary, truths),
+    )
+
+
+#: Levels of the demonstration study: one setting that only widens (u'' noise x4), one that
+#: biases (a prior box whose log-width is 5 % of the default's, excluding the truth), and
+#: the seed's process noise of (u, u'), which the data do not have.
+DEMO_LEVELS = ("obs_noise_ddu=1,4", "prior_box=1,0.05", "state_noise=0,0.005")
+
+
+def demo_record(seed: int = 1) -> tuple[str, Record]:
+    """Return a record in the model class with a known truth: 8 s at 100 Hz from rest, 70 kg.
+
+    No step-to-step variability, so a whole-record Fourier force on absolute time with the
+    stated pacing is the generating model, and the start-up transient identifies C and K.
+    """
+    from workbench.synth.simulate import simulate_walking
+
+    sim = simulate_walking(
+        mass_kg=70.0,
+        pacing_hz=1.8,
+        duration_s=8.0,
+        sample_rate_hz=100.0,
+        start="rest",
+        seed=seed,
+        noise_sd_n=2.0,
+        amplitude_sd=0.0,
+        phase_sd_rad=0.0,
+        step_duration_sd=0.0,
+    )
+    return f"simulated-rest-seed{seed}", sim.record
+
+
+def demo_settings(particles: int = 32) -> IdentifySettings:
+    """Baseline settings for :func:`demo_record`: the model class's (whole, absolute, acc)."""
+    return IdentifySettings(
+        method="rbpf",
+        particles=particles,
+        harmonics=4,
+        pieces="whole",
+        time_basis="absolute",
+        pacing_hz=1.8,
+        highpass_hz=0.0,
+        observe="acc",
+        force_check=False,
+    )
+
+
+def demo_study(seed: int = 0, replicates: int = 2, workers: int = 1) -> SensitivityStudy:
+    """Run the small study of :data:`DEMO_LEVELS` on :func:`demo_record` (about half a minute)."""
+    from workbench.sensitivity.design import parse_levels
+
+    base = demo_settings()
+    levels = parse_levels(list(DEMO_LEVELS), base)
+    return run_sensitivity(
+        [demo_record()],
+        base=base,
+        factors=list(levels),
+        levels=levels,
+        replicates=replicates,
+        seed=seed,
+        workers=workers,
     )
