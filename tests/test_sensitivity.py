@@ -186,3 +186,35 @@ def test_bad_input_is_one_sentence(tmp_path, capsys, extra, needle):
     assert code == 2
     msg = json.loads(captured.out)["error"]
     assert needle in msg and "Traceback" not in captured.err
+
+
+@pytest.mark.slow
+def test_factorial_grid_heat_map_and_seeds_shared_with_one_at_a_time(study, tmp_path):
+    from workbench.reporting.sensitivity import sensitivity_section
+
+    base = demo_settings()
+    levels = parse_levels(["obs_noise_ddu=1,4", "state_noise=0,0.005"], base)
+    grid = run_sensitivity(
+        [demo_record()], base=base, levels=levels, factors=list(levels),
+        design="factorial", replicates=1, seed=0,
+    )  # fmt: skip
+    assert sorted(grid.summary["point"]) == sorted(
+        ["baseline", "obs_noise_ddu=x4", "state_noise=0.005", "obs_noise_ddu=x4; state_noise=0.005"]
+    )
+    # A point's runs have the same seeds in any design: the factorial baseline and the
+    # u''-noise point reproduce the one-at-a-time study's first replicate exactly.
+    for point in ("baseline", "obs_noise_ddu=x4"):
+        a = grid.replicate_rows[grid.replicate_rows["point"] == point].iloc[0]
+        reps = study.replicate_rows
+        b = reps[(reps["point"] == point) & (reps["replicate"] == 0)].iloc[0]
+        assert a["seed"] == b["seed"]
+        for o in SMD:
+            assert a[o] == b[o]
+    # One replicate gives no Monte Carlo uncertainty: nothing is called distinguishable.
+    assert not grid.effects["distinguishable"].any()
+    assert all("no Monte Carlo uncertainty" in s["sentence"] for s in grid.statements)
+    tidy = grid.tidy()
+    assert set(tidy["setting"]) == {"factorial"} and len(tidy) == 4 * 2
+    sec = sensitivity_section(grid, tmp_path)
+    assert (tmp_path / "sensitivity_heatmap_0_obs_noise_ddu_state_noise.png").exists()
+    assert "Sensitivity" in sec.title

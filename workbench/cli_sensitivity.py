@@ -27,6 +27,15 @@ def _is_manifest(path: Path) -> bool:
     return False
 
 
+def _rescaled(record: Any, args: argparse.Namespace) -> Any:
+    if not getattr(args, "rescale_to_mass", False):
+        return record
+    from workbench.records.inspection import inspect_record
+
+    # The study identifies the rescaled record, as 'identify --rescale-to-mass' would.
+    return inspect_record(record, rescale=True).record
+
+
 def load_study_records(args: argparse.Namespace) -> list[tuple[str, Any]]:
     """Load the record, or every record of a manifest, as ``(key, Record)`` pairs."""
     from workbench.records.io import load_manifest, load_record
@@ -38,7 +47,7 @@ def load_study_records(args: argparse.Namespace) -> list[tuple[str, Any]]:
         )
     if not _is_manifest(path):
         rec = load_record(path, mass_kg=args.mass, pacing_hz=args.pacing, subject=args.subject)
-        return [(path.name, rec)]
+        return [(path.name, _rescaled(rec, args))]
     out = []
     for entry in load_manifest(path):
         file = entry.path if entry.path.is_absolute() else path.parent / entry.path
@@ -48,7 +57,7 @@ def load_study_records(args: argparse.Namespace) -> list[tuple[str, Any]]:
             pacing_hz=entry.pacing_hz if entry.pacing_hz is not None else args.pacing,
             subject=entry.subject,
         )
-        out.append((str(entry.path), rec))
+        out.append((str(entry.path), _rescaled(rec, args)))
     if not out:
         raise InputError(path, "whole file", "the manifest lists no records", "add rows")
     return out
@@ -161,4 +170,9 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     r.add_argument("--mass", type=float, metavar="KG", help="body mass [kg]")
     r.add_argument("--pacing", type=float, metavar="HZ", help="stated pacing frequency [Hz]")
     r.add_argument("--subject", help="subject identifier")
+    r.add_argument(
+        "--rescale-to-mass",
+        action="store_true",
+        help="scale the GRF so its mean over whole steps equals M g (sensor gain error)",
+    )
     p.set_defaults(handler=_cmd_sensitivity)
