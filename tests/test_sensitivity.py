@@ -218,3 +218,35 @@ def test_factorial_grid_heat_map_and_seeds_shared_with_one_at_a_time(study, tmp_
     sec = sensitivity_section(grid, tmp_path)
     assert (tmp_path / "sensitivity_heatmap_0_obs_noise_ddu_state_noise.png").exists()
     assert "Sensitivity" in sec.title
+
+
+def test_pooled_effects_and_manifest_records(tmp_path):
+    import argparse
+
+    import pandas as pd
+
+    from workbench.cli_sensitivity import load_study_records
+    from workbench.sensitivity.analysis import pooled_effects
+
+    d = [0.10, 0.14, 0.12, 0.08]
+    eff = pd.DataFrame(
+        {"record": list("abcd"), "point": "x=2", "output": "natural_frequency_hz", "effect": d}
+    )
+    row = pooled_effects(eff).iloc[0]
+    hw = scipy.stats.t.ppf(0.975, 3) * np.std(d, ddof=1) / 2.0
+    assert row["mean_effect"] == pytest.approx(0.11) and row["halfwidth_95"] == pytest.approx(hw)
+    assert row["verdict"] == "consistent shift"
+    eff["effect"] = [0.1, -0.1, 0.05, -0.04]
+    assert pooled_effects(eff).iloc[0]["verdict"] == "not distinguishable"
+    assert pooled_effects(eff.iloc[:1]).empty
+    # A manifest gives one (key, record) pair per row, keyed by the path as written.
+    _, record = demo_record()
+    for name in ("a.csv", "b.csv"):
+        save_record(record, tmp_path / name)
+    (tmp_path / "m.csv").write_text("path,mass_kg\na.csv,70\nb.csv,71\n")
+    ns = argparse.Namespace(
+        record=str(tmp_path / "m.csv"), mass=None, pacing=None, subject=None, rescale_to_mass=False
+    )
+    recs = load_study_records(ns)
+    assert [k for k, _ in recs] == ["a.csv", "b.csv"]
+    assert recs[1][1].mass_kg == 71.0

@@ -57,7 +57,12 @@ def load_study_records(args: argparse.Namespace) -> list[tuple[str, Any]]:
             pacing_hz=entry.pacing_hz if entry.pacing_hz is not None else args.pacing,
             subject=entry.subject,
         )
-        out.append((str(entry.path), _rescaled(rec, args)))
+        # Keys relative to the manifest: the seeds then do not depend on where it lies.
+        try:
+            key = file.resolve().relative_to(path.parent.resolve()).as_posix()
+        except ValueError:
+            key = str(entry.path)
+        out.append((key, _rescaled(rec, args)))
     if not out:
         raise InputError(path, "whole file", "the manifest lists no records", "add rows")
     return out

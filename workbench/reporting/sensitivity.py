@@ -179,6 +179,26 @@ def sensitivity_section(
             caption="Mean over replicates and Monte Carlo sd (sensitivity.csv has all outputs)",
         )
     )
+    pooled = study.pooled
+    if not pooled.empty:
+        pooled = pooled[pooled["output"].isin(outputs)]
+        sec.table(
+            Table(
+                ["levels", "output", "records", "mean effect", "95 % half-width", "verdict"],
+                [
+                    [
+                        str(r["point"]),
+                        _LABELS[str(r["output"])],
+                        str(r["records"]),
+                        _fmt(r["mean_effect"]),
+                        _fmt(r["halfwidth_95"]),
+                        str(r["verdict"]),
+                    ]
+                    for _, r in pooled.iterrows()
+                ],
+                caption="Effects averaged over the records, 95 % t interval over records",
+            )
+        )
     for rec_i, record in enumerate(study.records):
         for o in outputs:
             name = f"sensitivity_tornado_{rec_i}_{o}.png"

@@ -38,6 +38,7 @@ from workbench.sensitivity.run import OUTPUTS
 __all__ = [
     "WIDEN_RATIO",
     "effects_table",
+    "pooled_effects",
     "recovered",
     "replicate_table",
     "statements",
@@ -295,3 +296,38 @@ def statements(
         verdicts = {o: by[o]["verdict"] for o in by}
         out.append({"record": record, "point": point, "sentence": text, "verdicts": verdicts})
     return out
+
+
+def pooled_effects(effects: pd.DataFrame) -> pd.DataFrame:
+    """Effects across the records of a manifest: mean, spread and a 95 % interval.
+
+    For every design point and output, the per-record effects (each already a difference of
+    replicate means) are averaged; the interval is the t interval over records, so it holds
+    the record-to-record variation as well as the Monte Carlo noise. A mean effect inside it
+    is "not distinguishable" across the population; otherwise "consistent shift". The table
+    is empty for fewer than two records.
+    """
+    cols = ["point", "output", "records", "mean_effect", "sd_effect", "halfwidth_95", "verdict"]
+    if effects.empty or effects["record"].nunique() < 2:
+        return pd.DataFrame(columns=cols)
+    out = []
+    for (point, output), g in effects.groupby(["point", "output"], sort=True):
+        d = g["effect"].to_numpy(dtype=float)
+        d = d[np.isfinite(d)]
+        n = d.size
+        mean = float(np.mean(d)) if n else math.nan
+        sd = float(np.std(d, ddof=1)) if n > 1 else math.nan
+        hw = float(scipy.stats.t.ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else math.nan
+        dist = bool(np.isfinite(hw) and abs(mean) > hw)
+        out.append(
+            {
+                "point": point,
+                "output": output,
+                "records": n,
+                "mean_effect": mean,
+                "sd_effect": sd,
+                "halfwidth_95": hw,
+                "verdict": "consistent shift" if dist else "not distinguishable",
+            }
+        )
+    return pd.DataFrame(out, columns=cols)

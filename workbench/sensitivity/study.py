@@ -11,6 +11,8 @@ script and the demo. Outputs written by :meth:`SensitivityStudy.write`:
   setting is ``factorial`` and the level names every factor's level.
 - ``effects.csv``: every non-baseline point and output: effect, 95 % Monte Carlo half-width,
   posterior sd ratio, truth and verdict (:mod:`workbench.sensitivity.analysis`).
+- ``pooled_effects.csv`` (two or more records): each point's effect averaged over the
+  records with a 95 % t interval over records (the population view);
 - ``statements.txt``: the plain-words statements; ``sensitivity.json``: the ``--json`` object.
 """
 
@@ -31,6 +33,7 @@ from workbench.inference.settings import IdentifySettings
 from workbench.records.record import Record
 from workbench.sensitivity.analysis import (
     effects_table,
+    pooled_effects,
     recovered,
     replicate_table,
     statements,
@@ -74,6 +77,11 @@ class SensitivityStudy:
     truths: dict[str, dict[str, float]]
     recovered: dict[str, Any]
     files: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def pooled(self) -> pd.DataFrame:
+        """Effects across the records (:func:`~workbench.sensitivity.analysis.pooled_effects`)."""
+        return pooled_effects(self.effects)
 
     @property
     def defaults(self) -> dict[str, str]:
@@ -169,6 +177,10 @@ class SensitivityStudy:
             "failed_runs": int((self.replicate_rows["status"] != "done").sum()),
             "rows": self.rows(),
             "statements": self.statements,
+            "pooled": [
+                {k: (_clean(v) if isinstance(v, float) else v) for k, v in r.items()}
+                for r in self.pooled.to_dict("records")
+            ],
             "truth": self.truths,
             "default_recovers_truth": self.default_recovers_truth(),
             "files": self.files,
@@ -198,7 +210,11 @@ class SensitivityStudy:
             "statements": out / "statements.txt",
             "json": out / "sensitivity.json",
         }
-        for key, frame in (("table", self.tidy()), ("effects", self.effects)):
+        frames = [("table", self.tidy()), ("effects", self.effects)]
+        if len(self.records) > 1:
+            files["pooled"] = out / "pooled_effects.csv"
+            frames.append(("pooled", self.pooled))
+        for key, frame in frames:
             with atomic_path(files[key]) as tmp:
                 frame.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
         atomic_write_text(
