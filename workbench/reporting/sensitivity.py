@@ -224,5 +224,5 @@ def sensitivity_demo_section(out_dir: str | Path, seed: int = 0) -> Section:
     from workbench.sensitivity.study import demo_study
 
     study = demo_study(seed=seed)
-    study.write(out_dir)
+    study.write(Path(out_dir) / "sensitivity")  # tables beside the report, figures in it
     return sensitivity_section(study, out_dir)
