@@ -336,6 +336,9 @@ def build_parser() -> argparse.ArgumentParser:
     from workbench.simulate_cli import add_simulate_parser
 
     add_simulate_parser(sub, out_opts)
+    from workbench.cli_sensitivity import add_sensitivity_parser
+
+    add_sensitivity_parser(sub, out_opts)
     from workbench.cli_hsi import add_hsi_parser
 
     add_hsi_parser(sub, out_opts)

@@ -16,6 +16,7 @@ steps, with the decisions they take:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -207,6 +208,8 @@ def identify(
     *,
     rescale: bool = False,
     progress: bool = False,
+    adjust_problem: Callable[[IdentificationProblem], IdentificationProblem] | None = None,
+    adjust_noise: Callable[[IdentificationProblem], IdentificationProblem] | None = None,
 ) -> IdentificationResult:
     """Identify the SMD model of one record.
 
@@ -221,6 +224,11 @@ def identify(
         Apply ``--rescale-to-mass`` during inspection.
     progress : bool, default False
         Show a progress bar for the filters.
+    adjust_problem : callable, optional
+        Applied to the problem before its observation noise is set (a prior box or random
+        walks of C and K that the settings do not name; sensitivity studies).
+    adjust_noise : callable, optional
+        Applied to the problem after its observation noise is set (per-channel noise scales).
 
     Returns
     -------
@@ -232,7 +240,11 @@ def identify(
     else:
         insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=rescale)
     problem = problem_from_inspection(insp, settings)
+    if adjust_problem is not None:
+        problem = adjust_problem(problem)
     problem, info = _set_noise(problem, settings)
+    if adjust_noise is not None:
+        problem = adjust_noise(problem)
     result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
     result.extra["inspection_warnings"] = list(insp.warnings)
     if settings.force_check:

@@ -1,0 +1,203 @@
+"""Run a sensitivity design: one identification per record, design point and replicate.
+
+Execution follows the batch engine's conventions (:mod:`workbench.population.batch`): in
+this process for one worker, a local process pool (``spawn`` start method) for more, a Dask
+distributed cluster when a scheduler address is given. The batch engine's own entry point
+identifies a record with one :class:`IdentifySettings`; a design point also changes what the
+settings do not name (prior box, random walks of C and K, per-channel observation noise),
+so the study submits its own picklable tasks through a small executor of the same shape,
+and reuses the batch engine's :func:`~workbench.population.batch.result_row` for the row.
+
+Determinism: each run's seed is :func:`~workbench.sensitivity.design.point_seed` of the
+study seed, the record, the point and the replicate, and the rows are sorted by those keys
+before anything is computed from them, so the numbers do not depend on the worker count.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from workbench.errors import UsageError, WorkbenchError
+from workbench.inference.settings import IdentifySettings
+from workbench.records.record import Record
+from workbench.sensitivity.design import DesignPoint, Overrides, point_seed
+
+__all__ = ["OUTPUTS", "SensitivityTask", "make_tasks", "run_task", "run_tasks"]
+
+#: Outputs the study follows, with units for statements.
+OUTPUTS: dict[str, str] = {
+    "natural_frequency_hz": "Hz",
+    "damping_ratio": "",
+    "blf1": "",
+    "blf2": "",
+    "blf3": "",
+    "stiffness_n_per_m": "N/m",
+    "damping_ns_per_m": "N s/m",
+}
+
+
+@dataclass(frozen=True)
+class SensitivityTask:
+    """One identification of a study (picklable: it travels to pool and Dask workers)."""
+
+    record_key: str
+    record: Record
+    point_key: str
+    levels: dict[str, str]
+    settings: dict[str, Any]
+    overrides: Overrides
+    replicate: int
+    seed: int
+
+
+def make_tasks(
+    records: Sequence[tuple[str, Record]],
+    points: Sequence[DesignPoint],
+    base: IdentifySettings,
+    replicates: int,
+    seed: int,
+) -> list[SensitivityTask]:
+    """Every (record, point, replicate) of a study, with its seed."""
+    if replicates < 1:
+        raise UsageError(f"--replicates must be at least 1, got {replicates}")
+    tasks = []
+    for key, record in records:
+        for p in points:
+            settings, overrides = p.configure(base)
+            for r in range(replicates):
+                s = point_seed(seed, key, p.key, r)
+                tasks.append(
+                    SensitivityTask(
+                        key,
+                        record,
+                        p.key,
+                        dict(p.levels),
+                        settings.replace(seed=s).to_json(),
+                        overrides,
+                        r,
+                        s,
+                    )
+                )
+    return tasks
+
+
+def run_task(task: SensitivityTask) -> dict[str, Any]:
+    """Identify one record at one design point; a failure is returned, not raised."""
+    from workbench.inference.identify import identify
+    from workbench.population.batch import result_row
+
+    start = time.perf_counter()
+    out: dict[str, Any] = {
+        "record": task.record_key,
+        "point": task.point_key,
+        "replicate": task.replicate,
+        "seed": task.seed,
+        "levels": task.levels,
+    }
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        try:
+            settings = IdentifySettings(**task.settings)
+            result = identify(
+                task.record,
+                settings,
+                adjust_problem=task.overrides.adjust_problem,
+                adjust_noise=task.overrides.adjust_noise,
+            )
+            row = result_row(result, task.record_key, task.record.subject, task.seed)
+            out.update({k: row[k] for k in row if k not in ("path", "subject", "seed")})
+            out["obs_fraction"] = result.noise.get("obs_fraction")
+            out["status"] = "done"
+        except WorkbenchError as err:
+            out.update(status="failed", reason=str(err))
+        except Exception as err:  # one failing point must not stop the study
+            out.update(status="failed", reason=f"internal error ({type(err).__name__}: {err})")
+    out["elapsed_s"] = round(time.perf_counter() - start, 3)
+    return out
+
+
+def _serial(tasks: list[SensitivityTask]) -> Iterator[dict[str, Any]]:
+    for t in tasks:
+        yield run_task(t)
+
+
+def _pool(tasks: list[SensitivityTask], workers: int) -> Iterator[dict[str, Any]]:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(run_task, t) for t in tasks]
+        for fut in as_completed(futures):
+            yield fut.result()
+
+
+def _dask(tasks: list[SensitivityTask], address: str) -> Iterator[dict[str, Any]]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise UsageError(
+            "--scheduler needs Dask distributed; install it with pip install 'workbench[dask]'"
+        ) from None
+    try:
+        client = Client(address, timeout="20s")
+    except (OSError, TimeoutError) as err:
+        raise UsageError(
+            f"--scheduler {address}: cannot reach a Dask scheduler there ({err}); start one "
+            "(dask scheduler) or check the address"
+        ) from None
+    try:
+        keys = [
+            f"workbench-sensitivity-{t.record_key}-{t.point_key}-{t.replicate}-{t.seed}"
+            for t in tasks
+        ]
+        futures = client.map(run_task, tasks, key=keys)
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+
+
+def run_tasks(
+    tasks: list[SensitivityTask],
+    *,
+    workers: int = 1,
+    scheduler: str | None = None,
+    progress: bool = False,
+) -> list[dict[str, Any]]:
+    """Run every task and return the rows sorted by record, point and replicate.
+
+    Parameters
+    ----------
+    tasks : list of SensitivityTask
+        From :func:`make_tasks`.
+    workers : int, default 1
+        Local processes (1: in this process).
+    scheduler : str, optional
+        Address of a Dask scheduler (overrides ``workers``).
+    progress : bool, default False
+        Show a progress bar.
+
+    Returns
+    -------
+    list of dict
+    """
+    if workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {workers}")
+    if scheduler:
+        it = _dask(tasks, scheduler)
+    elif workers > 1 and len(tasks) > 1:
+        it = _pool(tasks, workers)
+    else:
+        it = _serial(tasks)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, total=len(tasks), desc="sensitivity", unit="run", leave=False)
+    rows = list(it)
+    rows.sort(key=lambda r: (r["record"], r["point"], r["replicate"]))
+    return rows
