@@ -1,0 +1,958 @@
+"""Model criticism: held-out prediction of GRF, effect ranking and the scoreboard.
+
+Why this level
+--------------
+Force coefficients redrawn for every step fit almost anything inside one step, so a misfit
+has to be judged where they cannot absorb it. Here the *baseline* predicts the measured GRF
+from one force shape shared by all steps (a Fourier series in the step phase, ``n``
+harmonics, measured from the record's own footfalls) plus the spring and damper acting on
+the COM response::
+
+    GRF - M g = a0 + sum_i (a_i cos(i phi) + b_i sin(i phi)) - K u - C u'
+
+which is linear in ``(a, b, K, C)``; ``u`` and ``u'`` come from the preprocessed record
+(DESIGN.md 2.2). A candidate effect adds a *feature group* (the columns its term is made
+of, e.g. ``u^3`` for cubic stiffness). Every model is scored by step-blocked K-fold
+cross-validation: the steps are cut into ``K`` contiguous blocks, each block is predicted
+from a fit to the others, and the held-out squared error is summed per block.
+
+Significance respects autocorrelation: residuals of a shared force shape are correlated
+within and across neighbouring steps, so samples are not independent evidence. The unit of
+evidence is a block of steps: for each block the fraction of the baseline's held-out error
+that the candidate removes, ``r_f = 1 - SSE_cand,f / SSE_base,f``. The score is the pooled
+fraction ``1 - sum SSE_cand / sum SSE_base``; its uncertainty is the fold-to-fold standard
+error of ``r_f``; a candidate is *significant* when its score exceeds both
+:data:`SIGNIFICANCE_T` standard errors and :data:`SIGNIFICANCE_MIN_DROP`. The thresholds
+were set on simulated records without an effect (``tests/test_criticism.py`` checks that
+at most one of ten such records raises any alarm).
+
+Two significant candidates are *indistinguishable* when neither adds significant
+held-out skill to a model that already has the other: the record's data explain the same
+error either way (typically an effect acting through ``u`` or ``u'`` against another one,
+both nearly periodic in the step phase; only step-to-step variation separates them).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from workbench.errors import UsageError
+from workbench.models.effects import available_effects
+from workbench.models.force import step_phase_rad
+from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ, highpass, integrate, preprocess
+from workbench.records.record import G_M_S2, Record
+from workbench.records.steps import Steps, segment_steps
+
+__all__ = [
+    "CATALOGUE",
+    "DEFAULT_HARMONICS",
+    "SIGNIFICANCE_MIN_DROP",
+    "SIGNIFICANCE_T",
+    "Candidate",
+    "CriticismData",
+    "Diagnosis",
+    "FeatureGroup",
+    "ScoreRow",
+    "compare",
+    "diagnose",
+    "feature_group",
+    "prepare",
+    "register_feature_group",
+]
+
+FloatArray = NDArray[np.float64]
+ArrayLikeFloat = FloatArray | Sequence[float]
+
+#: Harmonics of the shared force shape of the baseline.
+DEFAULT_HARMONICS = 6
+#: Folds of the step-blocked cross-validation (fewer on short records, at least 3 steps each).
+DEFAULT_FOLDS = 10
+#: Harmonics of the step phase that every step gets its own coefficients of (nuisance).
+STEP_NUISANCE_HARMONICS: tuple[int, ...] = ()
+#: Harmonics of the gait cycle over which the baseline lets K and C vary (u cos(i phi)...).
+GAIT_MODULATION_HARMONICS: tuple[int, ...] = ()
+#: Steps per block; blocks are dealt to the folds in turn, so every fold spans the record.
+BLOCK_STEPS = 3
+#: A candidate is significant when its score exceeds this many fold-to-fold standard errors...
+SIGNIFICANCE_T = 4.0
+#: ...and removes at least this fraction of the baseline's held-out squared error.
+SIGNIFICANCE_MIN_DROP = 0.02
+#: Effects acting through the measured state: nonlinear functions of ``u`` and ``u'`` mimic
+#: step-to-step variability of the force, so on simulated records *without* any effect they
+#: removed up to about 0.38 of the held-out squared error; they are called significant only
+#: above this fraction.
+STATE_MIN_DROP = 0.4
+STATE_ACTING = frozenset({"cubic_stiffness", "quadratic_damping", "stiffness_drift"})
+#: Ridge added to the normal equations of standardised features (numerical safety only).
+_RIDGE = 1e-8
+
+#: The catalogue of DESIGN.md 2.5, in its order.
+CATALOGUE = (
+    "gait_asymmetry",
+    "cubic_stiffness",
+    "quadratic_damping",
+    "heel_impact",
+    "pacing_drift",
+    "stiffness_drift",
+    "base_motion",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class CriticismData:
+    """A record prepared for criticism: target, COM response, step phase, ground motion.
+
+    Only samples inside whole steps are kept.
+
+    Attributes
+    ----------
+    time_s : ndarray
+        Sample times [s].
+    grf_n : ndarray
+        Measured GRF [N].
+    target_n : ndarray
+        ``GRF - M g`` [N], the quantity predicted.
+    disp_m, vel_m_s : ndarray
+        COM displacement [m] and velocity [m/s] (preprocessed).
+    phase_rad : ndarray
+        Step phase, ``2 pi`` per step, 0 at the first kept footfall.
+    step : ndarray of int
+        Index of the step each sample belongs to.
+    mass_kg, pacing_hz, sample_rate_hz : float
+        Body mass, mean pacing (from the footfalls) and sample rate.
+    footfall_times_s : ndarray
+        Footfall times delimiting the kept steps [s].
+    ground : tuple of ndarray or None
+        Ground displacement [m], velocity [m/s], acceleration [m/s^2], when measured.
+    source : str
+        Where the record came from.
+    """
+
+    time_s: FloatArray
+    grf_n: FloatArray
+    target_n: FloatArray
+    disp_m: FloatArray
+    vel_m_s: FloatArray
+    phase_rad: FloatArray
+    step: NDArray[np.int64]
+    mass_kg: float
+    pacing_hz: float
+    sample_rate_hz: float
+    footfall_times_s: FloatArray
+    ground: tuple[FloatArray, FloatArray, FloatArray] | None
+    source: str = "<memory>"
+
+    @property
+    def n_steps(self) -> int:
+        """Number of whole steps kept."""
+        return int(self.footfall_times_s.size - 1)
+
+    @property
+    def step_fraction(self) -> FloatArray:
+        """Position within the step, 0 at footfall and 1 at the next (gait phase)."""
+        return np.asarray(self.phase_rad / (2.0 * np.pi) - self.step, dtype=np.float64)
+
+
+def prepare(
+    record: Record,
+    *,
+    highpass_hz: float = DEFAULT_HIGHPASS_HZ,
+    pacing_hz: float | None = None,
+    steps: Steps | None = None,
+) -> CriticismData:
+    """Preprocess a record and keep its whole steps (DESIGN.md 2.2).
+
+    Parameters
+    ----------
+    record : Record
+        GRF record with a body mass.
+    highpass_hz : float, optional
+        High-pass cut-off for the COM response [Hz].
+    pacing_hz : float, optional
+        Expected pacing, passed to the step detection.
+    steps : Steps, optional
+        Steps already segmented (else found from the record).
+
+    Returns
+    -------
+    CriticismData
+    """
+    mass = record.require_mass()
+    com = preprocess(record, highpass_hz=highpass_hz)
+    if steps is None:
+        steps = segment_steps(com, pacing_hz=pacing_hz or record.pacing_hz, min_steps=6)
+    lo, hi = steps.start, steps.stop
+    t = np.asarray(record.time_s[lo:hi], dtype=np.float64)
+    footfalls = np.asarray(steps.footfall_times_s, dtype=np.float64)
+    phase = step_phase_rad(t, footfalls)
+    step = np.clip(np.floor(phase / (2.0 * np.pi)).astype(np.int64), 0, steps.n_steps - 1)
+    ground = None
+    if record.ground_acc_m_s2 is not None:
+        acc_g = np.asarray(record.ground_acc_m_s2, dtype=np.float64)
+        fs = record.sample_rate_hz
+        if highpass_hz > 0:
+            acc_g = highpass(acc_g, fs, highpass_hz)
+            vel_g = highpass(integrate(acc_g, 1.0 / fs), fs, highpass_hz)
+            disp_g = highpass(integrate(vel_g, 1.0 / fs), fs, highpass_hz)
+        else:
+            vel_g = integrate(acc_g, 1.0 / fs)
+            disp_g = integrate(vel_g, 1.0 / fs)
+        ground = (disp_g[lo:hi], vel_g[lo:hi], acc_g[lo:hi])
+    grf = np.asarray(record.grf_n[lo:hi], dtype=np.float64)
+    return CriticismData(
+        time_s=t,
+        grf_n=grf,
+        target_n=grf - mass * G_M_S2,
+        disp_m=np.asarray(com.disp_m[lo:hi], dtype=np.float64),
+        vel_m_s=np.asarray(com.vel_m_s[lo:hi], dtype=np.float64),
+        phase_rad=phase,
+        step=step,
+        mass_kg=mass,
+        pacing_hz=float(1.0 / np.mean(np.diff(footfalls))),
+        sample_rate_hz=record.sample_rate_hz,
+        footfall_times_s=footfalls,
+        ground=ground,
+        source=record.source,
+    )
+
+
+# -- feature groups ---------------------------------------------------------------------
+@dataclass(frozen=True)
+class FeatureGroup:
+    """The columns a candidate effect adds to the baseline's regression, and its reason.
+
+    Attributes
+    ----------
+    name : str
+        Effect name (a registered effect for the catalogue; any snake_case name otherwise).
+    columns : callable
+        ``data -> (n_samples, n_columns)`` array, or None when the record cannot test the
+        effect (e.g. no ground motion).
+    reason : str
+        Plain-words sentence used when the effect is significant.
+    statistic : callable, optional
+        ``(data, baseline_residual_n) -> (value, sentence)``: the statistic that reveals
+        the effect, reported as evidence.
+    """
+
+    name: str
+    columns: Callable[[CriticismData], FloatArray | None]
+    reason: str
+    statistic: Callable[[CriticismData, FloatArray], tuple[float, str]] | None = None
+
+
+_GROUPS: dict[str, FeatureGroup] = {}
+
+
+def register_feature_group(group: FeatureGroup) -> FeatureGroup:
+    """Make a feature group available to :func:`diagnose` and :func:`compare` by name.
+
+    This is the extension point of criticism: a user-written effect (see
+    :mod:`workbench.models.effects`) becomes a candidate once the columns of its term are
+    registered under its name. Re-registering a name replaces the entry.
+
+    Parameters
+    ----------
+    group : FeatureGroup
+
+    Returns
+    -------
+    FeatureGroup
+        ``group`` itself.
+    """
+    if not isinstance(group, FeatureGroup):
+        raise UsageError(
+            f"register_feature_group: {group!r} is not a FeatureGroup; build one with "
+            "FeatureGroup(name, columns, reason)"
+        )
+    _GROUPS[group.name] = group
+    return group
+
+
+def feature_group(name: str) -> FeatureGroup:
+    """Return the feature group registered under an effect name.
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    FeatureGroup
+    """
+    try:
+        return _GROUPS[name]
+    except KeyError:
+        known = ", ".join(sorted(_GROUPS))
+        hint = (
+            " (it is a registered effect, but criticism needs its feature group: call "
+            "register_feature_group)"
+            if name in available_effects()
+            else ""
+        )
+        raise UsageError(
+            f"effect '{name}' cannot be criticised{hint}; use one of {known}"
+        ) from None
+
+
+def _harmonics(phi: FloatArray, orders: Iterable[float]) -> FloatArray:
+    cols = []
+    for k in orders:
+        cols.append(np.cos(k * phi))
+        cols.append(np.sin(k * phi))
+    return np.stack(cols, axis=1)
+
+
+def _centred_time(data: CriticismData) -> FloatArray:
+    t = data.time_s
+    return np.asarray((t - 0.5 * (t[0] + t[-1])) / max(t[-1] - t[0], 1e-12), dtype=np.float64)
+
+
+def _max_order(data: CriticismData) -> float:
+    # Columns above 0.45 of the sample rate would alias.
+    return 0.45 * data.sample_rate_hz / data.pacing_hz
+
+
+def baseline_columns(data: CriticismData, harmonics: int = DEFAULT_HARMONICS) -> FloatArray:
+    """Baseline design: constant, ``harmonics`` step-phase harmonics, ``u`` and ``u'``.
+
+    Parameters
+    ----------
+    data : CriticismData
+    harmonics : int, optional
+
+    Returns
+    -------
+    ndarray
+        Shape ``(n_samples, 3 + 2 harmonics)``.
+    """
+    n = int(min(harmonics, math.floor(_max_order(data))))
+    cols = [np.ones_like(data.time_s), _harmonics(data.phase_rad, range(1, n + 1))]
+    cols += [data.disp_m[:, None], data.vel_m_s[:, None]]
+    if GAIT_MODULATION_HARMONICS:
+        mod = _harmonics(data.phase_rad, GAIT_MODULATION_HARMONICS)
+        cols += [data.disp_m[:, None] * mod, data.vel_m_s[:, None] * mod]
+    return np.column_stack(cols)
+
+
+def _corr(x: FloatArray, y: FloatArray) -> float:
+    sx, sy = float(np.std(x)), float(np.std(y))
+    if sx == 0 or sy == 0:
+        return 0.0
+    return float(np.mean((x - x.mean()) * (y - y.mean())) / (sx * sy))
+
+
+def _stat_asymmetry(data: CriticismData, resid: FloatArray) -> tuple[float, str]:
+    bins = np.minimum((data.step_fraction * 20).astype(int), 19)
+    odd = data.step % 2 == 1
+    diffs = []
+    for b in range(20):
+        sel = bins == b
+        if np.any(sel & odd) and np.any(sel & ~odd):
+            diffs.append(0.5 * (resid[sel & odd].mean() - resid[sel & ~odd].mean()))
+    contrast = float(np.sqrt(np.mean(np.square(diffs)))) if diffs else 0.0
+    return contrast, f"odd/even step contrast of the error {contrast:.3g} N RMS over the step"
+
+
+def _stat_corr(feature: Callable[[CriticismData], FloatArray], label: str) -> Any:
+    def stat(data: CriticismData, resid: FloatArray) -> tuple[float, str]:
+        r = _corr(feature(data), resid)
+        return r, f"error correlates with {label} (r = {r:.2f})"
+
+    return stat
+
+
+def _stat_impact(data: CriticismData, resid: FloatArray) -> tuple[float, str]:
+    early = data.step_fraction < 0.1
+    share = float(np.sum(resid[early] ** 2) / max(np.sum(resid**2), 1e-300))
+    return share, (
+        f"{100 * share:.0f} % of the error power lies in the first 10 % of the step "
+        "(10 % expected if it were spread evenly)"
+    )
+
+
+def _stat_drift(data: CriticismData, resid: FloatArray) -> tuple[float, str]:
+    thirds = np.array_split(np.arange(data.n_steps), 3)
+    amps = []
+    for block in (thirds[0], thirds[-1]):
+        sel = np.isin(data.step, block)
+        z = np.exp(-1j * data.phase_rad[sel])
+        amps.append(2.0 * np.mean(resid[sel] * z))
+    change = float(abs(amps[1] - amps[0]))
+    return change, (
+        f"the error's first harmonic changes by {change:.3g} N between the first and last "
+        "third of the record"
+    )
+
+
+def _stat_ground(data: CriticismData, resid: FloatArray) -> tuple[float, str]:
+    if data.ground is None:
+        return 0.0, "the record has no ground acceleration"
+    r = _corr(data.ground[2], resid)
+    return r, f"error correlates with the measured ground acceleration (r = {r:.2f})"
+
+
+def _asym_columns(data: CriticismData) -> FloatArray:
+    return _harmonics(data.phase_rad, (0.5, 1.5, 2.5, 3.5))
+
+
+def _impact_columns(data: CriticismData) -> FloatArray | None:
+    top = int(min(3 * DEFAULT_HARMONICS, math.floor(_max_order(data))))
+    if top <= DEFAULT_HARMONICS:
+        return None
+    return _harmonics(data.phase_rad, range(DEFAULT_HARMONICS + 1, top + 1))
+
+
+def _drift_columns(data: CriticismData) -> FloatArray:
+    tau = _centred_time(data)[:, None]
+    return tau * _harmonics(data.phase_rad, (1, 2))
+
+
+def _stiffness_drift_columns(data: CriticismData) -> FloatArray:
+    tau = _centred_time(data)
+    return np.column_stack([tau * data.disp_m, tau * data.vel_m_s])
+
+
+def _ground_columns(data: CriticismData) -> FloatArray | None:
+    if data.ground is None:
+        return None
+    return np.column_stack(data.ground)
+
+
+for _group in (
+    FeatureGroup(
+        "gait_asymmetry",
+        _asym_columns,
+        "the error repeats every second step: left and right steps differ",
+        _stat_asymmetry,
+    ),
+    FeatureGroup(
+        "cubic_stiffness",
+        lambda d: (d.disp_m**3)[:, None],
+        "the error grows with the amplitude of the COM motion like u^3: the leg spring is "
+        "not linear",
+        _stat_corr(lambda d: d.disp_m**3, "u^3"),
+    ),
+    FeatureGroup(
+        "quadratic_damping",
+        lambda d: (np.abs(d.vel_m_s) * d.vel_m_s)[:, None],
+        "the error follows |u'| u': damping grows with speed",
+        _stat_corr(lambda d: np.abs(d.vel_m_s) * d.vel_m_s, "|u'| u'"),
+    ),
+    FeatureGroup(
+        "heel_impact",
+        _impact_columns,
+        "the error is a short, broadband transient locked to footfall: a heel impact the "
+        "smooth force shape misses",
+        _stat_impact,
+    ),
+    FeatureGroup(
+        "pacing_drift",
+        _drift_columns,
+        "the force's timing and size drift along the record: the gait (pacing) changes, so "
+        "one force shape does not fit the whole record",
+        _stat_drift,
+    ),
+    FeatureGroup(
+        "stiffness_drift",
+        _stiffness_drift_columns,
+        "the error follows t u and t u': stiffness or damping changes along the record",
+        _stat_corr(lambda d: _centred_time(d) * d.disp_m, "t u"),
+    ),
+    FeatureGroup(
+        "base_motion",
+        _ground_columns,
+        "the error follows the measured ground motion: the walking surface moves",
+        _stat_ground,
+    ),
+):
+    register_feature_group(_group)
+
+
+def _within_step_residual(
+    data: CriticismData, x: FloatArray, y: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Project each step's own low-harmonic variation out of the target and every column.
+
+    Walking varies from step to step; with measured ``u`` and ``u'`` in the model, any
+    nonlinear function of the state (``u^3``, ``|u'| u'``) can mimic part of that variation
+    and win held-out skill on a record without any effect. Giving every step its own
+    coefficients of the harmonics in :data:`STEP_NUISANCE_HARMONICS` (fitted within the
+    step, held-out steps included) removes that variation from the comparison, while the
+    half-harmonics of asymmetry, the high harmonics of an impact and slow drifts stay
+    largely outside their span (about 16 % of a half-harmonic's power is absorbed).
+    """
+    phi = data.phase_rad
+    nuis = _harmonics(phi, STEP_NUISANCE_HARMONICS)
+    xy = np.column_stack([x, y])
+    out = np.empty_like(xy)
+    bounds = np.flatnonzero(np.diff(data.step)) + 1
+    for sel in np.split(np.arange(phi.size), bounds):
+        basis = nuis[sel]
+        coef, *_ = np.linalg.lstsq(basis, xy[sel], rcond=None)
+        out[sel] = xy[sel] - basis @ coef
+    return out[:, :-1], out[:, -1]
+
+
+# -- cross-validation engine --------------------------------------------------------------
+class _CV:
+    """Per-fold Gram matrices of all columns, so any column subset is scored cheaply."""
+
+    def __init__(self, data: CriticismData, blocks: dict[str, FloatArray], folds: int) -> None:
+        self.data = data
+        self.names = list(blocks)
+        mats = [blocks[k] for k in self.names]
+        x = np.column_stack(mats)
+        scale = np.std(x, axis=0)
+        scale[scale == 0] = 1.0  # the constant column
+        x = x / scale
+        y = np.asarray(data.target_n, dtype=np.float64)
+        if STEP_NUISANCE_HARMONICS:
+            x, y = _within_step_residual(data, x, y)
+        self.x = x
+        self.y = y
+        self.slices: dict[str, NDArray[np.intp]] = {}
+        start = 0
+        for k, m in zip(self.names, mats, strict=True):
+            self.slices[k] = np.arange(start, start + m.shape[1])
+            start += m.shape[1]
+        n_blocks = max(data.n_steps // BLOCK_STEPS, 1)
+        n_folds = int(max(3, min(folds, n_blocks)))
+        block = np.minimum(data.step // BLOCK_STEPS, n_blocks - 1)
+        self.fold_of = block % n_folds
+        self.n_folds = n_folds
+        self.gram = np.empty((n_folds, x.shape[1], x.shape[1]))
+        self.xty = np.empty((n_folds, x.shape[1]))
+        self.yty = np.empty(n_folds)
+        self.count = np.empty(n_folds)
+        for f in range(n_folds):
+            sel = self.fold_of == f
+            xf, yf = x[sel], self.y[sel]
+            self.gram[f] = xf.T @ xf
+            self.xty[f] = xf.T @ yf
+            self.yty[f] = yf @ yf
+            self.count[f] = sel.sum()
+        self.gram_all = self.gram.sum(axis=0)
+        self.xty_all = self.xty.sum(axis=0)
+
+    def columns(self, groups: Sequence[str]) -> NDArray[np.intp]:
+        return np.concatenate([self.slices[g] for g in ("baseline", *groups)])
+
+    def _solve(self, g: FloatArray, b: FloatArray) -> FloatArray:
+        ridge = _RIDGE * np.trace(g) / g.shape[0]
+        return np.asarray(np.linalg.solve(g + ridge * np.eye(g.shape[0]), b), dtype=np.float64)
+
+    def fold_sse(self, groups: Sequence[str]) -> tuple[FloatArray, FloatArray]:
+        """Held-out SSE per fold and training residual variance per fold."""
+        idx = self.columns(groups)
+        sse = np.empty(self.n_folds)
+        train_var = np.empty(self.n_folds)
+        g_all = self.gram_all[np.ix_(idx, idx)]
+        b_all = self.xty_all[idx]
+        yty_all = float(self.yty.sum())
+        for f in range(self.n_folds):
+            g_f = self.gram[f][np.ix_(idx, idx)]
+            b_f = self.xty[f][idx]
+            beta = self._solve(g_all - g_f, b_all - b_f)
+            sse[f] = max(self.yty[f] - 2.0 * beta @ b_f + beta @ g_f @ beta, 0.0)
+            train_sse = (yty_all - self.yty[f]) - 2.0 * beta @ (b_all - b_f)
+            train_sse += beta @ (g_all - g_f) @ beta
+            n_train = self.count.sum() - self.count[f]
+            train_var[f] = max(train_sse, 1e-300) / max(n_train - idx.size, 1.0)
+        return sse, train_var
+
+    def heldout_prediction(self, groups: Sequence[str]) -> FloatArray:
+        idx = self.columns(groups)
+        pred = np.empty_like(self.y)
+        g_all = self.gram_all[np.ix_(idx, idx)]
+        b_all = self.xty_all[idx]
+        for f in range(self.n_folds):
+            sel = self.fold_of == f
+            beta = self._solve(g_all - self.gram[f][np.ix_(idx, idx)], b_all - self.xty[f][idx])
+            pred[sel] = self.x[np.ix_(sel, idx)] @ beta
+        return pred
+
+    def gain(self, base: Sequence[str], extended: Sequence[str]) -> tuple[float, float, float]:
+        """Pooled fraction of held-out SSE removed, its fold-to-fold SE, and the t ratio."""
+        sse_b, _ = self.fold_sse(base)
+        sse_e, _ = self.fold_sse(extended)
+        pooled = 1.0 - float(sse_e.sum() / max(sse_b.sum(), 1e-300))
+        per_fold = 1.0 - sse_e / np.maximum(sse_b, 1e-300)
+        se = float(np.std(per_fold, ddof=1) / np.sqrt(self.n_folds))
+        t = pooled / se if se > 0 else (np.inf if pooled > 0 else 0.0)
+        return pooled, se, float(t)
+
+
+# -- results --------------------------------------------------------------------------------
+@dataclass
+class Candidate:
+    """One candidate effect's result (the JSON contract of DESIGN.md 4.2, plus details)."""
+
+    effect: str
+    score: float
+    significant: bool
+    evidence: str
+    expected_error_drop: float
+    indistinguishable_from: list[str] = field(default_factory=list)
+    score_se: float = 0.0
+    t_ratio: float = 0.0
+    statistic: float = 0.0
+    testable: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dictionary."""
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class ScoreRow:
+    """One scoreboard row: a model's held-out errors."""
+
+    model: str
+    heldout_rmse_n: float
+    fit_percent: float
+    ljung_box_p: float
+    score: float
+    rmse_drop_fraction: float = 0.0
+    rmse_drop_se: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dictionary."""
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class Diagnosis:
+    """Result of :func:`diagnose`."""
+
+    baseline: dict[str, Any]
+    candidates: list[Candidate]
+    verdict: str
+    data: CriticismData
+    residual_n: FloatArray
+    prediction_n: FloatArray
+    current_effects: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON object of ``workbench diagnose``."""
+        return {
+            "baseline": self.baseline,
+            "candidates": [c.to_dict() for c in self.candidates],
+            "verdict": self.verdict,
+        }
+
+
+def ljung_box_p(residual: ArrayLikeFloat, lags: int) -> float:
+    """Ljung-Box p-value that a series is white up to ``lags``.
+
+    Parameters
+    ----------
+    residual : array_like
+    lags : int
+
+    Returns
+    -------
+    float
+    """
+    x = np.asarray(residual, dtype=np.float64)
+    x = x - x.mean()
+    n = x.size
+    lags = int(min(lags, n - 2))
+    denom = float(x @ x)
+    if lags < 1 or denom == 0:
+        return 1.0
+    q = 0.0
+    for k in range(1, lags + 1):
+        rho = float(x[k:] @ x[:-k]) / denom
+        q += rho * rho / (n - k)
+    q *= n * (n + 2)
+    return float(stats.chi2.sf(q, lags))
+
+
+def _step_binned(data: CriticismData, resid: FloatArray, per_step: int = 10) -> FloatArray:
+    """Average the residual in ``per_step`` equal phase bins of every step.
+
+    The whiteness of that series is about step-to-step structure, not the smoothness of
+    the error within a step.
+    """
+    bins = np.minimum((data.step_fraction * per_step).astype(int), per_step - 1)
+    key = data.step * per_step + bins
+    sums = np.bincount(key, weights=resid, minlength=data.n_steps * per_step)
+    counts = np.bincount(key, minlength=data.n_steps * per_step)
+    ok = counts > 0
+    return np.asarray(sums[ok] / counts[ok], dtype=np.float64)
+
+
+def _row(cv: _CV, groups: Sequence[str], label: str, base_sse: FloatArray | None) -> ScoreRow:
+    sse, train_var = cv.fold_sse(groups)
+    n = cv.count.sum()
+    rmse = float(np.sqrt(sse.sum() / n))
+    pred = cv.heldout_prediction(groups)
+    resid = cv.y - pred
+    y = cv.y
+    fit = 100.0 * (1.0 - float(np.linalg.norm(resid) / np.linalg.norm(y - y.mean())))
+    series = _step_binned(cv.data, resid)
+    lb = ljung_box_p(series, 20)
+    # Gaussian log predictive density per sample with each fold's training variance.
+    lpd = -0.5 * np.sum(cv.count * np.log(2 * np.pi * train_var) + sse / train_var) / n
+    drop = se = 0.0
+    if base_sse is not None:
+        drop = 1.0 - rmse / float(np.sqrt(base_sse.sum() / n))
+        per_fold = 1.0 - np.sqrt(sse / np.maximum(base_sse, 1e-300))
+        se = float(np.std(per_fold, ddof=1) / np.sqrt(cv.n_folds))
+    return ScoreRow(label, rmse, fit, lb, float(lpd), drop, se)
+
+
+def _build_cv(
+    data: CriticismData, names: Sequence[str], harmonics: int, folds: int
+) -> tuple[_CV, list[str]]:
+    blocks: dict[str, FloatArray] = {"baseline": baseline_columns(data, harmonics)}
+    untestable = []
+    for name in names:
+        cols = feature_group(name).columns(data)
+        if cols is None:
+            untestable.append(name)
+        else:
+            blocks[name] = np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
+    return _CV(data, blocks, folds), untestable
+
+
+def _names(effects: Iterable[str] | None) -> list[str]:
+    out: list[str] = []
+    for name in effects or ():
+        feature_group(name)  # clear error for unknown names
+        if name not in out:
+            out.append(name)
+    return out
+
+
+def diagnose(
+    data: CriticismData | Record,
+    *,
+    effects: Iterable[str] | None = None,
+    candidates: Iterable[str] | None = None,
+    harmonics: int = DEFAULT_HARMONICS,
+    folds: int = DEFAULT_FOLDS,
+) -> Diagnosis:
+    """Rank candidate effects by the held-out GRF error they remove.
+
+    Parameters
+    ----------
+    data : CriticismData or Record
+        The record (prepared with :func:`prepare` when a ``Record`` is given).
+    effects : iterable of str, optional
+        Effects already in the current model (their columns join the baseline).
+    candidates : iterable of str, optional
+        Effects to test; default every registered feature group not in ``effects``.
+    harmonics : int, optional
+        Harmonics of the shared force shape.
+    folds : int, optional
+        Folds of the step-blocked cross-validation.
+
+    Returns
+    -------
+    Diagnosis
+    """
+    if isinstance(data, Record):
+        data = prepare(data)
+    current = _names(effects)
+    cands = [c for c in _names(candidates if candidates is not None else list(_GROUPS))]
+    cands = [c for c in cands if c not in current]
+    cv, untestable = _build_cv(data, [*current, *cands], harmonics, folds)
+    base_row = _row(cv, current, "baseline", None)
+    base_pred = cv.heldout_prediction(current)
+    resid = data.target_n - base_pred
+
+    results: list[Candidate] = []
+    for name in cands:
+        group = feature_group(name)
+        stat_value, stat_text = (
+            group.statistic(data, resid) if group.statistic is not None else (0.0, "")
+        )
+        if name in untestable:
+            results.append(
+                Candidate(
+                    name,
+                    0.0,
+                    False,
+                    f"not testable on this record: {stat_text}",
+                    0.0,
+                    testable=False,
+                )
+            )
+            continue
+        pooled, se, t = cv.gain(current, [*current, name])
+        floor = STATE_MIN_DROP if name in STATE_ACTING else SIGNIFICANCE_MIN_DROP
+        significant = bool(t > SIGNIFICANCE_T and pooled > floor)
+        drop = 1.0 - math.sqrt(max(1.0 - pooled, 0.0))
+        head = group.reason if significant else "no significant held-out gain"
+        evidence = (
+            f"{head}; {stat_text}; adding it removes {100 * pooled:.1f} % "
+            f"(+- {100 * se:.1f} %) of the held-out squared error"
+        )
+        results.append(Candidate(name, pooled, significant, evidence, drop, [], se, t, stat_value))
+
+    results.sort(key=lambda c: (c.testable, c.score), reverse=True)
+    sig = [c for c in results if c.significant]
+    for a in sig:
+        for b in sig:
+            if a is b:
+                continue
+            both = [*current, a.effect, b.effect]
+            p_ab, _, t_ab = cv.gain([*current, b.effect], both)  # a beyond b
+            p_ba, _, t_ba = cv.gain([*current, a.effect], both)  # b beyond a
+            a_adds = t_ab > SIGNIFICANCE_T and p_ab > SIGNIFICANCE_MIN_DROP / 2
+            b_adds = t_ba > SIGNIFICANCE_T and p_ba > SIGNIFICANCE_MIN_DROP / 2
+            if not a_adds and not b_adds:
+                a.indistinguishable_from.append(b.effect)
+    for c in sig:
+        if c.indistinguishable_from:
+            c.evidence += (
+                "; on this record it explains the same held-out error as "
+                + ", ".join(c.indistinguishable_from)
+                + " (neither adds significantly to a model with the other)"
+            )
+
+    verdict = _verdict(results, base_row)
+    baseline = {
+        "model": "baseline" + "".join(f" + {e}" for e in current),
+        "effects": current,
+        "heldout_rmse_n": base_row.heldout_rmse_n,
+        "fit_percent": base_row.fit_percent,
+        "ljung_box_p": base_row.ljung_box_p,
+        "score": base_row.score,
+        "harmonics": int(min(harmonics, math.floor(_max_order(data)))),
+        "folds": cv.n_folds,
+        "steps": data.n_steps,
+        "pacing_hz": data.pacing_hz,
+        "grf_rms_n": float(np.std(data.target_n)),
+    }
+    return Diagnosis(baseline, results, verdict, data, resid, base_pred, tuple(current))
+
+
+def _verdict(results: Sequence[Candidate], base: ScoreRow) -> str:
+    sig = [c for c in results if c.significant]
+    if not sig:
+        return (
+            f"No candidate effect removes a significant share of the held-out error "
+            f"(baseline held-out RMSE {base.heldout_rmse_n:.3g} N); the model is adequate "
+            "for the effects tested."
+        )
+    top = sig[0]
+    group = feature_group(top.effect)
+    alike = (
+        f" (on this record it cannot be told apart from {', '.join(top.indistinguishable_from)})"
+        if top.indistinguishable_from
+        else ""
+    )
+    return (
+        f"Add {top.effect}: {group.reason}; it is expected to cut the held-out RMSE by "
+        f"{100 * top.expected_error_drop:.0f} %{alike}."
+    )
+
+
+def compare(
+    data: CriticismData | Record,
+    effects: Sequence[str],
+    *,
+    harmonics: int = DEFAULT_HARMONICS,
+    folds: int = DEFAULT_FOLDS,
+) -> list[ScoreRow]:
+    """Scoreboard: the baseline, then the baseline with each effect added in turn.
+
+    Parameters
+    ----------
+    data : CriticismData or Record
+    effects : sequence of str
+        Effects added cumulatively, in order.
+    harmonics, folds : int, optional
+        As in :func:`diagnose`.
+
+    Returns
+    -------
+    list of ScoreRow
+        Baseline first; ``rmse_drop_fraction`` and ``rmse_drop_se`` of each row are
+        relative to the row before it.
+    """
+    if isinstance(data, Record):
+        data = prepare(data)
+    names = _names(effects)
+    if not names:
+        raise UsageError("compare: give at least one effect, e.g. --effects gait_asymmetry")
+    cv, untestable = _build_cv(data, names, harmonics, folds)
+    if untestable:
+        raise UsageError(
+            f"compare: effect '{untestable[0]}' cannot be tested on {data.source} (for "
+            "base_motion the record needs a ground_acc column); drop it from --effects"
+        )
+    rows = [_row(cv, [], "baseline", None)]
+    for i in range(len(names)):
+        prev, _ = cv.fold_sse(names[:i])
+        label = "baseline + " + " + ".join(names[: i + 1])
+        rows.append(_row(cv, names[: i + 1], label, prev))
+    return rows
+
+
+# -- locate: where the error lives ----------------------------------------------------------
+def error_by_gait_phase(data: CriticismData, residual: FloatArray, bins: int = 20) -> FloatArray:
+    """RMS of the error in equal bins of the step, footfall to footfall [N].
+
+    Parameters
+    ----------
+    data : CriticismData
+    residual : ndarray
+        Error on the data's samples [N].
+    bins : int, optional
+
+    Returns
+    -------
+    ndarray
+        One RMS per bin, the first bin starting at footfall.
+    """
+    b = np.minimum((data.step_fraction * bins).astype(int), bins - 1)
+    ss = np.bincount(b, weights=np.square(residual), minlength=bins)
+    n = np.maximum(np.bincount(b, minlength=bins), 1)
+    return np.asarray(np.sqrt(ss / n), dtype=np.float64)
+
+
+def error_by_step(data: CriticismData, residual: FloatArray) -> FloatArray:
+    """RMS of the error in each step [N]."""
+    ss = np.bincount(data.step, weights=np.square(residual), minlength=data.n_steps)
+    n = np.maximum(np.bincount(data.step, minlength=data.n_steps), 1)
+    return np.asarray(np.sqrt(ss / n), dtype=np.float64)
+
+
+def residual_spectrum(data: CriticismData, residual: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Welch power spectral density of the error (8-step Hann segments).
+
+    Returns
+    -------
+    freq_hz, psd_n2_per_hz : ndarray
+    """
+    from scipy import signal
+
+    nper = int(min(residual.size, round(8 * data.sample_rate_hz / data.pacing_hz)))
+    f, p = signal.welch(residual, fs=data.sample_rate_hz, nperseg=nper)
+    return np.asarray(f, dtype=np.float64), np.asarray(p, dtype=np.float64)
+
+
+def state_features(data: CriticismData) -> dict[str, FloatArray]:
+    """Return the state quantities the error is plotted against (DESIGN.md 2.5)."""
+    out = {
+        "u [m]": data.disp_m,
+        "u' [m/s]": data.vel_m_s,
+        "u^3 [m^3]": data.disp_m**3,
+        "|u'| u' [m^2/s^2]": np.abs(data.vel_m_s) * data.vel_m_s,
+        "t u [s m]": _centred_time(data) * data.disp_m,
+    }
+    if data.ground is not None:
+        out["ground acc [m/s^2]"] = data.ground[2]
+    return out
