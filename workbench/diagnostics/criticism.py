@@ -42,12 +42,18 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
+from scipy import signal, stats
 
 from workbench.errors import UsageError
 from workbench.models.effects import available_effects
 from workbench.models.force import step_phase_rad
-from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ, highpass, integrate, preprocess
+from workbench.records.preprocess import (
+    DEFAULT_HIGHPASS_HZ,
+    COMResponse,
+    highpass,
+    integrate,
+    preprocess,
+)
 from workbench.records.record import G_M_S2, Record
 from workbench.records.steps import Steps, segment_steps
 
@@ -75,22 +81,12 @@ ArrayLikeFloat = FloatArray | Sequence[float]
 DEFAULT_HARMONICS = 6
 #: Folds of the step-blocked cross-validation (fewer on short records, at least 3 steps each).
 DEFAULT_FOLDS = 10
-#: Harmonics of the step phase that every step gets its own coefficients of (nuisance).
-STEP_NUISANCE_HARMONICS: tuple[int, ...] = ()
-#: Harmonics of the gait cycle over which the baseline lets K and C vary (u cos(i phi)...).
-GAIT_MODULATION_HARMONICS: tuple[int, ...] = ()
-#: Steps per block; blocks are dealt to the folds in turn, so every fold spans the record.
+#: Steps per block; blocks are dealt to the folds in turn (block b goes to fold b mod K).
 BLOCK_STEPS = 3
 #: A candidate is significant when its score exceeds this many fold-to-fold standard errors...
-SIGNIFICANCE_T = 4.0
+SIGNIFICANCE_T = 3.0
 #: ...and removes at least this fraction of the baseline's held-out squared error.
 SIGNIFICANCE_MIN_DROP = 0.02
-#: Effects acting through the measured state: nonlinear functions of ``u`` and ``u'`` mimic
-#: step-to-step variability of the force, so on simulated records *without* any effect they
-#: removed up to about 0.38 of the held-out squared error; they are called significant only
-#: above this fraction.
-STATE_MIN_DROP = 0.4
-STATE_ACTING = frozenset({"cubic_stiffness", "quadratic_damping", "stiffness_drift"})
 #: Ridge added to the normal equations of standardised features (numerical safety only).
 _RIDGE = 1e-8
 
@@ -189,11 +185,10 @@ def prepare(
     com = preprocess(record, highpass_hz=highpass_hz)
     if steps is None:
         steps = segment_steps(com, pacing_hz=pacing_hz or record.pacing_hz, min_steps=6)
-    lo, hi = steps.start, steps.stop
+    lo, hi, phase, footfalls = _fundamental_phase(com, steps)
     t = np.asarray(record.time_s[lo:hi], dtype=np.float64)
-    footfalls = np.asarray(steps.footfall_times_s, dtype=np.float64)
-    phase = step_phase_rad(t, footfalls)
-    step = np.clip(np.floor(phase / (2.0 * np.pi)).astype(np.int64), 0, steps.n_steps - 1)
+    n_steps = footfalls.size - 1
+    step = np.clip(np.floor(phase / (2.0 * np.pi)).astype(np.int64), 0, n_steps - 1)
     ground = None
     if record.ground_acc_m_s2 is not None:
         acc_g = np.asarray(record.ground_acc_m_s2, dtype=np.float64)
@@ -222,6 +217,69 @@ def prepare(
         ground=ground,
         source=record.source,
     )
+
+
+def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatArray, FloatArray]:
+    """Step phase from the pacing component of the COM acceleration.
+
+    Peaks of the acceleration mark footfalls, but with a double-humped force they can jump
+    between the humps from step to step, and where the response changes (stiffness drift, a
+    nonlinear spring) they shift against the force. Both would enter the criticism as an
+    error of the force's timing. The phase of the acceleration's pacing component (a
+    zero-phase band-pass of 0.7-1.4 f_p, then the angle of its analytic signal) advances
+    smoothly by ``2 pi`` per step and is set so that its circular mean at the detected
+    footfalls is 0: step phase 0 is, on average, the footfall peak.
+
+    Returns
+    -------
+    lo, hi : int
+        Sample span of the whole steps kept.
+    phase_rad : ndarray
+        Phase on that span, starting in ``[0, 2 pi)``.
+    boundaries_s : ndarray
+        Times where the phase crosses multiples of ``2 pi`` (step boundaries) [s].
+    """
+    fs = com.sample_rate_hz
+    fp = float(1.0 / np.median(steps.durations_s))
+    band = np.array([0.7, 1.4]) * fp / (0.5 * fs)
+    sos = signal.butter(4, np.clip(band, 1e-6, 0.99), btype="bandpass", output="sos")
+    acc = np.asarray(com.acc_m_s2, dtype=np.float64)
+    pacing = signal.sosfiltfilt(sos, acc - acc.mean())
+    unwrapped = np.unwrap(np.angle(signal.hilbert(pacing)))
+    # Average the phase rate over two steps (one stride): left/right asymmetry leaks into the
+    # band as an alternating timing, which would otherwise hide it in the phase.
+    width = max(round(2.0 * fs / fp), 1)
+    rate = np.diff(unwrapped)
+    kernel = np.ones(width) / width
+    padded = np.concatenate(
+        [np.full(width, rate[:width].mean()), rate, np.full(width, rate[-width:].mean())]
+    )
+    smooth = np.convolve(padded, kernel, mode="same")[width:-width]
+    unwrapped = unwrapped[0] + np.concatenate([[0.0], np.cumsum(smooth)])
+    # Footfall peaks of the acceleration sit near the maxima of its pacing component, where
+    # the analytic signal's angle is 0.
+    at_footfalls = np.exp(1j * np.interp(steps.footfall_times_s, com.time_s, unwrapped))
+    unwrapped = unwrapped - float(np.angle(np.mean(at_footfalls)))
+    # Keep whole cycles away from the band-pass's edge effects (one step at either end).
+    first = steps.start
+    last = steps.stop
+    k0 = int(np.ceil(unwrapped[first] / (2.0 * np.pi)))
+    k1 = int(np.floor(unwrapped[last - 1] / (2.0 * np.pi)))
+    if k1 - k0 < 6 or np.any(np.diff(unwrapped[first:last]) <= 0):
+        # An irregular record (stops, turns): fall back to the detected footfalls.
+        t = com.time_s[first:last]
+        return (
+            first,
+            last,
+            step_phase_rad(t, steps.footfall_times_s),
+            np.asarray(steps.footfall_times_s, dtype=np.float64),
+        )
+    crossings = 2.0 * np.pi * np.arange(k0, k1 + 1)
+    lo = int(np.searchsorted(unwrapped, crossings[0]))
+    hi = int(np.searchsorted(unwrapped, crossings[-1]))
+    boundaries = np.interp(crossings, unwrapped, com.time_s)
+    phase = unwrapped[lo:hi] - crossings[0]
+    return lo, hi, np.asarray(phase, dtype=np.float64), np.asarray(boundaries, dtype=np.float64)
 
 
 # -- feature groups ---------------------------------------------------------------------
@@ -311,6 +369,22 @@ def _harmonics(phi: FloatArray, orders: Iterable[float]) -> FloatArray:
     return np.stack(cols, axis=1)
 
 
+def _without_stride_lines(data: CriticismData) -> tuple[FloatArray, FloatArray]:
+    """``u`` and ``u'`` with their steady components at odd multiples of ``f_p / 2`` removed.
+
+    ``u`` is the double integral of ``GRF / M``, so a steady line at angular frequency ``w``
+    in the GRF is also in ``u``, scaled by ``-1 / (M w^2)``: a free ``K`` can take up any
+    such line. Lines at whole multiples of ``f_p`` belong to the force shape anyway; lines
+    at odd multiples of ``f_p / 2`` are what left/right asymmetry makes, and ``K`` must not
+    hide them. Only their steady (constant-amplitude) part is projected out, so ``u`` and
+    ``u'`` still follow the step-to-step variation of the response.
+    """
+    q, _ = np.linalg.qr(_harmonics(data.phase_rad, (0.5, 1.5, 2.5, 3.5)))
+    u = data.disp_m - q @ (q.T @ data.disp_m)
+    v = data.vel_m_s - q @ (q.T @ data.vel_m_s)
+    return np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
+
+
 def _centred_time(data: CriticismData) -> FloatArray:
     t = data.time_s
     return np.asarray((t - 0.5 * (t[0] + t[-1])) / max(t[-1] - t[0], 1e-12), dtype=np.float64)
@@ -336,10 +410,8 @@ def baseline_columns(data: CriticismData, harmonics: int = DEFAULT_HARMONICS) ->
     """
     n = int(min(harmonics, math.floor(_max_order(data))))
     cols = [np.ones_like(data.time_s), _harmonics(data.phase_rad, range(1, n + 1))]
-    cols += [data.disp_m[:, None], data.vel_m_s[:, None]]
-    if GAIT_MODULATION_HARMONICS:
-        mod = _harmonics(data.phase_rad, GAIT_MODULATION_HARMONICS)
-        cols += [data.disp_m[:, None] * mod, data.vel_m_s[:, None] * mod]
+    u, v = _without_stride_lines(data)
+    cols += [u[:, None], v[:, None]]
     return np.column_stack(cols)
 
 
@@ -477,31 +549,6 @@ for _group in (
     register_feature_group(_group)
 
 
-def _within_step_residual(
-    data: CriticismData, x: FloatArray, y: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Project each step's own low-harmonic variation out of the target and every column.
-
-    Walking varies from step to step; with measured ``u`` and ``u'`` in the model, any
-    nonlinear function of the state (``u^3``, ``|u'| u'``) can mimic part of that variation
-    and win held-out skill on a record without any effect. Giving every step its own
-    coefficients of the harmonics in :data:`STEP_NUISANCE_HARMONICS` (fitted within the
-    step, held-out steps included) removes that variation from the comparison, while the
-    half-harmonics of asymmetry, the high harmonics of an impact and slow drifts stay
-    largely outside their span (about 16 % of a half-harmonic's power is absorbed).
-    """
-    phi = data.phase_rad
-    nuis = _harmonics(phi, STEP_NUISANCE_HARMONICS)
-    xy = np.column_stack([x, y])
-    out = np.empty_like(xy)
-    bounds = np.flatnonzero(np.diff(data.step)) + 1
-    for sel in np.split(np.arange(phi.size), bounds):
-        basis = nuis[sel]
-        coef, *_ = np.linalg.lstsq(basis, xy[sel], rcond=None)
-        out[sel] = xy[sel] - basis @ coef
-    return out[:, :-1], out[:, -1]
-
-
 # -- cross-validation engine --------------------------------------------------------------
 class _CV:
     """Per-fold Gram matrices of all columns, so any column subset is scored cheaply."""
@@ -515,8 +562,6 @@ class _CV:
         scale[scale == 0] = 1.0  # the constant column
         x = x / scale
         y = np.asarray(data.target_n, dtype=np.float64)
-        if STEP_NUISANCE_HARMONICS:
-            x, y = _within_step_residual(data, x, y)
         self.x = x
         self.y = y
         self.slices: dict[str, NDArray[np.intp]] = {}
@@ -528,6 +573,9 @@ class _CV:
         n_folds = int(max(3, min(folds, n_blocks)))
         block = np.minimum(data.step // BLOCK_STEPS, n_blocks - 1)
         self.fold_of = block % n_folds
+        self.block_of = block
+        self.n_blocks = n_blocks
+        self._block_cache: dict[tuple[str, ...], FloatArray] = {}
         self.n_folds = n_folds
         self.gram = np.empty((n_folds, x.shape[1], x.shape[1]))
         self.xty = np.empty((n_folds, x.shape[1]))
@@ -580,13 +628,30 @@ class _CV:
             pred[sel] = self.x[np.ix_(sel, idx)] @ beta
         return pred
 
+    def block_sse(self, groups: Sequence[str]) -> FloatArray:
+        """Held-out SSE per block of steps (each block predicted by its fold's fit)."""
+        key = tuple(groups)
+        if key not in self._block_cache:
+            resid = self.y - self.heldout_prediction(groups)
+            self._block_cache[key] = np.bincount(
+                self.block_of, weights=resid**2, minlength=self.n_blocks
+            )
+        return self._block_cache[key]
+
     def gain(self, base: Sequence[str], extended: Sequence[str]) -> tuple[float, float, float]:
-        """Pooled fraction of held-out SSE removed, its fold-to-fold SE, and the t ratio."""
-        sse_b, _ = self.fold_sse(base)
-        sse_e, _ = self.fold_sse(extended)
-        pooled = 1.0 - float(sse_e.sum() / max(sse_b.sum(), 1e-300))
-        per_fold = 1.0 - sse_e / np.maximum(sse_b, 1e-300)
-        se = float(np.std(per_fold, ddof=1) / np.sqrt(self.n_folds))
+        """Pooled fraction of held-out SSE removed, its block-to-block SE, and the t ratio.
+
+        The pooled fraction is the mean over blocks of ``(SSE_base,b - SSE_ext,b)`` divided
+        by the mean baseline SSE per block, so its standard error is the spread of those
+        paired differences over the blocks (units of three steps, whose errors are nearly
+        independent) divided by ``sqrt(n_blocks)``.
+        """
+        sse_b = self.block_sse(base)
+        sse_e = self.block_sse(extended)
+        scale = max(float(sse_b.mean()), 1e-300)
+        diff = (sse_b - sse_e) / scale
+        pooled = float(diff.mean())
+        se = float(np.std(diff, ddof=1) / np.sqrt(diff.size))
         t = pooled / se if se > 0 else (np.inf if pooled > 0 else 0.0)
         return pooled, se, float(t)
 
@@ -790,8 +855,7 @@ def diagnose(
             )
             continue
         pooled, se, t = cv.gain(current, [*current, name])
-        floor = STATE_MIN_DROP if name in STATE_ACTING else SIGNIFICANCE_MIN_DROP
-        significant = bool(t > SIGNIFICANCE_T and pooled > floor)
+        significant = bool(t > SIGNIFICANCE_T and pooled > SIGNIFICANCE_MIN_DROP)
         drop = 1.0 - math.sqrt(max(1.0 - pooled, 0.0))
         head = group.reason if significant else "no significant held-out gain"
         evidence = (
