@@ -633,9 +633,8 @@ class _CV:
         key = tuple(groups)
         if key not in self._block_cache:
             resid = self.y - self.heldout_prediction(groups)
-            self._block_cache[key] = np.bincount(
-                self.block_of, weights=resid**2, minlength=self.n_blocks
-            )
+            sse = np.bincount(self.block_of, weights=resid**2, minlength=self.n_blocks)
+            self._block_cache[key] = np.asarray(sse, dtype=np.float64)
         return self._block_cache[key]
 
     def gain(self, base: Sequence[str], extended: Sequence[str]) -> tuple[float, float, float]:
