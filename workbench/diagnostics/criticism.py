@@ -86,7 +86,7 @@ BLOCK_STEPS = 3
 #: A candidate is significant when its score exceeds this many fold-to-fold standard errors...
 SIGNIFICANCE_T = 3.0
 #: ...and removes at least this fraction of the baseline's held-out squared error.
-SIGNIFICANCE_MIN_DROP = 0.02
+SIGNIFICANCE_MIN_DROP = 0.01
 #: Ridge added to the normal equations of standardised features (numerical safety only).
 _RIDGE = 1e-8
 
@@ -125,11 +125,13 @@ class CriticismData:
     mass_kg, pacing_hz, sample_rate_hz : float
         Body mass, mean pacing (from the footfalls) and sample rate.
     footfall_times_s : ndarray
-        Footfall times delimiting the kept steps [s].
+        Step boundaries of the kept steps [s] (where the step phase crosses ``2 pi k``).
     ground : tuple of ndarray or None
         Ground displacement [m], velocity [m/s], acceleration [m/s^2], when measured.
     source : str
         Where the record came from.
+    pacing_local_hz : ndarray, optional
+        Local pacing rate [Hz]: the step phase's rate, averaged over a stride.
     """
 
     time_s: FloatArray
@@ -145,6 +147,7 @@ class CriticismData:
     footfall_times_s: FloatArray
     ground: tuple[FloatArray, FloatArray, FloatArray] | None
     source: str = "<memory>"
+    pacing_local_hz: FloatArray | None = None
 
     @property
     def n_steps(self) -> int:
@@ -216,6 +219,7 @@ def prepare(
         footfall_times_s=footfalls,
         ground=ground,
         source=record.source,
+        pacing_local_hz=np.gradient(phase) * record.sample_rate_hz / (2.0 * np.pi),
     )
 
 
@@ -249,12 +253,7 @@ def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatA
     # Average the phase rate over two steps (one stride): left/right asymmetry leaks into the
     # band as an alternating timing, which would otherwise hide it in the phase.
     width = max(round(2.0 * fs / fp), 1)
-    rate = np.diff(unwrapped)
-    kernel = np.ones(width) / width
-    padded = np.concatenate(
-        [np.full(width, rate[:width].mean()), rate, np.full(width, rate[-width:].mean())]
-    )
-    smooth = np.convolve(padded, kernel, mode="same")[width:-width]
+    smooth = _moving_average(np.diff(unwrapped), width)
     unwrapped = unwrapped[0] + np.concatenate([[0.0], np.cumsum(smooth)])
     # Footfall peaks of the acceleration sit near the maxima of its pacing component, where
     # the analytic signal's angle is 0.
@@ -483,9 +482,34 @@ def _impact_columns(data: CriticismData) -> FloatArray | None:
     return _harmonics(data.phase_rad, range(DEFAULT_HARMONICS + 1, top + 1))
 
 
+SLOW_STEPS = 8
+
+
+def _moving_average(x: FloatArray, width: int) -> FloatArray:
+    """Centred moving average with the ends padded by their own means."""
+    width = int(min(width, x.size))
+    padded = np.concatenate(
+        [np.full(width, x[:width].mean()), x, np.full(width, x[-width:].mean())]
+    )
+    out = np.convolve(padded, np.ones(width) / width, mode="same")[width:-width]
+    return np.asarray(out, dtype=np.float64)
+
+
 def _drift_columns(data: CriticismData) -> FloatArray:
+    shape = _harmonics(data.phase_rad, (1, 2))
     tau = _centred_time(data)[:, None]
-    return tau * _harmonics(data.phase_rad, (1, 2))
+    cols = [tau * shape]
+    if data.pacing_local_hz is not None:
+        # Only slow changes of pacing (over about SLOW_STEPS steps): a change of speed, not
+        # the step-to-step jitter of durations, whose dynamic effects the baseline leaves in
+        # its error on any record.
+        width = max(round(SLOW_STEPS * data.sample_rate_hz / data.pacing_hz), 1)
+        slow = _moving_average(data.pacing_local_hz, width)
+        rate = slow - float(np.mean(slow))
+        if np.std(rate) > 1e-3 * data.pacing_hz:
+            # Scaled by the pacing so the column is dimensionless like tau.
+            cols.append((rate / data.pacing_hz)[:, None] * shape)
+    return np.column_stack(cols)
 
 
 def _stiffness_drift_columns(data: CriticismData) -> FloatArray:

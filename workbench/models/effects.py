@@ -802,30 +802,37 @@ class StiffnessDrift(Effect):
 
 @register_effect
 class PacingDrift(Effect):
-    """The gait changes along the record: the first harmonic of the force drifts.
+    """The gait changes along the record: the force shape follows time and the pacing rate.
 
-    The term is ``-t (g cos(phi) + h sin(phi))`` with ``phi`` the step phase: amplitude and
-    phase of the first harmonic change linearly in time, as they do when the pacing rate
-    drifts (load factors rise with the pacing rate, and the timing of the force within a step
-    shifts). Measured in step phase from the record's own footfalls, the change of step
-    duration itself is absorbed; what a shared force shape cannot follow is this drift.
+    The term is ``-((t) (g cos(phi) + h sin(phi)) + (f - f_ref) (p cos(phi) + q sin(phi)))``
+    with ``phi`` the step phase, ``f`` the rate of the current step (one over its duration)
+    and ``f_ref`` the reference pacing: the first harmonic's amplitude and phase drift in
+    time and change with the pacing rate, as they do when a walker speeds up or slows down
+    (load factors rise with the pacing rate, and the timing of the force within a step
+    shifts). Measured in step phase, the change of step duration itself is absorbed; what a
+    shared force shape cannot follow is this change of shape.
 
     Parameters
     ----------
     drift_cos_n_per_s, drift_sin_n_per_s : float, optional
         Rates of change of the first harmonic's cosine and sine coefficients [N/s].
+    rate_cos_n_per_hz, rate_sin_n_per_hz : float, optional
+        Change of those coefficients per Hz of pacing rate above ``f_ref`` [N/Hz].
 
     Notes
     -----
     Statistic that reveals it: the residual's first-harmonic phase and amplitude drift from
     one block of steps to the next; a fixed-f_p basis in absolute time fails. Needs
-    ``context.step_start_s``.
+    ``context.step_start_s``; ``f_ref`` is ``context.pacing_hz`` when given, otherwise the
+    median step rate.
     """
 
     name = "pacing_drift"
     parameters = (
         Parameter("drift_cos_n_per_s", "N/s", 0.0, "drift of a1 per second", typical=4.0),
         Parameter("drift_sin_n_per_s", "N/s", 0.0, "drift of b1 per second", typical=-3.0),
+        Parameter("rate_cos_n_per_hz", "N/Hz", 0.0, "change of a1 per Hz of pacing"),
+        Parameter("rate_sin_n_per_hz", "N/Hz", 0.0, "change of b1 per Hz of pacing"),
     )
 
     def regressors(
@@ -835,11 +842,23 @@ class PacingDrift(Effect):
         t_s: ArrayLike,
         context: EffectContext | None = None,
     ) -> FloatArray:
-        """Columns ``-t cos(phi)`` and ``-t sin(phi)``."""
+        """Columns ``-t cos(phi)``, ``-t sin(phi)``, ``-(f - f_ref) cos(phi)``, ``... sin``."""
         _, _, t_b = self.broadcast(u, v, t_s)
         ctx = context if context is not None else EffectContext()
         phi = ctx.step_phase_rad(t_b)
-        return np.stack([-t_b * np.cos(phi), -t_b * np.sin(phi)], axis=-1)
+        starts = np.asarray(ctx._require("step_start_s", "PacingDrift"), dtype=np.float64)
+        durations = np.diff(starts)
+        if durations.size == 0:
+            raise UsageError(
+                "PacingDrift: the effect context needs at least two step starts; pass "
+                "step_start_s with every footfall"
+            )
+        rates = 1.0 / np.concatenate([durations, durations[-1:]])
+        f = rates[np.clip(ctx.step_index(t_b), 0, rates.size - 1)]
+        f_ref = float(np.median(rates)) if ctx.pacing_hz is None else float(ctx.pacing_hz)
+        df = f - f_ref
+        c, s_ = np.cos(phi), np.sin(phi)
+        return np.stack([-t_b * c, -t_b * s_, -df * c, -df * s_], axis=-1)
 
 
 @register_effect
