@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -16,19 +17,25 @@ from workbench.diagnostics.criticism import (
     _build_cv,
     compare,
     diagnose,
+    feature_group_from_effect,
     ljung_box_p,
     prepare,
+    unregister_feature_group,
 )
 from workbench.models import (
     BaseMotion,
+    Effect,
     EffectContext,
     GaitAsymmetry,
     HeelImpact,
     PacingDrift,
+    Parameter,
     QuadraticDamping,
     SMDModel,
     StiffnessDrift,
     available_effects,
+    register_effect,
+    unregister_effect,
 )
 from workbench.records.io import save_record
 from workbench.synth import simulate_walking
@@ -200,6 +207,46 @@ def test_current_effects_join_the_baseline() -> None:
     diag = diagnose(rec, effects=["heel_impact"])
     assert "heel_impact" not in [c.effect for c in diag.candidates]
     assert not any(c.significant for c in diag.candidates)
+
+
+# -- extension point -----------------------------------------------------------------------
+class BreathingModulation(Effect):
+    """User-written effect: breathing at 0.3 Hz modulates the force's first harmonic."""
+
+    name = "breathing_modulation"
+    breathing_hz = 0.3
+    parameters = (
+        Parameter("mod_cos_n", "N", 0.0, "modulation in phase with cos(2 pi f_b t)"),
+        Parameter("mod_sin_n", "N", 0.0, "modulation in phase with sin(2 pi f_b t)"),
+    )
+
+    def regressors(self, u, v, t_s, context=None):  # type: ignore[no-untyped-def]
+        _, _, t = self.broadcast(u, v, t_s)
+        carrier = np.cos(context.step_phase_rad(t))
+        w = 2 * np.pi * self.breathing_hz * t
+        return -np.stack([np.cos(w) * carrier, np.sin(w) * carrier], axis=-1)
+
+
+@pytest.fixture
+def breathing() -> Iterator[None]:
+    register_effect(BreathingModulation)
+    feature_group_from_effect(BreathingModulation, "the force's size rises and falls with breath")
+    try:
+        yield
+    finally:
+        unregister_feature_group("breathing_modulation")
+        unregister_effect("breathing_modulation")
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_user_written_effect_is_a_candidate(breathing: None, seed: int) -> None:
+    hidden = BreathingModulation(mod_cos_n=100.0, mod_sin_n=50.0)
+    diag = diagnose(_record(seed, effects=[hidden]))
+    assert diag.candidates[0].effect == "breathing_modulation"
+    assert diag.candidates[0].significant
+    assert "breath" in diag.verdict
+    # Without the hidden effect the new candidate raises no alarm.
+    assert not any(c.significant for c in diagnose(_record(seed)).candidates)
 
 
 # -- command line ----------------------------------------------------------------------------

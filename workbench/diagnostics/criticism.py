@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from scipy import signal, stats
 
 from workbench.errors import UsageError
-from workbench.models.effects import available_effects
+from workbench.models.effects import Effect, EffectContext, available_effects
 from workbench.models.force import step_phase_rad
 from workbench.records.preprocess import (
     DEFAULT_HIGHPASS_HZ,
@@ -70,8 +70,10 @@ __all__ = [
     "compare",
     "diagnose",
     "feature_group",
+    "feature_group_from_effect",
     "prepare",
     "register_feature_group",
+    "unregister_feature_group",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -332,6 +334,69 @@ def register_feature_group(group: FeatureGroup) -> FeatureGroup:
         )
     _GROUPS[group.name] = group
     return group
+
+
+def unregister_feature_group(name: str) -> None:
+    """Remove a feature group (for tests and interactive sessions).
+
+    Parameters
+    ----------
+    name : str
+        A registered name; unknown names are a ``UsageError``.
+    """
+    feature_group(name)
+    del _GROUPS[name]
+
+
+def feature_group_from_effect(
+    effect: Effect | type[Effect], reason: str, *, register: bool = True
+) -> FeatureGroup:
+    """Make a linear effect a candidate: its regressors become the feature group's columns.
+
+    The effect's :meth:`~workbench.models.effects.Effect.regressors` are evaluated on the
+    record's measured state with an :class:`~workbench.models.effects.EffectContext` that
+    holds the body mass, the pacing, the step boundaries and the ground motion (when
+    measured), so an effect written once serves simulation, identification and criticism.
+
+    Parameters
+    ----------
+    effect : Effect or Effect subclass
+        A linear effect (``linear = True``).
+    reason : str
+        Plain-words sentence shown when the effect is significant.
+    register : bool, optional
+        Also register the group under the effect's name (default).
+
+    Returns
+    -------
+    FeatureGroup
+    """
+    instance = effect() if isinstance(effect, type) else effect
+    if not instance.linear:
+        raise UsageError(
+            f"feature_group_from_effect: effect '{instance.name}' is not linear in its "
+            "parameters; write a FeatureGroup with the columns that describe it instead"
+        )
+
+    def columns(data: CriticismData) -> FloatArray | None:
+        ground = data.ground
+        ctx = EffectContext(
+            mass_kg=data.mass_kg,
+            pacing_hz=data.pacing_hz,
+            step_start_s=data.footfall_times_s,
+            ground_time_s=None if ground is None else data.time_s,
+            ground_disp_m=None if ground is None else ground[0],
+            ground_vel_m_s=None if ground is None else ground[1],
+            ground_acc_m_s2=None if ground is None else ground[2],
+        )
+        try:
+            cols = instance.regressors(data.disp_m, data.vel_m_s, data.time_s, ctx)
+        except UsageError:
+            return None  # the record lacks what the effect needs (e.g. ground motion)
+        return np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
+
+    group = FeatureGroup(instance.name, columns, reason)
+    return register_feature_group(group) if register else group
 
 
 def feature_group(name: str) -> FeatureGroup:
@@ -930,8 +995,9 @@ def _verdict(results: Sequence[Candidate], base: ScoreRow) -> str:
     if not sig:
         return (
             f"No candidate effect removes a significant share of the held-out error "
-            f"(baseline held-out RMSE {base.heldout_rmse_n:.3g} N); the model is adequate "
-            "for the effects tested."
+            f"(baseline held-out RMSE {base.heldout_rmse_n:.3g} N, fit {base.fit_percent:.0f} %); "
+            "what is left is not structured the way any tested effect would make it "
+            "(step-to-step variability of the force, noise)."
         )
     top = sig[0]
     group = feature_group(top.effect)
