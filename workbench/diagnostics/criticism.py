@@ -579,7 +579,20 @@ def _drift_columns(data: CriticismData) -> FloatArray:
 
 def _stiffness_drift_columns(data: CriticismData) -> FloatArray:
     tau = _centred_time(data)
-    return np.column_stack([tau * data.disp_m, tau * data.vel_m_s])
+    u, v = _without_stride_lines(data)
+    return np.column_stack([tau * u, tau * v])
+
+
+def _cubic_columns(data: CriticismData) -> FloatArray:
+    # The state without steady stride lines, like the baseline's: otherwise u^3 would pick
+    # up asymmetry through the response to it.
+    u, _ = _without_stride_lines(data)
+    return (u**3)[:, None]
+
+
+def _quadratic_columns(data: CriticismData) -> FloatArray:
+    _, v = _without_stride_lines(data)
+    return (np.abs(v) * v)[:, None]
 
 
 def _ground_columns(data: CriticismData) -> FloatArray | None:
@@ -597,14 +610,14 @@ for _group in (
     ),
     FeatureGroup(
         "cubic_stiffness",
-        lambda d: (d.disp_m**3)[:, None],
+        _cubic_columns,
         "the error grows with the amplitude of the COM motion like u^3: the leg spring is "
         "not linear",
         _stat_corr(lambda d: d.disp_m**3, "u^3"),
     ),
     FeatureGroup(
         "quadratic_damping",
-        lambda d: (np.abs(d.vel_m_s) * d.vel_m_s)[:, None],
+        _quadratic_columns,
         "the error follows |u'| u': damping grows with speed",
         _stat_corr(lambda d: np.abs(d.vel_m_s) * d.vel_m_s, "|u'| u'"),
     ),
@@ -953,25 +966,7 @@ def diagnose(
         results.append(Candidate(name, pooled, significant, evidence, drop, [], se, t, stat_value))
 
     results.sort(key=lambda c: (c.testable, c.score), reverse=True)
-    sig = [c for c in results if c.significant]
-    for a in sig:
-        for b in sig:
-            if a is b:
-                continue
-            both = [*current, a.effect, b.effect]
-            p_ab, _, t_ab = cv.gain([*current, b.effect], both)  # a beyond b
-            p_ba, _, t_ba = cv.gain([*current, a.effect], both)  # b beyond a
-            a_adds = t_ab > SIGNIFICANCE_T and p_ab > SIGNIFICANCE_MIN_DROP / 2
-            b_adds = t_ba > SIGNIFICANCE_T and p_ba > SIGNIFICANCE_MIN_DROP / 2
-            if not a_adds and not b_adds:
-                a.indistinguishable_from.append(b.effect)
-    for c in sig:
-        if c.indistinguishable_from:
-            c.evidence += (
-                "; on this record it explains the same held-out error as "
-                + ", ".join(c.indistinguishable_from)
-                + " (neither adds significantly to a model with the other)"
-            )
+    _forward_selection(cv, current, results)
 
     verdict = _verdict(results, base_row)
     baseline = {
@@ -988,6 +983,58 @@ def diagnose(
         "grf_rms_n": float(np.std(data.target_n)),
     }
     return Diagnosis(baseline, results, verdict, data, resid, base_pred, tuple(current))
+
+
+def _adds(cv: _CV, base: Sequence[str], extra: str) -> tuple[bool, float, float]:
+    pooled, se, t = cv.gain(base, [*base, extra])
+    return bool(t > SIGNIFICANCE_T and pooled > SIGNIFICANCE_MIN_DROP), pooled, se
+
+
+def _forward_selection(cv: _CV, current: Sequence[str], results: list[Candidate]) -> None:
+    """Keep a marginally significant candidate only if it adds to the better ones kept.
+
+    Candidates are visited best first. One that adds significant held-out skill to the
+    model with the candidates already kept is kept. One that does not is *explained by*
+    them -- unless a kept candidate in turn adds nothing to a model with this one: then the
+    two explain the same error and neither can be preferred from this record, so both stay
+    significant and name each other in ``indistinguishable_from``.
+    """
+    kept: list[Candidate] = []
+    for cand in results:
+        if not cand.significant:
+            continue
+        base = [*current, *(k.effect for k in kept)]
+        adds, pooled, se = _adds(cv, base, cand.effect)
+        if adds or not kept:
+            kept.append(cand)
+            continue
+        twins = []
+        for k in kept:
+            others = [*current, *(x.effect for x in kept if x is not k), cand.effect]
+            k_adds, _, _ = _adds(cv, others, k.effect)
+            if not k_adds:
+                twins.append(k)
+        if twins:
+            for k in twins:
+                k.indistinguishable_from.append(cand.effect)
+                cand.indistinguishable_from.append(k.effect)
+            kept.append(cand)
+            continue
+        cand.significant = False
+        names = ", ".join(k.effect for k in kept)
+        cand.evidence = cand.evidence.replace(
+            feature_group(cand.effect).reason,
+            f"explained by {names}: beyond it, it removes only {100 * pooled:.1f} % "
+            f"(+- {100 * se:.1f} %) of the held-out squared error",
+            1,
+        )
+    for cand in kept:
+        if cand.indistinguishable_from:
+            cand.evidence += (
+                "; on this record it explains the same held-out error as "
+                + ", ".join(cand.indistinguishable_from)
+                + " (neither adds significantly to a model with the other)"
+            )
 
 
 def _verdict(results: Sequence[Candidate], base: ScoreRow) -> str:
