@@ -249,6 +249,16 @@ def test_user_written_effect_is_a_candidate(breathing: None, seed: int) -> None:
     assert not any(c.significant for c in diagnose(_record(seed)).candidates)
 
 
+def test_demo_section_has_the_figures(tmp_path: Path) -> None:
+    from workbench.reporting.criticism import criticism_demo_section
+
+    rec = _record(0, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)])
+    section = criticism_demo_section(rec, tmp_path, seed=0)
+    pngs = sorted(p.name for p in (tmp_path / "figures").glob("*.png"))
+    assert len(pngs) == 5  # overlay, phase, spectrum, state, scoreboard
+    assert "gait_asymmetry" in section.to_markdown()
+
+
 # -- command line ----------------------------------------------------------------------------
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
