@@ -132,6 +132,7 @@ def test_ljung_box_matches_its_definition() -> None:
 
 
 # -- must-show properties that hold -------------------------------------------------------
+@pytest.mark.slow
 def test_no_false_alarm_without_an_effect() -> None:
     alarms = 0
     for seed in range(10):
@@ -249,6 +250,7 @@ def test_user_written_effect_is_a_candidate(breathing: None, seed: int) -> None:
     assert not any(c.significant for c in diagnose(_record(seed)).candidates)
 
 
+@pytest.mark.slow
 def test_demo_section_has_the_figures(tmp_path: Path) -> None:
     from workbench.reporting.criticism import criticism_demo_section
 
@@ -266,6 +268,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
+@pytest.mark.slow
 def test_cli_diagnose_and_compare(tmp_path: Path) -> None:
     rec = _record(2, effects=[HeelImpact(impact_n=250.0, decay_s=0.02)])
     path = tmp_path / "walk.csv"
@@ -292,6 +295,12 @@ def test_cli_diagnose_and_compare(tmp_path: Path) -> None:
     assert len(rows) == 3
     assert set(rows[0]) >= {"model", "heldout_rmse_n", "fit_percent", "ljung_box_p", "score"}
     assert rows[1]["heldout_rmse_n"] < rows[0]["heldout_rmse_n"]
-    bad = _cli("compare", str(path), "--effects", "wobble")
-    assert bad.returncode == 2
-    assert "wobble" in bad.stderr and "Traceback" not in bad.stderr
+    for args, word in [
+        (("compare", str(path), "--effects", "wobble"), "wobble"),
+        (("diagnose", str(path), "--harmonics", "0"), "--harmonics"),
+        (("compare", str(path), "--effects", ","), "--effects"),
+    ]:
+        bad = _cli(*args)
+        assert bad.returncode == 2
+        assert word in bad.stderr
+        assert "Traceback" not in bad.stderr

@@ -32,6 +32,14 @@ def parse_effect_names(text: str | None) -> list[str]:
     return names
 
 
+def _check_harmonics(args: argparse.Namespace) -> None:
+    if args.harmonics < 1 or args.harmonics > 40:
+        raise UsageError(
+            f"--harmonics {args.harmonics}: the shared force shape needs 1 to 40 harmonics; "
+            "give for example --harmonics 6"
+        )
+
+
 def _prepared(args: argparse.Namespace) -> Any:
     from workbench.cli import _load
     from workbench.diagnostics.criticism import prepare
@@ -46,6 +54,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from workbench.cli import _emit
     from workbench.diagnostics.criticism import diagnose
 
+    _check_harmonics(args)
     data = _prepared(args)
     result = diagnose(data, effects=parse_effect_names(args.effects), harmonics=args.harmonics)
     obj = result.to_dict()
@@ -75,6 +84,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     names = parse_effect_names(args.effects)
     if not names:
         raise UsageError("compare: --effects needs at least one effect name, e.g. gait_asymmetry")
+    _check_harmonics(args)
     data = _prepared(args)
     rows = compare(data, names, harmonics=args.harmonics)
     obj = {"rows": [r.to_dict() for r in rows]}

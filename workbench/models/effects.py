@@ -67,12 +67,14 @@ A nonlinear one overrides ``force`` and declares ``linear = False``::
             k, gap = self.split_theta(theta)
             return k * np.maximum(-u - gap, 0.0)
 
-The effects planned for the catalogue fit the same mould: ``gait_asymmetry`` (half-harmonic
-force terms, regressors ``cos(i phi / 2)`` from ``context.step_phase_rad(t)``),
-``quadratic_damping`` (regressor ``|v| v``), ``stiffness_drift`` (regressor ``t u``),
-``heel_impact`` (regressors localised after ``context.step_start_s``), ``pacing_drift``
-(nonlinear, ``force`` overridden) and ``base_motion`` (``-(K u_g + C v_g)`` from
-``context.ground_at(t)`` and ``context.stiffness_n_per_m``).
+The catalogue of DESIGN.md 2.5 is written this way: ``gait_asymmetry`` (half-harmonic force
+terms from ``context.step_phase_rad(t)``), ``cubic_stiffness`` (``u^3``),
+``quadratic_damping`` (``|v| v``), ``stiffness_drift`` (``t u``, ``t v``), ``heel_impact``
+(a pulse after each ``context.step_start_s``; nonlinear, ``force`` overridden),
+``pacing_drift`` (first harmonic drifting in time and with the step rate) and
+``base_motion`` (``-(k_g u_g + c_g v_g)`` from ``context.ground_at(t)``). To make a new
+effect a candidate of model criticism, see
+:func:`workbench.diagnostics.criticism.feature_group_from_effect`.
 """
 
 from __future__ import annotations
@@ -943,5 +945,11 @@ class BaseMotion(Effect):
         """Columns ``-u_g`` and ``-u_g'``."""
         _, _, t_b = self.broadcast(u, v, t_s)
         ctx = context if context is not None else EffectContext()
+        if ctx.ground_motion is None and ctx.ground_time_s is None:
+            raise UsageError(
+                "base_motion: there is no ground motion to act through; give the surface's "
+                "acceleration (simulate --ground-acc-amplitude, simulate_walking("
+                "ground_acc_m_s2=...), or a record with a ground_acc column)"
+            )
         disp, vel, _ = ctx.ground_at(t_b)
         return np.stack([-disp, -vel], axis=-1)
