@@ -24,6 +24,7 @@ from workbench.diagnostics.criticism import (
 )
 from workbench.models import (
     BaseMotion,
+    CubicStiffness,
     Effect,
     EffectContext,
     GaitAsymmetry,
@@ -182,12 +183,52 @@ def test_pacing_drift_is_found(seed: int) -> None:
     assert rows[1].rmse_drop_fraction > rows[1].rmse_drop_se
 
 
+def _cubic_walk(seed: int, amplitude_sd: float):  # type: ignore[no-untyped-def]
+    return simulate_walking(
+        duration_s=30.0,
+        sample_rate_hz=200.0,
+        noise_sd_n=5.0,
+        seed=seed,
+        amplitude_sd=amplitude_sd,
+        start="steady",
+        effects=[CubicStiffness(k3_n_per_m3=5e6)],
+    ).record
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_state_effect_on_periodic_walking_is_called_inseparable(seed: int) -> None:
+    """u^3 lies almost wholly in the span of the force shape and K u: say so, do not guess."""
+    diag = diagnose(_cubic_walk(seed, amplitude_sd=0.05))
+    cubic = next(c for c in diag.candidates if c.effect == "cubic_stiffness")
+    assert not cubic.significant
+    assert cubic.separable_fraction < 0.05
+    assert "cannot be separated" in cubic.evidence
+    assert "cubic_stiffness" in diag.verdict and "cannot be separated" in diag.verdict
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_state_effect_is_found_when_steps_vary_enough(seed: int) -> None:
+    data = prepare(_cubic_walk(seed, amplitude_sd=0.15))
+    diag = diagnose(data)
+    assert diag.candidates[0].effect == "cubic_stiffness"
+    assert diag.candidates[0].significant
+    right = compare(data, ["cubic_stiffness"])[1]
+    wrong = compare(data, ["gait_asymmetry"])[1]
+    assert right.rmse_drop_fraction > right.rmse_drop_se
+    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
+
+
 @pytest.mark.parametrize("seed", [0, 3])
 def test_base_motion_is_found(seed: int) -> None:
     rec = _record(seed, ground=lambda t: 1.0 * np.sin(2 * np.pi * 2.7 * np.asarray(t)))
     diag = diagnose(rec)
     assert diag.candidates[0].effect == "base_motion"
     assert diag.candidates[0].significant
+    rows = compare(prepare(rec), ["base_motion"])
+    assert rows[1].rmse_drop_fraction > rows[1].rmse_drop_se
+    if seed == 0:  # here the effect carries more than half of the baseline's error variance
+        assert diag.candidates[0].score >= 0.5
+        assert rows[1].rmse_drop_fraction >= 0.2
     no_ground = diagnose(_record(seed))
     untestable = [c for c in no_ground.candidates if not c.testable]
     assert [c.effect for c in untestable] == ["base_motion"]

@@ -89,6 +89,9 @@ BLOCK_STEPS = 3
 SIGNIFICANCE_T = 3.0
 #: ...and removes at least this fraction of the baseline's held-out squared error.
 SIGNIFICANCE_MIN_DROP = 0.01
+#: Below this share of variation outside the baseline's span, a candidate that is not
+#: significant is reported as "cannot be separated on this record" rather than absent.
+SEPARABLE_MIN = 0.05
 #: Ridge added to the normal equations of standardised features (numerical safety only).
 _RIDGE = 1e-8
 
@@ -730,6 +733,29 @@ class _CV:
             pred[sel] = self.x[np.ix_(sel, idx)] @ beta
         return pred
 
+    def separable_fraction(self, group: str, base: Sequence[str]) -> float:
+        """Share of a group's variation the baseline (plus ``base``) cannot represent.
+
+        ``1 - R^2`` of the group's columns regressed on the model's columns over the whole
+        record, pooled over the columns (their variances add). A candidate whose columns
+        lie almost wholly in the model's span cannot show its error however large it is.
+        """
+        idx_m = self.columns(base)
+        idx_g = self.slices[group]
+        g = self.gram_all
+        g_mm = g[np.ix_(idx_m, idx_m)]
+        g_mg = g[np.ix_(idx_m, idx_g)]
+        coef = self._solve(g_mm, g_mg)
+        total = np.diag(g[np.ix_(idx_g, idx_g)]).copy()
+        n = self.count.sum()
+        mean = self.x[:, idx_g].mean(axis=0)
+        total_c = total - n * mean**2
+        resid = total - np.einsum("ij,ij->j", g_mg, coef)
+        keep = total_c > 0
+        if not np.any(keep):
+            return 0.0
+        return float(np.clip(np.sum(resid[keep]) / np.sum(total_c[keep]), 0.0, 1.0))
+
     def block_sse(self, groups: Sequence[str]) -> FloatArray:
         """Held-out SSE per block of steps (each block predicted by its fold's fit)."""
         key = tuple(groups)
@@ -772,6 +798,7 @@ class Candidate:
     t_ratio: float = 0.0
     statistic: float = 0.0
     testable: bool = True
+    separable_fraction: float = 1.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able dictionary."""
@@ -958,12 +985,26 @@ def diagnose(
         pooled, se, t = cv.gain(current, [*current, name])
         significant = bool(t > SIGNIFICANCE_T and pooled > SIGNIFICANCE_MIN_DROP)
         drop = 1.0 - math.sqrt(max(1.0 - pooled, 0.0))
-        head = group.reason if significant else "no significant held-out gain"
+        separable = cv.separable_fraction(name, current)
+        if significant:
+            head = group.reason
+        elif separable < SEPARABLE_MIN:
+            head = (
+                f"cannot be separated on this record: only {100 * separable:.1f} % of its "
+                "variation lies outside what the shared force shape and K u + C u' represent, "
+                "so its error would be absorbed by them"
+            )
+        else:
+            head = "no significant held-out gain"
         evidence = (
             f"{head}; {stat_text}; adding it removes {100 * pooled:.1f} % "
             f"(+- {100 * se:.1f} %) of the held-out squared error"
         )
-        results.append(Candidate(name, pooled, significant, evidence, drop, [], se, t, stat_value))
+        results.append(
+            Candidate(
+                name, pooled, significant, evidence, drop, [], se, t, stat_value, True, separable
+            )
+        )
 
     results.sort(key=lambda c: (c.testable, c.score), reverse=True)
     _forward_selection(cv, current, results)
@@ -1039,12 +1080,25 @@ def _forward_selection(cv: _CV, current: Sequence[str], results: list[Candidate]
 
 def _verdict(results: Sequence[Candidate], base: ScoreRow) -> str:
     sig = [c for c in results if c.significant]
+    hidden = [c for c in results if c.testable and c.separable_fraction < SEPARABLE_MIN]
+    caveat = ""
+    if hidden:
+        caveat = (
+            " "
+            + ", ".join(c.effect for c in hidden)
+            + " cannot"
+            + " be separated from the force shape on this record ("
+            + ", ".join(f"{100 * c.separable_fraction:.1f} %" for c in hidden)
+            + " of the variation outside it), so the record cannot show whether "
+            + ("they are" if len(hidden) > 1 else "it is")
+            + " present."
+        )
     if not sig:
         return (
             f"No candidate effect removes a significant share of the held-out error "
             f"(baseline held-out RMSE {base.heldout_rmse_n:.3g} N, fit {base.fit_percent:.0f} %); "
             "what is left is not structured the way any tested effect would make it "
-            "(step-to-step variability of the force, noise)."
+            "(step-to-step variability of the force, noise)." + caveat
         )
     top = sig[0]
     group = feature_group(top.effect)
@@ -1055,7 +1109,7 @@ def _verdict(results: Sequence[Candidate], base: ScoreRow) -> str:
     )
     return (
         f"Add {top.effect}: {group.reason}; it is expected to cut the held-out RMSE by "
-        f"{100 * top.expected_error_drop:.0f} %{alike}."
+        f"{100 * top.expected_error_drop:.0f} %{alike}." + caveat
     )
 
 
