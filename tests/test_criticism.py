@@ -218,6 +218,17 @@ def test_state_effect_is_found_when_steps_vary_enough(seed: int) -> None:
     assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
 
 
+@pytest.mark.parametrize("seed", [0, 2])
+def test_stiffness_drift_is_significant_or_named_with_its_twin(seed: int) -> None:
+    """A drifting K moves the response's phase, which the step phase follows: the record
+    cannot tell it from a drifting force, and the diagnosis must say so."""
+    diag = diagnose(_record(seed, effects=[StiffnessDrift(dk_n_per_m_s=300.0)]))
+    drift = next(c for c in diag.candidates if c.effect == "stiffness_drift")
+    assert drift.significant
+    assert diag.candidates[0] is drift or "pacing_drift" in drift.indistinguishable_from
+    assert diag.candidates.index(drift) <= 1
+
+
 @pytest.mark.parametrize("seed", [0, 3])
 def test_base_motion_is_found(seed: int) -> None:
     rec = _record(seed, ground=lambda t: 1.0 * np.sin(2 * np.pi * 2.7 * np.asarray(t)))

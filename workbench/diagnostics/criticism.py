@@ -566,7 +566,8 @@ def _moving_average(x: FloatArray, width: int) -> FloatArray:
 def _drift_columns(data: CriticismData) -> FloatArray:
     shape = _harmonics(data.phase_rad, (1, 2))
     tau = _centred_time(data)[:, None]
-    cols = [tau * shape]
+    # A slow shift of the force's timing within the step: tau S'(phi).
+    cols = [tau * shape, tau * _shape_slope(data)[:, None]]
     if data.pacing_local_hz is not None:
         # Only slow changes of pacing (over about SLOW_STEPS steps): a change of speed, not
         # the step-to-step jitter of durations, whose dynamic effects the baseline leaves in
@@ -580,10 +581,28 @@ def _drift_columns(data: CriticismData) -> FloatArray:
     return np.column_stack(cols)
 
 
+def _shape_slope(data: CriticismData) -> FloatArray:
+    """Return the step-phase derivative of the record's shared force shape (all steps)."""
+    x = baseline_columns(data)
+    coef, *_ = np.linalg.lstsq(x, data.target_n, rcond=None)
+    n = (x.shape[1] - 3) // 2
+    orders = np.arange(1, n + 1)
+    a, b = coef[1 : 1 + 2 * n : 2], coef[2 : 2 + 2 * n : 2]
+    phi = data.phase_rad[:, None]
+    return np.asarray(
+        np.sum(orders * (-a * np.sin(orders * phi) + b * np.cos(orders * phi)), axis=1),
+        dtype=np.float64,
+    )
+
+
 def _stiffness_drift_columns(data: CriticismData) -> FloatArray:
+    # A drifting K also shifts the phase of the response, and the step phase, measured from
+    # the response, follows it: in step phase the drift then shows as a slow timing shift of
+    # the whole force shape, tau S'(phi). Without that column the drift is only seen as a
+    # drift of the force.
     tau = _centred_time(data)
     u, v = _without_stride_lines(data)
-    return np.column_stack([tau * u, tau * v])
+    return np.column_stack([tau * u, tau * v, tau * _shape_slope(data)])
 
 
 def _cubic_columns(data: CriticismData) -> FloatArray:
