@@ -182,7 +182,7 @@ def sweep(n: int) -> None:
     # force amplitudes varying 15 % from step to step instead of 2-6 %.
     rows += [(f"{n} (steps 15 %)", n, 0.15) for n in ("cubic_stiffness", "quadratic_damping")]
     for label, name, sd_a in rows:
-        first = sig = inseparable = 0
+        first = sig = inseparable = twins = 0
         max_t = -np.inf
         instead: dict[str, int] = {}
         for seed in range(n):
@@ -199,6 +199,11 @@ def sweep(n: int) -> None:
             first += top.effect == name and top.significant
             sig += cands[name].significant
             inseparable += "cannot be separated" in cands[name].evidence
+            twins += bool(
+                cands[name].significant
+                and top.effect != name
+                and top.effect in cands[name].indistinguishable_from
+            )
             if top.effect != name and top.significant:
                 instead[top.effect] = instead.get(top.effect, 0) + 1
         other = max(instead, key=lambda k: instead[k]) if instead else "-"
@@ -207,6 +212,8 @@ def sweep(n: int) -> None:
             other = f"(largest t ratio of any candidate {max_t:.1f}; threshold 3)"
         elif inseparable:
             other += f"; called inseparable in {inseparable}/{n}"
+        if twins:
+            other += f"; significant and named indistinguishable from the first in {twins}/{n}"
         print(f"{label:<30} {first:>5}/{n:<3} {sig:>3}/{n:<3} {other}")
 
 
