@@ -5,31 +5,37 @@ Why this level
 Force coefficients redrawn for every step fit almost anything inside one step, so a misfit
 has to be judged where they cannot absorb it. Here the *baseline* predicts the measured GRF
 from one force shape shared by all steps (a Fourier series in the step phase, ``n``
-harmonics, measured from the record's own footfalls) plus the spring and damper acting on
-the COM response::
+harmonics) plus the spring and damper acting on the COM response::
 
     GRF - M g = a0 + sum_i (a_i cos(i phi) + b_i sin(i phi)) - K u - C u'
 
 which is linear in ``(a, b, K, C)``; ``u`` and ``u'`` come from the preprocessed record
-(DESIGN.md 2.2). A candidate effect adds a *feature group* (the columns its term is made
-of, e.g. ``u^3`` for cubic stiffness). Every model is scored by step-blocked K-fold
-cross-validation: the steps are cut into ``K`` contiguous blocks, each block is predicted
-from a fit to the others, and the held-out squared error is summed per block.
+(DESIGN.md 2.2), with their steady lines at odd multiples of ``f_p / 2`` removed (see
+:func:`_without_stride_lines`). The step phase is that of the pacing component of the COM
+acceleration (:func:`_fundamental_phase`). A candidate effect adds a *feature group* (the
+columns its term is made of, e.g. ``u^3`` for cubic stiffness).
 
-Significance respects autocorrelation: residuals of a shared force shape are correlated
-within and across neighbouring steps, so samples are not independent evidence. The unit of
-evidence is a block of steps: for each block the fraction of the baseline's held-out error
-that the candidate removes, ``r_f = 1 - SSE_cand,f / SSE_base,f``. The score is the pooled
-fraction ``1 - sum SSE_cand / sum SSE_base``; its uncertainty is the fold-to-fold standard
-error of ``r_f``; a candidate is *significant* when its score exceeds both
-:data:`SIGNIFICANCE_T` standard errors and :data:`SIGNIFICANCE_MIN_DROP`. The thresholds
-were set on simulated records without an effect (``tests/test_criticism.py`` checks that
-at most one of ten such records raises any alarm).
+Scoring and significance
+------------------------
+Every model is scored by step-blocked cross-validation: the steps are cut into blocks of
+:data:`BLOCK_STEPS`, the blocks are dealt to :data:`DEFAULT_FOLDS` folds in turn, each
+fold is predicted from a fit to the others. A candidate's *score* is the fraction of the
+baseline's held-out squared error it removes. Residuals of a shared force shape are
+correlated within and across neighbouring steps, so samples are not independent evidence;
+the unit of evidence is a block: the score's standard error is the spread of the paired
+block-by-block differences of held-out squared error, and a candidate is *significant*
+when its score exceeds :data:`SIGNIFICANCE_T` standard errors and
+:data:`SIGNIFICANCE_MIN_DROP`. The thresholds were set on simulated records without an
+effect (``tests/test_criticism.py`` checks at most one alarm in ten such records).
 
-Two significant candidates are *indistinguishable* when neither adds significant
-held-out skill to a model that already has the other: the record's data explain the same
-error either way (typically an effect acting through ``u`` or ``u'`` against another one,
-both nearly periodic in the step phase; only step-to-step variation separates them).
+Candidates are then taken best first (forward selection): one that adds nothing
+significant to the better ones kept is *explained by* them and not significant. Two that
+explain the same error -- neither adds to a model with the other -- both stay significant
+and name each other in ``indistinguishable_from``. Each candidate also reports the share
+of its columns' variation that lies outside the baseline's span (``separable_fraction``);
+below :data:`SEPARABLE_MIN` the record cannot show the effect at all, and the diagnosis says
+so instead of calling it absent (effects acting through ``u`` or ``u'`` on nearly periodic
+walking).
 """
 
 from __future__ import annotations
