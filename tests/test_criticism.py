@@ -166,10 +166,15 @@ def test_heel_impact_is_found_and_compare_cuts_the_error(
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_gait_asymmetry_is_found(seed: int) -> None:
-    diag = diagnose(_record(seed, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)]))
+    data = prepare(_record(seed, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)]))
+    diag = diagnose(data)
     assert diag.candidates[0].effect == "gait_asymmetry"
     assert diag.candidates[0].significant
     assert "every second step" in diag.verdict
+    right = compare(data, ["gait_asymmetry"])[1]
+    wrong = compare(data, ["heel_impact"])[1]
+    assert right.rmse_drop_fraction > right.rmse_drop_se
+    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
