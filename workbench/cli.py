@@ -346,6 +346,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_population_parser(sub, out_opts)
 
+    from workbench.cli_criticism import add_criticism_parser
+
+    add_criticism_parser(sub, out_opts)
+
     p = sub.add_parser(
         "demo",
         parents=[out_opts],

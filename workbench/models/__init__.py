@@ -18,11 +18,17 @@ from workbench.models.conversions import (
     stiffness_n_per_m,
 )
 from workbench.models.effects import (
+    BaseMotion,
     CubicStiffness,
     Effect,
     EffectContext,
     Effects,
+    GaitAsymmetry,
+    HeelImpact,
+    PacingDrift,
     Parameter,
+    QuadraticDamping,
+    StiffnessDrift,
     available_effects,
     effect_class,
     effect_from_name,
@@ -47,14 +53,20 @@ from workbench.models.statespace import (
 )
 
 __all__ = [
+    "BaseMotion",
     "CubicStiffness",
     "Effect",
     "EffectContext",
     "Effects",
     "FourierForce",
+    "GaitAsymmetry",
+    "HeelImpact",
+    "PacingDrift",
     "Parameter",
+    "QuadraticDamping",
     "ReducedMatrices",
     "SMDModel",
+    "StiffnessDrift",
     "available_effects",
     "blf",
     "continuous_matrix",

@@ -67,12 +67,14 @@ A nonlinear one overrides ``force`` and declares ``linear = False``::
             k, gap = self.split_theta(theta)
             return k * np.maximum(-u - gap, 0.0)
 
-The effects planned for the catalogue fit the same mould: ``gait_asymmetry`` (half-harmonic
-force terms, regressors ``cos(i phi / 2)`` from ``context.step_phase_rad(t)``),
-``quadratic_damping`` (regressor ``|v| v``), ``stiffness_drift`` (regressor ``t u``),
-``heel_impact`` (regressors localised after ``context.step_start_s``), ``pacing_drift``
-(nonlinear, ``force`` overridden) and ``base_motion`` (``-(K u_g + C v_g)`` from
-``context.ground_at(t)`` and ``context.stiffness_n_per_m``).
+The catalogue of DESIGN.md 2.5 is written this way: ``gait_asymmetry`` (half-harmonic force
+terms from ``context.step_phase_rad(t)``), ``cubic_stiffness`` (``u^3``),
+``quadratic_damping`` (``|v| v``), ``stiffness_drift`` (``t u``, ``t v``), ``heel_impact``
+(a pulse after each ``context.step_start_s``; nonlinear, ``force`` overridden),
+``pacing_drift`` (first harmonic drifting in time and with the step rate) and
+``base_motion`` (``-(k_g u_g + c_g v_g)`` from ``context.ground_at(t)``). To make a new
+effect a candidate of model criticism, see
+:func:`workbench.diagnostics.criticism.feature_group_from_effect`.
 """
 
 from __future__ import annotations
@@ -90,11 +92,17 @@ from workbench.errors import UsageError
 from workbench.models.force import step_index, step_phase_rad
 
 __all__ = [
+    "BaseMotion",
     "CubicStiffness",
     "Effect",
     "EffectContext",
     "Effects",
+    "GaitAsymmetry",
+    "HeelImpact",
+    "PacingDrift",
     "Parameter",
+    "QuadraticDamping",
+    "StiffnessDrift",
     "available_effects",
     "effect_class",
     "effect_from_name",
@@ -672,3 +680,276 @@ class CubicStiffness(Effect):
         """Single column ``u^3`` [m^3]."""
         u_b, _, _ = self.broadcast(u, v, t_s)
         return (u_b**3)[..., None]
+
+
+def _half_phase_columns(phi: FloatArray, orders: tuple[int, ...]) -> FloatArray:
+    cols = []
+    for k in orders:
+        cols.append(np.cos(0.5 * k * phi))
+        cols.append(np.sin(0.5 * k * phi))
+    return np.stack(cols, axis=-1)
+
+
+@register_effect
+class GaitAsymmetry(Effect):
+    """Left and right steps differ: force terms at half and three halves of the pacing rate.
+
+    The term is ``-(a_h cos(phi/2) + b_h sin(phi/2) + a_3h cos(3 phi/2) + b_3h sin(3 phi/2))``
+    with ``phi`` the step phase (``2 pi`` per step), so positive coefficients add to the
+    biomechanical force like its Fourier coefficients. Half a step-phase cycle per step is one
+    cycle per stride: the force of odd steps differs from that of even steps.
+
+    Parameters
+    ----------
+    a_half_n, b_half_n, a_3half_n, b_3half_n : float, optional
+        Cosine and sine amplitudes [N] at ``f_p / 2`` and ``3 f_p / 2``; default 0.
+
+    Notes
+    -----
+    Statistic that reveals it: residual power at odd multiples of ``f_p / 2`` and an odd/even
+    step contrast of the residual's step-phase profile. Needs ``context.step_start_s``.
+    """
+
+    name = "gait_asymmetry"
+    parameters = (
+        Parameter("a_half_n", "N", 0.0, "cosine amplitude at f_p/2", typical=25.0),
+        Parameter("b_half_n", "N", 0.0, "sine amplitude at f_p/2", typical=15.0),
+        Parameter("a_3half_n", "N", 0.0, "cosine amplitude at 3 f_p/2"),
+        Parameter("b_3half_n", "N", 0.0, "sine amplitude at 3 f_p/2"),
+    )
+
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Columns ``-cos(phi/2), -sin(phi/2), -cos(3 phi/2), -sin(3 phi/2)``."""
+        _, _, t_b = self.broadcast(u, v, t_s)
+        ctx = context if context is not None else EffectContext()
+        return -_half_phase_columns(ctx.step_phase_rad(t_b), (1, 3))
+
+
+@register_effect
+class QuadraticDamping(Effect):
+    """Velocity-squared damping: term ``c2 |u'| u'``.
+
+    Parameters
+    ----------
+    c2_ns2_per_m2 : float, optional
+        Quadratic damping coefficient [N s^2/m^2]; default 0.
+
+    Notes
+    -----
+    Statistic that reveals it: residual correlated with ``|u'| u'`` beyond what ``u'`` and the
+    step-periodic force shape explain.
+    """
+
+    name = "quadratic_damping"
+    # Typical: c2 |u'| is about 10 % of C = 500 N s/m at |u'| = 0.2 m/s.
+    parameters = (
+        Parameter(
+            "c2_ns2_per_m2", "N s^2/m^2", 0.0, "quadratic damping (term c2 |u'| u')", typical=250.0
+        ),
+    )
+
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Single column ``|u'| u'`` [m^2/s^2]."""
+        _, v_b, _ = self.broadcast(u, v, t_s)
+        return (np.abs(v_b) * v_b)[..., None]
+
+
+@register_effect
+class StiffnessDrift(Effect):
+    """K and C change along the record: term ``t (dk u + dc u')``.
+
+    Parameters
+    ----------
+    dk_n_per_m_s : float, optional
+        Rate of change of the stiffness [N/m per s]; default 0.
+    dc_ns_per_m_s : float, optional
+        Rate of change of the damping [N s/m per s]; default 0.
+
+    Notes
+    -----
+    ``t`` is the time of the record (its first sample is usually 0), so at that time the
+    model's K and C hold. Statistic that reveals it: residual correlated with ``t u`` and
+    ``t u'``; per-window estimates of K trend.
+    """
+
+    name = "stiffness_drift"
+    parameters = (
+        Parameter("dk_n_per_m_s", "N/m/s", 0.0, "stiffness change per second", typical=60.0),
+        Parameter("dc_ns_per_m_s", "N s/m/s", 0.0, "damping change per second"),
+    )
+
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Columns ``t u`` and ``t u'``."""
+        u_b, v_b, t_b = self.broadcast(u, v, t_s)
+        return np.stack([t_b * u_b, t_b * v_b], axis=-1)
+
+
+@register_effect
+class PacingDrift(Effect):
+    """The gait changes along the record: the force shape follows time and the pacing rate.
+
+    The term is ``-((t) (g cos(phi) + h sin(phi)) + (f - f_ref) (p cos(phi) + q sin(phi)))``
+    with ``phi`` the step phase, ``f`` the rate of the current step (one over its duration)
+    and ``f_ref`` the reference pacing: the first harmonic's amplitude and phase drift in
+    time and change with the pacing rate, as they do when a walker speeds up or slows down
+    (load factors rise with the pacing rate, and the timing of the force within a step
+    shifts). Measured in step phase, the change of step duration itself is absorbed; what a
+    shared force shape cannot follow is this change of shape.
+
+    Parameters
+    ----------
+    drift_cos_n_per_s, drift_sin_n_per_s : float, optional
+        Rates of change of the first harmonic's cosine and sine coefficients [N/s].
+    rate_cos_n_per_hz, rate_sin_n_per_hz : float, optional
+        Change of those coefficients per Hz of pacing rate above ``f_ref`` [N/Hz].
+
+    Notes
+    -----
+    Statistic that reveals it: the residual's first-harmonic phase and amplitude drift from
+    one block of steps to the next; a fixed-f_p basis in absolute time fails. Needs
+    ``context.step_start_s``; ``f_ref`` is ``context.pacing_hz`` when given, otherwise the
+    median step rate.
+    """
+
+    name = "pacing_drift"
+    parameters = (
+        Parameter("drift_cos_n_per_s", "N/s", 0.0, "drift of a1 per second", typical=4.0),
+        Parameter("drift_sin_n_per_s", "N/s", 0.0, "drift of b1 per second", typical=-3.0),
+        Parameter("rate_cos_n_per_hz", "N/Hz", 0.0, "change of a1 per Hz of pacing"),
+        Parameter("rate_sin_n_per_hz", "N/Hz", 0.0, "change of b1 per Hz of pacing"),
+    )
+
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Columns ``-t cos(phi)``, ``-t sin(phi)``, ``-(f - f_ref) cos(phi)``, ``... sin``."""
+        _, _, t_b = self.broadcast(u, v, t_s)
+        ctx = context if context is not None else EffectContext()
+        phi = ctx.step_phase_rad(t_b)
+        starts = np.asarray(ctx._require("step_start_s", "PacingDrift"), dtype=np.float64)
+        durations = np.diff(starts)
+        if durations.size == 0:
+            raise UsageError(
+                "PacingDrift: the effect context needs at least two step starts; pass "
+                "step_start_s with every footfall"
+            )
+        rates = 1.0 / np.concatenate([durations, durations[-1:]])
+        f = rates[np.clip(ctx.step_index(t_b), 0, rates.size - 1)]
+        f_ref = float(np.median(rates)) if ctx.pacing_hz is None else float(ctx.pacing_hz)
+        df = f - f_ref
+        c, s_ = np.cos(phi), np.sin(phi)
+        return np.stack([-t_b * c, -t_b * s_, -df * c, -df * s_], axis=-1)
+
+
+@register_effect
+class HeelImpact(Effect):
+    """A short impact transient at each heel strike.
+
+    The term is ``-impact_n x exp(1 - x)`` with ``x = (t - t_step) / decay_s`` the time since
+    the step's start: a pulse of height ``impact_n`` peaking ``decay_s`` after footfall,
+    added to the biomechanical force. Nonlinear in ``decay_s``, so ``force`` is overridden.
+
+    Parameters
+    ----------
+    impact_n : float, optional
+        Peak of the impact force [N]; default 0.
+    decay_s : float, optional
+        Time from footfall to the peak, also the decay time [s]; default 0.012.
+
+    Notes
+    -----
+    Statistic that reveals it: residual localised just after footfall, broadband (power at
+    step harmonics above those of the force model). Needs ``context.step_start_s``.
+    """
+
+    name = "heel_impact"
+    linear = False
+    parameters = (
+        Parameter("impact_n", "N", 0.0, "peak impact force", typical=150.0),
+        Parameter("decay_s", "s", 0.012, "time to peak and decay time"),
+    )
+
+    def force(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        theta: ArrayLike | None = None,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Return ``-impact_n x exp(1 - x)`` [N], ``x`` the time since the step start."""
+        _, _, t_b = self.broadcast(u, v, t_s)
+        impact, decay = self.split_theta(theta)
+        ctx = context if context is not None else EffectContext()
+        starts = np.asarray(ctx._require("step_start_s", "HeelImpact"), dtype=np.float64)
+        since = t_b - starts[ctx.step_index(t_b)]
+        x = since / np.where(decay > 0, decay, np.inf)
+        return np.asarray(-impact * x * np.exp(1.0 - x), dtype=np.float64)
+
+
+@register_effect
+class BaseMotion(Effect):
+    """Walking on a vibrating surface: the leg acts on the relative motion.
+
+    The term is ``-(k_g u_g + c_g u_g')`` with ``u_g`` the surface displacement; with
+    ``k_g = K`` and ``c_g = C`` the spring and damper act on ``u - u_g``.
+
+    Parameters
+    ----------
+    k_ground_n_per_m : float, optional
+        Stiffness coupling to the surface displacement [N/m]; default 0.
+    c_ground_ns_per_m : float, optional
+        Damping coupling to the surface velocity [N s/m]; default 0.
+
+    Notes
+    -----
+    Statistic that reveals it: residual correlated with the measured ground motion, a
+    narrow-band peak off the ``f_p`` harmonics. Needs ground motion in the context.
+    """
+
+    name = "base_motion"
+    parameters = (
+        Parameter("k_ground_n_per_m", "N/m", 0.0, "coupling to surface displacement"),
+        Parameter("c_ground_ns_per_m", "N s/m", 0.0, "coupling to surface velocity"),
+    )
+
+    def regressors(
+        self,
+        u: ArrayLike,
+        v: ArrayLike,
+        t_s: ArrayLike,
+        context: EffectContext | None = None,
+    ) -> FloatArray:
+        """Columns ``-u_g`` and ``-u_g'``."""
+        _, _, t_b = self.broadcast(u, v, t_s)
+        ctx = context if context is not None else EffectContext()
+        if ctx.ground_motion is None and ctx.ground_time_s is None:
+            raise UsageError(
+                "base_motion: there is no ground motion to act through; give the surface's "
+                "acceleration (simulate --ground-acc-amplitude, simulate_walking("
+                "ground_acc_m_s2=...), or a record with a ground_acc column)"
+            )
+        disp, vel, _ = ctx.ground_at(t_b)
+        return np.stack([-disp, -vel], axis=-1)

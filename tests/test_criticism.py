@@ -1,0 +1,363 @@
+"""Model criticism: catalogue effects, the held-out engine, ranking, scoreboard and CLI."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from workbench.diagnostics.criticism import (
+    CATALOGUE,
+    _build_cv,
+    compare,
+    diagnose,
+    feature_group_from_effect,
+    ljung_box_p,
+    prepare,
+    unregister_feature_group,
+)
+from workbench.models import (
+    BaseMotion,
+    CubicStiffness,
+    Effect,
+    EffectContext,
+    GaitAsymmetry,
+    HeelImpact,
+    PacingDrift,
+    Parameter,
+    QuadraticDamping,
+    SMDModel,
+    StiffnessDrift,
+    available_effects,
+    register_effect,
+    unregister_effect,
+)
+from workbench.records.io import save_record
+from workbench.synth import simulate_walking
+
+
+def _record(seed: int, effects=(), ground=None, base: int = 100):  # type: ignore[no-untyped-def]
+    """A walking record whose generator details vary with the seed."""
+    rng = np.random.default_rng(base + seed)
+    fs = float(rng.choice([100, 200, 500, 1000]))
+    return simulate_walking(
+        duration_s=float(rng.uniform(20, 40)),
+        sample_rate_hz=fs,
+        noise_sd_n=float(rng.uniform(2, 15)),
+        seed=seed,
+        pacing_hz=float(rng.uniform(1.6, 2.3)),
+        mass_kg=float(rng.uniform(55, 95)),
+        step_duration_sd=float(rng.uniform(0.01, 0.03)),
+        amplitude_sd=float(rng.uniform(0.02, 0.06)),
+        phase_sd_rad=float(rng.uniform(0.02, 0.06)),
+        start="steady",
+        effects=effects,
+        ground_acc_m_s2=ground,
+    ).record
+
+
+# -- catalogue ---------------------------------------------------------------------------
+def test_catalogue_names_are_registered_and_compose() -> None:
+    assert set(CATALOGUE) <= set(available_effects())
+    model = SMDModel() + GaitAsymmetry() + HeelImpact()
+    assert model.effects.names == ("gait_asymmetry", "heel_impact")
+
+
+def test_catalogue_terms_match_their_formulas() -> None:
+    starts = np.array([0.0, 0.5, 1.0, 1.5])
+    ctx = EffectContext(step_start_s=starts)
+    t = np.array([0.0, 0.25, 0.5 + 0.012, 0.75])
+    # Step phase 0, pi, 2 pi + 0.048 pi, 3 pi.
+    phi = np.array([0.0, np.pi, 2 * np.pi + 2 * np.pi * 0.024, 3 * np.pi])
+    asym = GaitAsymmetry(a_half_n=10.0, b_half_n=4.0).force(0.0, 0.0, t, context=ctx)
+    np.testing.assert_allclose(asym, -(10 * np.cos(phi / 2) + 4 * np.sin(phi / 2)), atol=1e-12)
+    heel = HeelImpact(impact_n=100.0, decay_s=0.012).force(0.0, 0.0, t, context=ctx)
+    assert heel[2] == pytest.approx(-100.0)  # the pulse peaks at decay_s after footfall
+    assert heel[0] == 0.0
+    v = np.array([-0.2, 0.1])
+    np.testing.assert_allclose(
+        QuadraticDamping(c2_ns2_per_m2=50.0).force(0.0, v, 0.0), 50 * np.abs(v) * v
+    )
+    np.testing.assert_allclose(
+        StiffnessDrift(dk_n_per_m_s=3.0, dc_ns_per_m_s=2.0).force(0.01, 0.1, 4.0), 4 * (0.03 + 0.2)
+    )
+    drift = PacingDrift(drift_cos_n_per_s=2.0).force(0.0, 0.0, np.array([0.5, 1.0]), context=ctx)
+    np.testing.assert_allclose(drift, [-1.0, -2.0], atol=1e-12)  # phase 0 at footfalls
+    gctx = EffectContext(
+        ground_time_s=np.array([0.0, 1.0]),
+        ground_disp_m=np.array([0.0, 0.002]),
+        ground_vel_m_s=np.array([0.01, 0.01]),
+        ground_acc_m_s2=np.zeros(2),
+    )
+    base = BaseMotion(k_ground_n_per_m=1e4, c_ground_ns_per_m=500.0).force(
+        0.0, 0.0, 0.5, context=gctx
+    )
+    assert base == pytest.approx(-(1e4 * 0.001 + 500 * 0.01))
+
+
+# -- engine -----------------------------------------------------------------------------
+def test_fold_errors_equal_a_direct_refit() -> None:
+    """The Gram-matrix shortcut gives the held-out error of refitting on the other folds."""
+    data = prepare(_record(0, effects=[GaitAsymmetry(a_half_n=30.0)]))
+    cv, _ = _build_cv(data, ["gait_asymmetry", "cubic_stiffness"], 6, 10)
+    sse, _ = cv.fold_sse(["gait_asymmetry"])
+    idx = cv.columns(["gait_asymmetry"])
+    for f in (0, cv.n_folds - 1):
+        test = cv.fold_of == f
+        beta, *_ = np.linalg.lstsq(cv.x[~test][:, idx], cv.y[~test], rcond=None)
+        direct = np.sum((cv.y[test] - cv.x[test][:, idx] @ beta) ** 2)
+        assert sse[f] == pytest.approx(direct, rel=1e-6)
+    # Whole blocks of three steps are held out together.
+    for f in range(cv.n_folds):
+        steps = np.unique(data.step[cv.fold_of == f])
+        assert all(set(range(3 * (s // 3), 3 * (s // 3) + 3)) & set(steps) for s in steps)
+
+
+def test_ljung_box_matches_its_definition() -> None:
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal(400)
+    xc = x - x.mean()
+    rho = np.array([xc[k:] @ xc[:-k] for k in range(1, 6)]) / (xc @ xc)
+    q = 400 * 402 * np.sum(rho**2 / (400 - np.arange(1, 6)))
+    assert ljung_box_p(x, 5) == pytest.approx(stats.chi2.sf(q, 5), rel=1e-12)
+    ar = np.zeros(400)
+    for i in range(1, 400):
+        ar[i] = 0.6 * ar[i - 1] + x[i]
+    assert ljung_box_p(ar, 10) < 1e-10
+
+
+# -- must-show properties that hold -------------------------------------------------------
+@pytest.mark.slow
+def test_no_false_alarm_without_an_effect() -> None:
+    alarms = 0
+    for seed in range(10):
+        diag = diagnose(_record(seed, base=5))
+        alarms += any(c.significant for c in diag.candidates)
+        assert [c.score for c in diag.candidates if c.testable] == sorted(
+            (c.score for c in diag.candidates if c.testable), reverse=True
+        )
+    assert alarms <= 1
+
+
+@pytest.mark.parametrize(
+    ("seed", "impact_n", "decay_s"), [(1, 200.0, 0.015), (2, 250.0, 0.02), (3, 120.0, 0.012)]
+)
+def test_heel_impact_is_found_and_compare_cuts_the_error(
+    seed: int, impact_n: float, decay_s: float
+) -> None:
+    rec = _record(seed, effects=[HeelImpact(impact_n=impact_n, decay_s=decay_s)])
+    data = prepare(rec)
+    diag = diagnose(data)
+    assert diag.candidates[0].effect == "heel_impact"
+    assert diag.candidates[0].significant
+    right = compare(data, ["heel_impact"])
+    wrong = compare(data, ["gait_asymmetry"])
+    assert right[1].rmse_drop_fraction > right[1].rmse_drop_se
+    assert wrong[1].rmse_drop_fraction < wrong[1].rmse_drop_se
+    if diag.candidates[0].score >= 0.5:  # the effect carries half of the baseline error
+        assert right[1].rmse_drop_fraction >= 0.2
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_gait_asymmetry_is_found(seed: int) -> None:
+    data = prepare(_record(seed, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)]))
+    diag = diagnose(data)
+    assert diag.candidates[0].effect == "gait_asymmetry"
+    assert diag.candidates[0].significant
+    assert "every second step" in diag.verdict
+    right = compare(data, ["gait_asymmetry"])[1]
+    wrong = compare(data, ["heel_impact"])[1]
+    assert right.rmse_drop_fraction > right.rmse_drop_se
+    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_pacing_drift_is_found(seed: int) -> None:
+    rec = _record(seed, effects=[PacingDrift(drift_cos_n_per_s=4.0, drift_sin_n_per_s=-3.0)])
+    data = prepare(rec)
+    diag = diagnose(data)
+    assert diag.candidates[0].effect == "pacing_drift"
+    assert diag.candidates[0].significant
+    rows = compare(data, ["pacing_drift"])
+    assert rows[1].rmse_drop_fraction > rows[1].rmse_drop_se
+
+
+def _cubic_walk(seed: int, amplitude_sd: float):  # type: ignore[no-untyped-def]
+    return simulate_walking(
+        duration_s=30.0,
+        sample_rate_hz=200.0,
+        noise_sd_n=5.0,
+        seed=seed,
+        amplitude_sd=amplitude_sd,
+        start="steady",
+        effects=[CubicStiffness(k3_n_per_m3=5e6)],
+    ).record
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_state_effect_on_periodic_walking_is_called_inseparable(seed: int) -> None:
+    """u^3 lies almost wholly in the span of the force shape and K u: say so, do not guess."""
+    diag = diagnose(_cubic_walk(seed, amplitude_sd=0.05))
+    cubic = next(c for c in diag.candidates if c.effect == "cubic_stiffness")
+    assert not cubic.significant
+    assert cubic.separable_fraction < 0.05
+    assert "cannot be separated" in cubic.evidence
+    assert "cubic_stiffness" in diag.verdict and "cannot be separated" in diag.verdict
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_state_effect_is_found_when_steps_vary_enough(seed: int) -> None:
+    data = prepare(_cubic_walk(seed, amplitude_sd=0.15))
+    diag = diagnose(data)
+    assert diag.candidates[0].effect == "cubic_stiffness"
+    assert diag.candidates[0].significant
+    right = compare(data, ["cubic_stiffness"])[1]
+    wrong = compare(data, ["gait_asymmetry"])[1]
+    assert right.rmse_drop_fraction > right.rmse_drop_se
+    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_stiffness_drift_is_significant_or_named_with_its_twin(seed: int) -> None:
+    """A drifting K moves the response's phase, which the step phase follows: the record
+    cannot tell it from a drifting force, and the diagnosis must say so."""
+    diag = diagnose(_record(seed, effects=[StiffnessDrift(dk_n_per_m_s=300.0)]))
+    drift = next(c for c in diag.candidates if c.effect == "stiffness_drift")
+    assert drift.significant
+    assert diag.candidates[0] is drift or "pacing_drift" in drift.indistinguishable_from
+    assert diag.candidates.index(drift) <= 1
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_base_motion_is_found(seed: int) -> None:
+    rec = _record(seed, ground=lambda t: 1.0 * np.sin(2 * np.pi * 2.7 * np.asarray(t)))
+    diag = diagnose(rec)
+    assert diag.candidates[0].effect == "base_motion"
+    assert diag.candidates[0].significant
+    rows = compare(prepare(rec), ["base_motion"])
+    assert rows[1].rmse_drop_fraction > rows[1].rmse_drop_se
+    if seed == 0:  # here the effect carries more than half of the baseline's error variance
+        assert diag.candidates[0].score >= 0.5
+        assert rows[1].rmse_drop_fraction >= 0.2
+    no_ground = diagnose(_record(seed))
+    untestable = [c for c in no_ground.candidates if not c.testable]
+    assert [c.effect for c in untestable] == ["base_motion"]
+    assert no_ground.candidates[-1].effect == "base_motion"
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_two_hidden_effects_are_both_in_the_top_three(seed: int) -> None:
+    rec = _record(
+        seed, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0), HeelImpact(impact_n=150.0)]
+    )
+    top = [c.effect for c in diagnose(rec).candidates[:3]]
+    assert {"gait_asymmetry", "heel_impact"} <= set(top)
+
+
+def test_current_effects_join_the_baseline() -> None:
+    rec = _record(1, effects=[HeelImpact(impact_n=150.0, decay_s=0.015)])
+    diag = diagnose(rec, effects=["heel_impact"])
+    assert "heel_impact" not in [c.effect for c in diag.candidates]
+    assert not any(c.significant for c in diag.candidates)
+
+
+# -- extension point -----------------------------------------------------------------------
+class BreathingModulation(Effect):
+    """User-written effect: breathing at 0.3 Hz modulates the force's first harmonic."""
+
+    name = "breathing_modulation"
+    breathing_hz = 0.3
+    parameters = (
+        Parameter("mod_cos_n", "N", 0.0, "modulation in phase with cos(2 pi f_b t)"),
+        Parameter("mod_sin_n", "N", 0.0, "modulation in phase with sin(2 pi f_b t)"),
+    )
+
+    def regressors(self, u, v, t_s, context=None):  # type: ignore[no-untyped-def]
+        _, _, t = self.broadcast(u, v, t_s)
+        carrier = np.cos(context.step_phase_rad(t))
+        w = 2 * np.pi * self.breathing_hz * t
+        return -np.stack([np.cos(w) * carrier, np.sin(w) * carrier], axis=-1)
+
+
+@pytest.fixture
+def breathing() -> Iterator[None]:
+    register_effect(BreathingModulation)
+    feature_group_from_effect(BreathingModulation, "the force's size rises and falls with breath")
+    try:
+        yield
+    finally:
+        unregister_feature_group("breathing_modulation")
+        unregister_effect("breathing_modulation")
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_user_written_effect_is_a_candidate(breathing: None, seed: int) -> None:
+    hidden = BreathingModulation(mod_cos_n=100.0, mod_sin_n=50.0)
+    diag = diagnose(_record(seed, effects=[hidden]))
+    assert diag.candidates[0].effect == "breathing_modulation"
+    assert diag.candidates[0].significant
+    assert "breath" in diag.verdict
+    # Without the hidden effect the new candidate raises no alarm.
+    assert not any(c.significant for c in diagnose(_record(seed)).candidates)
+
+
+@pytest.mark.slow
+def test_demo_section_has_the_figures(tmp_path: Path) -> None:
+    from workbench.reporting.criticism import criticism_demo_section
+
+    rec = _record(0, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)])
+    section = criticism_demo_section(rec, tmp_path, seed=0)
+    pngs = sorted(p.name for p in (tmp_path / "figures").glob("*.png"))
+    assert len(pngs) == 5  # overlay, phase, spectrum, state, scoreboard
+    assert "gait_asymmetry" in section.to_markdown()
+
+
+# -- command line ----------------------------------------------------------------------------
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "workbench", *args], capture_output=True, text=True, check=False
+    )
+
+
+@pytest.mark.slow
+def test_cli_diagnose_and_compare(tmp_path: Path) -> None:
+    rec = _record(2, effects=[HeelImpact(impact_n=250.0, decay_s=0.02)])
+    path = tmp_path / "walk.csv"
+    save_record(rec, path)
+    out = _cli("diagnose", str(path), "--json", "--out", str(tmp_path / "rep"))
+    assert out.returncode == 0, out.stderr
+    obj = json.loads(out.stdout)
+    assert set(obj) >= {"baseline", "candidates", "verdict"}
+    first = obj["candidates"][0]
+    assert set(first) >= {
+        "effect",
+        "score",
+        "significant",
+        "evidence",
+        "expected_error_drop",
+        "indistinguishable_from",
+    }
+    assert first["effect"] == "heel_impact"
+    assert Path(obj["report"]).exists()
+    out = _cli("compare", str(path), "--effects", "heel_impact,gait_asymmetry", "--json")
+    assert out.returncode == 0, out.stderr
+    rows = json.loads(out.stdout)["rows"]
+    assert rows[0]["model"] == "baseline"
+    assert len(rows) == 3
+    assert set(rows[0]) >= {"model", "heldout_rmse_n", "fit_percent", "ljung_box_p", "score"}
+    assert rows[1]["heldout_rmse_n"] < rows[0]["heldout_rmse_n"]
+    for args, word in [
+        (("compare", str(path), "--effects", "wobble"), "wobble"),
+        (("diagnose", str(path), "--harmonics", "0"), "--harmonics"),
+        (("compare", str(path), "--effects", ","), "--effects"),
+    ]:
+        bad = _cli(*args)
+        assert bad.returncode == 2
+        assert word in bad.stderr
+        assert "Traceback" not in bad.stderr

@@ -1,0 +1,130 @@
+"""``workbench diagnose`` and ``workbench compare``: model criticism on the command line."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from workbench.errors import UsageError
+
+__all__ = ["add_criticism_parser", "parse_effect_names"]
+
+
+def parse_effect_names(text: str | None) -> list[str]:
+    """Split ``NAME,NAME`` into effect names, checking each is known to criticism.
+
+    Parameters
+    ----------
+    text : str or None
+
+    Returns
+    -------
+    list of str
+    """
+    from workbench.diagnostics.criticism import feature_group
+
+    names = [n.strip() for n in (text or "").split(",") if n.strip()]
+    for name in names:
+        try:
+            feature_group(name)
+        except UsageError as err:
+            raise UsageError(f"--effects {text}: {err}") from None
+    return names
+
+
+def _check_harmonics(args: argparse.Namespace) -> None:
+    if args.harmonics < 1 or args.harmonics > 40:
+        raise UsageError(
+            f"--harmonics {args.harmonics}: the shared force shape needs 1 to 40 harmonics; "
+            "give for example --harmonics 6"
+        )
+
+
+def _prepared(args: argparse.Namespace) -> Any:
+    from workbench.cli import _load
+    from workbench.diagnostics.criticism import prepare
+    from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
+
+    record = _load(args)
+    highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz
+    return prepare(record, highpass_hz=highpass_hz, pacing_hz=args.pacing)
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from workbench.cli import _emit
+    from workbench.diagnostics.criticism import diagnose
+
+    _check_harmonics(args)
+    data = _prepared(args)
+    result = diagnose(data, effects=parse_effect_names(args.effects), harmonics=args.harmonics)
+    obj = result.to_dict()
+    lines = [
+        f"baseline ({obj['baseline']['model']}): held-out RMSE "
+        f"{obj['baseline']['heldout_rmse_n']:.3g} N, fit {obj['baseline']['fit_percent']:.1f} %",
+    ]
+    for c in obj["candidates"]:
+        mark = "*" if c["significant"] else " "
+        lines.append(
+            f"{mark} {c['effect']:<18} score {c['score']:+.3f}  drop "
+            f"{100 * c['expected_error_drop']:5.1f} %  {c['evidence']}"
+        )
+    lines.append(obj["verdict"])
+    if args.out:
+        from workbench.reporting.criticism import write_criticism_report
+
+        obj["report"] = str(write_criticism_report(result, args.out))
+    _emit(args, obj, "\n".join(lines))
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from workbench.cli import _emit
+    from workbench.diagnostics.criticism import compare
+
+    names = parse_effect_names(args.effects)
+    if not names:
+        raise UsageError("compare: --effects needs at least one effect name, e.g. gait_asymmetry")
+    _check_harmonics(args)
+    data = _prepared(args)
+    rows = compare(data, names, harmonics=args.harmonics)
+    obj = {"rows": [r.to_dict() for r in rows]}
+    text = "\n".join(
+        f"{r.model:<50} RMSE {r.heldout_rmse_n:8.3f} N  fit {r.fit_percent:6.1f} %  "
+        f"LB p {r.ljung_box_p:.3g}  score {r.score:.3f}"
+        for r in rows
+    )
+    _emit(args, obj, text)
+    return 0
+
+
+def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
+    """Register the ``diagnose`` and ``compare`` subcommands on the ``workbench`` parser."""
+    from workbench.cli import _record_options
+
+    rec_opts = _record_options()
+    p = sub.add_parser(
+        "diagnose",
+        parents=[out_opts, rec_opts],
+        help="rank candidate effects by the held-out GRF error they would remove",
+        description="Predict held-out steps of the GRF from a force shape shared across "
+        "steps plus K u + C u' (and the current effects), and rank the catalogued effects by "
+        "the held-out error each removes, with a significance decision that respects "
+        "autocorrelation (step-blocked cross-validation).",
+    )
+    p.add_argument("record", help="the record file")
+    p.add_argument("--effects", metavar="NAME,...", help="effects already in the model")
+    p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
+    p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report")
+    p.set_defaults(handler=_cmd_diagnose)
+
+    p = sub.add_parser(
+        "compare",
+        parents=[out_opts, rec_opts],
+        help="scoreboard: held-out error of the baseline and with each effect added",
+        description="Held-out RMSE, fit %, Ljung-Box p and predictive score of the baseline "
+        "and of the baseline with the given effects added one after another.",
+    )
+    p.add_argument("record", help="the record file")
+    p.add_argument("--effects", required=True, metavar="NAME,...", help="effects to add in turn")
+    p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
+    p.set_defaults(handler=_cmd_compare)

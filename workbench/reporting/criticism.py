@@ -1,0 +1,196 @@
+"""Figures and report section of model criticism (``workbench diagnose --out``).
+
+Measured vs predicted GRF, error by gait phase, residual spectrum with the f_p harmonics and
+half-harmonics marked, error against state, and the scoreboard with the error falling.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from workbench.diagnostics.criticism import (
+    Diagnosis,
+    ScoreRow,
+    compare,
+    diagnose,
+    error_by_gait_phase,
+    prepare,
+    residual_spectrum,
+    state_features,
+)
+from workbench.records.record import Record
+from workbench.reporting.document import Report, Section, Table
+from workbench.reporting.figures import save_figure
+
+__all__ = [
+    "criticism_demo_section",
+    "criticism_section",
+    "error_by_phase_figure",
+    "error_vs_state_figure",
+    "overlay_figure",
+    "residual_spectrum_figure",
+    "scoreboard_figure",
+    "write_criticism_report",
+]
+
+
+def overlay_figure(diag: Diagnosis, seconds: float = 6.0) -> Figure:
+    """Measured vs held-out predicted GRF over the first seconds of the kept steps."""
+    d = diag.data
+    sel = d.time_s <= d.time_s[0] + seconds
+    weight = d.mass_kg * 9.81
+    fig = Figure(figsize=(8, 3.2))
+    ax = fig.add_subplot()
+    ax.plot(d.time_s[sel], d.grf_n[sel], lw=1.0, label="measured")
+    ax.plot(d.time_s[sel], diag.prediction_n[sel] + weight, lw=1.0, label="predicted (held out)")
+    ax.plot(d.time_s[sel], diag.residual_n[sel] + weight, lw=0.8, label="error + M g")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("GRF [N]")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def error_by_phase_figure(diag: Diagnosis, bins: int = 20) -> Figure:
+    """RMS error in bins of the step, footfall (0 %) to the next footfall (100 %)."""
+    rms = error_by_gait_phase(diag.data, diag.residual_n, bins)
+    fig = Figure(figsize=(6, 3))
+    ax = fig.add_subplot()
+    ax.bar(100 * (np.arange(bins) + 0.5) / bins, rms, width=100 / bins * 0.9)
+    ax.set_xlabel("gait phase [% of step from footfall]")
+    ax.set_ylabel("held-out RMS error [N]")
+    fig.tight_layout()
+    return fig
+
+
+def residual_spectrum_figure(diag: Diagnosis) -> Figure:
+    """Error spectrum with f_p harmonics (solid) and odd half-harmonics (dashed) marked."""
+    d = diag.data
+    f, p = residual_spectrum(d, diag.residual_n)
+    fmax = min(10.5 * d.pacing_hz, 0.5 * d.sample_rate_hz)
+    fig = Figure(figsize=(7, 3))
+    ax = fig.add_subplot()
+    keep = (f > 0) & (f <= fmax)
+    ax.semilogy(f[keep], p[keep], lw=1.0)
+    for k in range(1, int(fmax / (0.5 * d.pacing_hz)) + 1):
+        style = "-" if k % 2 == 0 else "--"
+        ax.axvline(0.5 * k * d.pacing_hz, color="0.6", ls=style, lw=0.6)
+    ax.set_xlabel("frequency [Hz] (solid: i f_p, dashed: odd multiples of f_p/2)")
+    ax.set_ylabel("error PSD [N^2/Hz]")
+    fig.tight_layout()
+    return fig
+
+
+def error_vs_state_figure(diag: Diagnosis, bins: int = 15) -> Figure:
+    """Mean held-out error in bins of each state quantity (with its correlation)."""
+    feats = state_features(diag.data)
+    fig = Figure(figsize=(3 * len(feats), 2.8))
+    for i, (label, x) in enumerate(feats.items()):
+        ax = fig.add_subplot(1, len(feats), i + 1)
+        edges = np.quantile(x, np.linspace(0, 1, bins + 1))
+        idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, bins - 1)
+        mean = np.bincount(idx, weights=diag.residual_n, minlength=bins) / np.maximum(
+            np.bincount(idx, minlength=bins), 1
+        )
+        centre = 0.5 * (edges[1:] + edges[:-1])
+        ax.plot(centre, mean, "o-", ms=3)
+        r = float(np.corrcoef(x, diag.residual_n)[0, 1]) if np.std(x) > 0 else 0.0
+        ax.set_title(f"r = {r:.2f}", fontsize=8)
+        ax.set_xlabel(label, fontsize=8)
+        if i == 0:
+            ax.set_ylabel("mean error [N]")
+        ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def scoreboard_figure(rows: list[ScoreRow]) -> Figure:
+    """Held-out RMSE per model, baseline first, with the fold-to-fold uncertainty of each drop."""
+    fig = Figure(figsize=(6, 3))
+    ax = fig.add_subplot()
+    x = np.arange(len(rows))
+    rmse = np.array([r.heldout_rmse_n for r in rows])
+    err = np.array(
+        [0.0] + [r.rmse_drop_se * rows[i].heldout_rmse_n for i, r in enumerate(rows[1:])]
+    )
+    ax.errorbar(x, rmse, yerr=err, fmt="o-", capsize=3)
+    ax.set_xticks(x, ["baseline"] + ["+ " + r.model.rsplit(" + ", 1)[-1] for r in rows[1:]])
+    ax.set_ylabel("held-out RMSE [N]")
+    ax.set_ylim(bottom=0)
+    fig.tight_layout()
+    return fig
+
+
+def _rows_table(rows: list[ScoreRow]) -> Table:
+    return Table(
+        ["model", "held-out RMSE [N]", "fit %", "Ljung-Box p", "score"],
+        [
+            [
+                r.model,
+                f"{r.heldout_rmse_n:.3f}",
+                f"{r.fit_percent:.1f}",
+                f"{r.ljung_box_p:.3g}",
+                f"{r.score:.3f}",
+            ]
+            for r in rows
+        ],
+    )
+
+
+def criticism_section(diag: Diagnosis, out_dir: str | Path, key: str) -> Section:
+    """Report section: candidates table, verdict, the four figures and the scoreboard."""
+    out = Path(out_dir)
+    fig_dir = out / "figures"
+    sec = Section(f"Model criticism: {Path(diag.data.source).name}")
+    sec.paragraph(diag.verdict)
+    sec.table(
+        Table(
+            ["effect", "score", "significant", "expected RMSE drop", "evidence"],
+            [
+                [
+                    c.effect,
+                    f"{c.score:+.3f}",
+                    "yes" if c.significant else "no",
+                    f"{100 * c.expected_error_drop:.1f} %",
+                    c.evidence,
+                ]
+                for c in diag.candidates
+            ],
+        )
+    )
+    figs: list[tuple[str, Figure, str]] = [
+        ("overlay", overlay_figure(diag), "Measured and held-out predicted GRF."),
+        ("phase", error_by_phase_figure(diag), "Held-out error by gait phase."),
+        ("spectrum", residual_spectrum_figure(diag), "Spectrum of the held-out error."),
+        ("state", error_vs_state_figure(diag), "Held-out error against state."),
+    ]
+    ranked = [c.effect for c in diag.candidates if c.significant]
+    if ranked:
+        rows = compare(diag.data, [*diag.current_effects, *ranked])
+        sec.table(_rows_table(rows))
+        figs.append(("scoreboard", scoreboard_figure(rows), "Held-out RMSE as effects are added."))
+    for name, fig, caption in figs:
+        path = save_figure(fig, fig_dir / f"{key}_criticism_{name}.png")
+        sec.figure(str(path.relative_to(out)), caption)
+    return sec
+
+
+def write_criticism_report(diag: Diagnosis, out_dir: str | Path) -> Path:
+    """Write an HTML/Markdown report with the criticism section; return its path."""
+    key = "".join(ch if ch.isalnum() else "_" for ch in Path(diag.data.source).stem) or "record"
+    report = Report("Model criticism")
+    report.add(criticism_section(diag, out_dir, key))
+    return report.write(out_dir)
+
+
+def criticism_demo_section(record: Record, out_dir: str | Path, seed: int = 0) -> Section:
+    """Run the criticism loop on one record and return it as a ``workbench demo`` section.
+
+    ``seed`` is accepted for a uniform demo interface; criticism itself uses no randomness.
+    """
+    del seed
+    diag = diagnose(prepare(record))
+    return criticism_section(diag, out_dir, "demo")
