@@ -220,11 +220,24 @@ def test_demo_writes_report(tmp_path, capsys):
     for label in labels:
         assert label in html and label in md
     assert "Camargo" in html and "PhysioNet" in html
-    figures = sorted(p.name for p in (out / "figures").glob("*.png"))
-    assert len(figures) == 4 * len(labels)
+    figures = {p.name for p in (out / "figures").glob("*.png")}
+    for key in ("treadmill", "insole", "synthetic_seed_individual"):
+        for kind in ("grf", "com", "spectrum", "pacing"):
+            assert f"{key}_{kind}.png" in figures
     insole = res["records"][1]
     assert insole["static_balance"] == pytest.approx(1.33, abs=0.03)
     assert insole["warnings"]
+    # The rest of the chain: criticism on a real stretch, sensitivity, and the population
+    # batch ending in the Table-2-style report.
+    assert "Model criticism" in md and "Sensitivity" in md
+    assert any(name.startswith("demo_criticism") for name in figures)
+    pop = res["population"]
+    assert pop["failed"] == 0
+    assert pop["records_used"] + pop["records_excluded"] == pop["records"] > 20
+    table2 = (out / "population" / "table2.csv").read_text()
+    assert "This study" in table2 and "Zhang 2015" in table2
+    assert (out / "population" / "index.html").is_file()
+    assert "Table 2" in md and "This study" in md
 
 
 def test_preprocessed_response_from_rest_matches_inside_the_edge_margin():

@@ -1,9 +1,19 @@
 """``workbench demo``: the main job on the embedded default data, ending in a report.
 
-At this stage the demo loads the embedded real records (treadmill and insole) and the small
-synthetic set, validates, preprocesses and segments them, and writes a report with a summary
-table and, per record, the GRF with footfalls, the COM response, the spectrum with pacing
-harmonics and the instantaneous pacing. Later stages append their own sections.
+The chain, on the embedded real records (treadmill and insole) and the small synthetic set:
+
+1. inspection: every record validated, preprocessed and split into footfall steps (GRF with
+   footfalls, COM response, spectrum with pacing harmonics, instantaneous pacing);
+2. model criticism: the compare-locate-explain-extend-re-score loop on a steady stretch of
+   the treadmill record (``workbench diagnose`` / ``compare``);
+3. sensitivity: a small study of how the filter's settings move the identified parameters on
+   a simulated record with known truth;
+4. population: a subset of the synthetic study plus steady stretches of the two real
+   records identified in batch, the population laws fitted, and the Table-2-style report.
+
+The real stretches (the first steady-pacing plateau of the treadmill record, the first
+30 s of the insole record) keep the demo to minutes: whole records take several minutes
+each (``workbench identify`` does them; ``analyses/individual.py`` does every plateau).
 """
 
 from __future__ import annotations
@@ -14,15 +24,23 @@ from typing import Any
 from tqdm import tqdm
 
 from workbench.datasets import EMBEDDED, embedded_path, synthetic_paths
+from workbench.fileutil import atomic_write_json, atomic_write_text
 from workbench.records.inspection import Inspection, inspect_record
 from workbench.records.io import load_record
-from workbench.reporting.document import Report, Section
+from workbench.records.plateaus import find_pacing_plateaus
+from workbench.records.record import Record
+from workbench.reporting.document import Report, Section, Table
 from workbench.reporting.inspection_report import inspection_section, inspection_summary_table
 
 __all__ = ["run_demo"]
 
 
 Job = tuple[str, str, Path, float | None, str, str]
+
+#: Longest stretch of a real record the demo identifies [s].
+REAL_STRETCH_S = 30.0
+#: Participants (male, female) of the synthetic study subset in the demo.
+DEMO_PARTICIPANTS = (2, 1)
 
 
 def _jobs() -> list[Job]:
@@ -84,24 +102,72 @@ def run_demo(
             "(an instrumented treadmill with speed changes and force-sensing insoles with a "
             "known calibration error) and a small seeded synthetic set. Each record is "
             "validated, turned into a COM response (acceleration from GRF, zero-phase high-pass, "
-            "trapezoidal integration with drift control) and split into footfall steps."
+            "trapezoidal integration with drift control) and split into footfall steps; then "
+            "the model is criticised on a real record, the sensitivity of the identification "
+            "to its settings is measured, and a population of records is identified in batch "
+            "and summarised in the Table-2-style report (population/index.html)."
         ),
     )
     summary = report.add(Section("Summary"))
     inspected: list[tuple[str, Inspection]] = []
     sections: list[Section] = []
     jobs = _jobs()
-    for key, label, path, mass, attribution, display in tqdm(
-        jobs, desc="demo", unit="record", disable=not progress
-    ):
+    stages = tqdm(total=len(jobs) + 3, desc="demo", unit="stage", disable=not progress)
+    records: dict[str, tuple[Record, Inspection]] = {}
+    for key, label, path, mass, attribution, display in jobs:
         record = load_record(path, mass_kg=mass, subject=label).replace(source=display)
         insp = inspect_record(record)
         inspected.append((label, insp))
+        records[key] = (record, insp)
         sections.append(inspection_section(insp, out_dir, key, attribution=attribution))
+        stages.update()
     summary.table(inspection_summary_table(inspected))
     summary.bullets([f"{label}: {w}" for label, insp in inspected for w in insp.warnings])
     for sec in sections:
         report.add(sec)
+
+    # Real stretches: the treadmill's first steady plateau, the insole's first seconds.
+    stretches = _real_stretches(records)
+    from workbench.reporting.criticism import criticism_demo_section
+
+    report.add(criticism_demo_section(stretches["treadmill"], out_dir, seed))
+    stages.update()
+    from workbench.reporting.sensitivity import sensitivity_demo_section
+
+    report.add(sensitivity_demo_section(out_dir, seed))
+    stages.update()
+    from workbench.reporting.population import run_population_demo, table2_rows
+
+    manifest = _write_stretches(stretches, out_dir / "population" / "real_stretches")
+    population = run_population_demo(
+        out_dir / "population",
+        seed,
+        participants=DEMO_PARTICIPANTS,
+        include_real=True,
+        real_manifest=manifest,
+    )
+    stages.update()
+    stages.close()
+    pop = report.add(Section("Population laws and Table 2"))
+    pop.paragraph(
+        f"{population['records']} records identified in batch ({population['records_used']} "
+        f"used for the laws, {population['records_excluded']} excluded as not identified, "
+        f"{population['failed']} failed). The full report with figures like the seed's "
+        "figs. 11-14 and the tables as CSV: population/index.html."
+    )
+    fit_summary = {
+        "laws": population["laws"],
+        "ranges_at_pacing_hz": _load_json(out_dir / "population" / "population.json")[
+            "ranges_at_pacing_hz"
+        ],
+    }
+    pop.table(
+        Table(
+            ["study", "posture", "natural frequency (Hz)", "damping ratio"],
+            table2_rows(fit_summary),
+            caption="Seed Table 2 beside the laws fitted here",
+        )
+    )
     html_path = report.write(out_dir)
 
     lines = [
@@ -112,10 +178,61 @@ def run_demo(
             f"{label:<32}{insp.pacing.pacing_hz:>10.3f}{insp.steps.n_steps:>7d}"
             f"{insp.static_balance_raw:>9.3f}  {len(insp.warnings)}"
         )
+    lines.append(population["text"])
     lines.append(f"Report written to {html_path} (and report.md beside it).")
+    lines.append(f"Table-2-style population report: {population['report']}")
     return {
         "report": str(html_path),
+        "population_report": str(population["report"]),
         "seed": seed,
         "records": [dict(insp.to_json(), label=label) for label, insp in inspected],
+        "population": {
+            k: population[k] for k in ("records", "records_used", "records_excluded", "failed")
+        },
         "text": "\n".join(lines),
     }
+
+
+def _real_stretches(records: dict[str, tuple[Record, Inspection]]) -> dict[str, Record]:
+    """Steady stretches of the real records, at most :data:`REAL_STRETCH_S` long."""
+    out: dict[str, Record] = {}
+    record, insp = records["treadmill"]
+    plateaus = find_pacing_plateaus(insp.steps)
+    if plateaus:
+        plateau = plateaus[0]
+        half_step = 0.5 / plateau.pacing_hz
+        start = plateau.start_s - half_step
+        stop = min(plateau.stop_s + half_step, start + REAL_STRETCH_S)
+    else:  # no steady stretch: the record's start
+        start, stop = float(record.time_s[0]), float(record.time_s[0]) + REAL_STRETCH_S
+    out["treadmill"] = record.slice_time(start, stop)
+    record, _ = records["insole"]
+    t0 = float(record.time_s[0])
+    out["insole"] = record.slice_time(t0, t0 + REAL_STRETCH_S)
+    return out
+
+
+def _write_stretches(stretches: dict[str, Record], folder: Path) -> Path:
+    """Write the stretches as CSV records with JSON sidecars and return their manifest."""
+    import pandas as pd
+
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for key, rec in stretches.items():
+        path = folder / f"{key}.csv"
+        frame = pd.DataFrame({"time": rec.time_s, "grf": rec.grf_n})
+        atomic_write_text(path, frame.to_csv(index=False))
+        atomic_write_json(
+            path.with_suffix(".json"),
+            {"mass_kg": rec.require_mass(), "subject": key, "notes": EMBEDDED[key].attribution},
+        )
+        rows.append(f"{path.name},{rec.require_mass()}")
+    manifest = folder / "manifest.csv"
+    atomic_write_text(manifest, "path,mass_kg\n" + "\n".join(rows) + "\n")
+    return manifest
+
+
+def _load_json(path: Path) -> Any:
+    import json
+
+    return json.loads(path.read_text())

@@ -417,6 +417,7 @@ def run_population_demo(
     *,
     participants: tuple[int, int] = (4, 2),
     include_real: bool = True,
+    real_manifest: str | Path | None = None,
     workers: int = 1,
     progress: bool = False,
 ) -> dict[str, Any]:
@@ -438,6 +439,9 @@ def run_population_demo(
         Male and female participants of the subset.
     include_real : bool
         Also identify the embedded real records (slower: minutes).
+    real_manifest : path-like, optional
+        With ``include_real``, a manifest of real records to identify instead of the whole
+        embedded records (``workbench demo`` passes steady segments of them).
     workers : int
         Local worker processes of the batches.
     progress : bool
@@ -470,16 +474,22 @@ def run_population_demo(
         )
     }
     frames = [pd.read_csv(batch_dir / "results.csv")]
+    whole_records = True
     if include_real:
-        from workbench.datasets import embedded_path
+        from workbench.datasets import EMBEDDED, embedded_path
 
-        real_dir = out / "real"
-        real_dir.mkdir(parents=True, exist_ok=True)
-        rows = [str(embedded_path(k)) for k in ("treadmill", "insole")]
-        atomic_write_text(real_dir / "manifest.csv", "path\n" + "\n".join(rows) + "\n")
+        whole_records = real_manifest is None
+        if real_manifest is None:
+            real_dir = out / "real"
+            real_dir.mkdir(parents=True, exist_ok=True)
+            rows = [
+                f"{embedded_path(k)},{EMBEDDED[k].mass_kg}" for k in ("treadmill", "insole")
+            ]
+            real_manifest = real_dir / "manifest.csv"
+            atomic_write_text(real_manifest, "path,mass_kg\n" + "\n".join(rows) + "\n")
         real_batch = out / "batch_real"
         summaries["real"] = run_batch(
-            real_dir / "manifest.csv",
+            real_manifest,
             real_batch,
             settings=IdentifySettings(seed=seed),
             workers=workers,
@@ -502,8 +512,13 @@ def run_population_demo(
     ]
     if include_real:
         notes.append(
-            "Real records: the embedded treadmill and insole records, identified "
-            "per footfall step with the default settings."
+            "Real records: "
+            + (
+                "the embedded treadmill and insole records"
+                if whole_records
+                else "steady stretches of the embedded treadmill and insole records"
+            )
+            + ", identified per footfall step with the default settings."
         )
     files = population_report(results, fit, out, notes=notes)
     fn = fit.summary["laws"]["natural_frequency_hz"]
