@@ -14,10 +14,7 @@ workers or on where the chunks run.
 
 from __future__ import annotations
 
-import multiprocessing
-import os
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -32,6 +29,7 @@ from workbench.hsi.modes import apparent_structure_modes
 from workbench.hsi.pedestrians import PedestrianSampler, validate_pedestrians
 from workbench.hsi.simulate import CrowdBatch, Model, integrate
 from workbench.hsi.structure import ModalStructure
+from workbench.population.engine import run_tasks
 
 __all__ = ["CrossingSpec", "crossing_metrics", "draw_crossing", "run_monte_carlo"]
 
@@ -219,6 +217,10 @@ def _run_chunk(spec: CrossingSpec, seed: int, indices: Sequence[int]) -> pd.Data
     return out
 
 
+def _run_chunk_task(task: tuple[CrossingSpec, int, Sequence[int]]) -> pd.DataFrame:
+    return _run_chunk(*task)
+
+
 def run_monte_carlo(
     spec: CrossingSpec,
     n_crossings: int,
@@ -264,54 +266,17 @@ def run_monte_carlo(
         list(range(i, min(i + chunk_size, n_crossings))) for i in range(0, n_crossings, chunk_size)
     ]
     results: list[pd.DataFrame] = []
-    bar = tqdm(total=n_crossings, disable=not progress, unit="crossing", desc="hsi")
-    try:
-        if scheduler is not None:
-            results = _run_dask(spec, seed, chunks, scheduler, bar.update)
-        elif workers == 1 or len(chunks) == 1:
-            for c in chunks:
-                results.append(_run_chunk(spec, seed, c))
-                bar.update(len(c))
-        else:
-            # Spawned workers share no state (threads, generators) with this process.
-            ctx = multiprocessing.get_context("spawn")
-            n_proc = min(workers, os.cpu_count() or 1, len(chunks))
-            with ProcessPoolExecutor(max_workers=n_proc, mp_context=ctx) as pool:
-                futs = [pool.submit(_run_chunk, spec, seed, c) for c in chunks]
-                for f, c in zip(futs, chunks, strict=True):
-                    results.append(f.result())
-                    bar.update(len(c))
-    finally:
-        bar.close()
+    tasks = [(spec, seed, c) for c in chunks]
+    # The batch engine's executor: this process, a spawned local pool or a Dask cluster.
+    runs = run_tasks(
+        _run_chunk_task,
+        tasks,
+        workers=min(int(workers), len(chunks)),
+        scheduler=scheduler,
+        keys=[f"workbench-hsi-{seed}-{c[0]}-{c[-1]}" for c in chunks],
+    )
+    with tqdm(total=n_crossings, disable=not progress, unit="crossing", desc="hsi") as bar:
+        for frame in runs:
+            results.append(frame)
+            bar.update(len(frame))
     return pd.concat(results, ignore_index=True).sort_values("crossing", ignore_index=True)
-
-
-def _run_dask(
-    spec: CrossingSpec,
-    seed: int,
-    chunks: list[list[int]],
-    scheduler: str,
-    update: Callable[[int], Any],
-) -> list[pd.DataFrame]:
-    try:
-        from distributed import Client
-    except ImportError:
-        raise UsageError(
-            "--scheduler needs Dask distributed; install the workbench with the 'dask' extra"
-        ) from None
-    try:
-        client = Client(scheduler, timeout=10, set_as_default=False)
-    except (OSError, TimeoutError) as err:
-        raise UsageError(
-            f"could not reach the Dask scheduler at {scheduler} ({err}); start it or check "
-            "the address"
-        ) from None
-    try:
-        futs = client.map(
-            _run_chunk, [spec] * len(chunks), [seed] * len(chunks), chunks, pure=False
-        )
-        out = client.gather(futs)
-        update(sum(len(c) for c in chunks))
-        return list(out)
-    finally:
-        client.close()

@@ -44,7 +44,7 @@ import os
 import re
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,6 +54,7 @@ import pandas as pd
 from workbench.errors import UsageError, WorkbenchError
 from workbench.fileutil import atomic_path, atomic_write_json
 from workbench.inference.settings import IdentifySettings
+from workbench.population.engine import run_tasks
 
 __all__ = [
     "FAILURE_COLUMNS",
@@ -274,47 +275,6 @@ def run_task(task: BatchTask) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------------------------
-# executors: each yields task results as they finish
-# ---------------------------------------------------------------------------------------------
-def _run_serial(tasks: list[BatchTask]) -> Iterator[dict[str, Any]]:
-    for task in tasks:
-        yield run_task(task)
-
-
-def _run_pool(tasks: list[BatchTask], workers: int) -> Iterator[dict[str, Any]]:
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(run_task, t) for t in tasks]
-        for fut in as_completed(futures):
-            yield fut.result()
-
-
-def _run_dask(tasks: list[BatchTask], address: str) -> Iterator[dict[str, Any]]:
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise UsageError(
-            "--scheduler needs Dask distributed; install it with pip install 'workbench[dask]'"
-        ) from None
-    try:
-        client = Client(address, timeout="20s")
-    except (OSError, TimeoutError) as err:
-        raise UsageError(
-            f"--scheduler {address}: cannot reach a Dask scheduler there ({err}); start one "
-            "(dask scheduler) or check the address"
-        ) from None
-    try:
-        futures = client.map(run_task, tasks, key=[f"workbench-batch-{t.key}" for t in tasks])
-        for fut in as_completed(futures):
-            yield fut.result()
-    finally:
-        client.close()
-
-
-# ---------------------------------------------------------------------------------------------
 def _read_json(p: Path) -> dict[str, Any] | None:
     try:
         obj = json.loads(p.read_text(encoding="utf-8"))
@@ -440,15 +400,13 @@ def run_batch(
             )
         )
 
-    results: Iterable[dict[str, Any]]
-    if not tasks:
-        results = []
-    elif scheduler:
-        results = _run_dask(tasks, scheduler)
-    elif workers == 1 or len(tasks) == 1:
-        results = _run_serial(tasks)
-    else:
-        results = _run_pool(tasks, min(int(workers), len(tasks)))
+    results: Iterable[dict[str, Any]] = run_tasks(
+        run_task,
+        tasks,
+        workers=min(int(workers), max(len(tasks), 1)),
+        scheduler=scheduler,
+        keys=[f"workbench-batch-{t.key}" for t in tasks],
+    )
     done = 0
     bar = tqdm(total=len(tasks), desc="batch", unit="record", disable=not progress)
     try:

@@ -1,12 +1,11 @@
 """Run a sensitivity design: one identification per record, design point and replicate.
 
-Execution follows the batch engine's conventions (:mod:`workbench.population.batch`): in
+Execution goes through the batch engine's executor (:mod:`workbench.population.engine`): in
 this process for one worker, a local process pool (``spawn`` start method) for more, a Dask
-distributed cluster when a scheduler address is given. The batch engine's own entry point
-identifies a record with one :class:`IdentifySettings`; a design point also changes what the
-settings do not name (prior box, random walks of C and K, per-channel observation noise),
-so the study submits its own picklable tasks through a small executor of the same shape,
-and reuses the batch engine's :func:`~workbench.population.batch.result_row` for the row.
+distributed cluster when a scheduler address is given. A design point changes more than an
+:class:`IdentifySettings` names (prior box, random walks of C and K, per-channel observation
+noise), so the study submits its own picklable tasks, and reuses the batch engine's
+:func:`~workbench.population.batch.result_row` for the row.
 
 Determinism: each run's seed is :func:`~workbench.sensitivity.design.point_seed` of the
 study seed, the record, the point and the replicate, and the rows are sorted by those keys
@@ -17,12 +16,13 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from workbench.errors import UsageError, WorkbenchError
 from workbench.inference.settings import IdentifySettings
+from workbench.population.engine import run_tasks as run_engine_tasks
 from workbench.records.record import Record
 from workbench.sensitivity.design import DesignPoint, Overrides, point_seed
 
@@ -120,48 +120,6 @@ def run_task(task: SensitivityTask) -> dict[str, Any]:
     return out
 
 
-def _serial(tasks: list[SensitivityTask]) -> Iterator[dict[str, Any]]:
-    for t in tasks:
-        yield run_task(t)
-
-
-def _pool(tasks: list[SensitivityTask], workers: int) -> Iterator[dict[str, Any]]:
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(run_task, t) for t in tasks]
-        for fut in as_completed(futures):
-            yield fut.result()
-
-
-def _dask(tasks: list[SensitivityTask], address: str) -> Iterator[dict[str, Any]]:
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise UsageError(
-            "--scheduler needs Dask distributed; install it with pip install 'workbench[dask]'"
-        ) from None
-    try:
-        client = Client(address, timeout="20s")
-    except (OSError, TimeoutError) as err:
-        raise UsageError(
-            f"--scheduler {address}: cannot reach a Dask scheduler there ({err}); start one "
-            "(dask scheduler) or check the address"
-        ) from None
-    try:
-        keys = [
-            f"workbench-sensitivity-{t.record_key}-{t.point_key}-{t.replicate}-{t.seed}"
-            for t in tasks
-        ]
-        futures = client.map(run_task, tasks, key=keys)
-        for fut in as_completed(futures):
-            yield fut.result()
-    finally:
-        client.close()
-
-
 def run_tasks(
     tasks: list[SensitivityTask],
     *,
@@ -186,14 +144,16 @@ def run_tasks(
     -------
     list of dict
     """
-    if workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {workers}")
-    if scheduler:
-        it = _dask(tasks, scheduler)
-    elif workers > 1 and len(tasks) > 1:
-        it = _pool(tasks, workers)
-    else:
-        it = _serial(tasks)
+    it = run_engine_tasks(
+        run_task,
+        tasks,
+        workers=workers,
+        scheduler=scheduler,
+        keys=[
+            f"workbench-sensitivity-{t.record_key}-{t.point_key}-{t.replicate}-{t.seed}"
+            for t in tasks
+        ],
+    )
     if progress:
         from tqdm import tqdm
 
