@@ -26,8 +26,9 @@ methods handle that (:func:`with_effects`):
 1. *conditional posterior*: for any (C, K) the log-likelihood is exactly quadratic in
    ``beta``; evaluating the exact Kalman likelihood
    (:func:`~workbench.inference.kalman.record_loglik`) with ``beta`` held at
-   ``1 + 2 d + d (d - 1) / 2`` points recovers the quadratic, hence the Gaussian conditional posterior ``p(beta | y, C, K)`` under the prior ``N(0, diag(s^2))``
-   and the marginal likelihood with ``beta`` integrated out (:func:`conditional_effects`);
+   ``1 + 2 d + d (d - 1) / 2`` points recovers the quadratic, hence the Gaussian
+   conditional posterior ``p(beta | y, C, K)`` under the prior ``N(0, diag(s^2))`` and the
+   marginal likelihood with ``beta`` integrated out (:func:`conditional_effects`);
 2. *pilot*: the marginal likelihood on successively zoomed 9 x 9 grids of (C, K) (until the
    spacing resolves the peak) gives a mixture posterior of ``beta``;
 3. the chosen method (rbpf, pf or exact) runs on the problem whose basis carries the columns
