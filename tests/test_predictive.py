@@ -86,3 +86,33 @@ def test_attach_to_diagnosis_adds_the_baseline_keys():
     # first samples of a step are predicted without a force: the residual peaks there.
     start = result.problem.piece_start_mask
     assert np.mean(np.abs(one.residual_n[start])) > 3 * np.mean(np.abs(one.residual_n[~start]))
+
+
+# -- posterior-predictive replicates ----------------------------------------------------------
+def _asymmetry_check(asymmetric: bool):
+    from workbench.diagnostics.posterior_predictive import posterior_predictive
+    from workbench.models.effects import GaitAsymmetry
+
+    effects = [GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)] if asymmetric else []
+    sim = simulate_walking(
+        duration_s=15.0, sample_rate_hz=100.0, effects=effects, seed=4, noise_sd_n=3.0
+    )
+    result = identify(
+        sim.record,
+        IdentifySettings(particles=16, harmonics=6, obs_noise="seed", force_check=False),
+    )
+    return posterior_predictive(result, replicates=49, seed=0)
+
+
+def test_posterior_predictive_flags_hidden_gait_asymmetry():
+    """Left and right steps that differ: the sub-harmonic line and the odd/even contrast are
+    larger than in every replicate (p = 1/50); without the asymmetry neither p is small."""
+    with_asym = _asymmetry_check(True)
+    without = _asymmetry_check(False)
+    assert with_asym.p_value["subharmonic_power"] <= 0.04, with_asym.to_dict()
+    assert with_asym.p_value["odd_even_contrast_n"] <= 0.04, with_asym.to_dict()
+    assert without.p_value["subharmonic_power"] >= 0.3, without.to_dict()
+    assert without.p_value["odd_even_contrast_n"] >= 0.3, without.to_dict()
+    obj = with_asym.to_dict()
+    assert obj["replicates"] == 49 and len(obj["error_by_phase_n"]) == 20
+    assert obj["subharmonic_power"]["observed"] > obj["subharmonic_power"]["replicate_95"]
