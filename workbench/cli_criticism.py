@@ -11,6 +11,8 @@ __all__ = ["add_criticism_parser", "parse_effect_names"]
 
 #: Particles of the identification behind diagnose's one-step-ahead residuals.
 ONE_STEP_PARTICLES = 64
+#: Replicate records of the posterior-predictive check in diagnose.
+ONE_STEP_REPLICATES = 99
 
 
 def parse_effect_names(text: str | None) -> list[str]:
@@ -61,9 +63,10 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     data = _prepared(args)
     names = parse_effect_names(args.effects)
     result = diagnose(data, effects=names, harmonics=args.harmonics)
-    if not args.no_one_step:
-        _one_step(args, result, names)
+    check = _one_step(args, result, names) if not args.no_one_step else None
     obj = result.to_dict()
+    if check is not None:
+        obj["posterior_predictive"] = check
     lines = [
         f"baseline ({obj['baseline']['model']}): held-out RMSE "
         f"{obj['baseline']['heldout_rmse_n']:.3g} N, fit {obj['baseline']['fit_percent']:.1f} %",
@@ -73,6 +76,12 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             f"one-step-ahead (identified model): RMSE {result.one_step.rmse_n:.3g} N, "
             f"Ljung-Box p {result.one_step.ljung_box_p:.3g}, log score "
             f"{result.one_step.log_score:.3f} nats/sample"
+        )
+    if check is not None:
+        lines.append(
+            "posterior-predictive p: sub-harmonic lines "
+            f"{check['subharmonic_power']['p_value']:.3g}, odd/even contrast "
+            f"{check['odd_even_contrast_n']['p_value']:.3g}"
         )
     for c in obj["candidates"]:
         mark = "*" if c["significant"] else " "
@@ -89,9 +98,13 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
-def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> None:
-    """Identify the record (rbpf) and attach the one-step-ahead residuals to the diagnosis."""
+def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str, Any]:
+    """Identify the record (rbpf), attach one-step-ahead residuals, run the replicate check.
+
+    Returns the posterior-predictive check's JSON object.
+    """
     from workbench.cli import _load
+    from workbench.diagnostics.posterior_predictive import posterior_predictive
     from workbench.diagnostics.predictive import attach_one_step, one_step_from_result
     from workbench.inference.identify import identify
     from workbench.inference.settings import IdentifySettings
@@ -107,6 +120,7 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> None:
         settings = settings.replace(highpass_hz=args.highpass_hz)
     result = identify(_load(args), settings)
     attach_one_step(diag, one_step_from_result(result))
+    return posterior_predictive(result, replicates=ONE_STEP_REPLICATES).to_dict()
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
@@ -150,7 +164,8 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-one-step",
         action="store_true",
-        help="skip the identification (rbpf) behind the one-step-ahead predictive residuals",
+        help="skip the identification (rbpf) behind the one-step-ahead predictive residuals "
+        "and the posterior-predictive check",
     )
     p.set_defaults(handler=_cmd_diagnose)
 
