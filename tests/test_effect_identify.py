@@ -147,3 +147,47 @@ def test_unknown_effect_is_one_sentence(walk_csv, capsys):
     assert "wobble" in err and "Traceback" not in err
     with pytest.raises(UsageError):
         IdentifySettings(effects=("cubic_stiffness", "cubic_stiffness"))
+
+
+def test_effect_columns_of_the_catalogue(walk_csv):
+    """Every catalogue effect gives named columns; state-acting ones use the observed u, u'."""
+    from workbench.inference.identify import problem_from_inspection
+    from workbench.models.effects import (
+        BaseMotion,
+        GaitAsymmetry,
+        HeelImpact,
+        PacingDrift,
+        QuadraticDamping,
+        StiffnessDrift,
+    )
+    from workbench.records.inspection import inspect_record
+    from workbench.records.io import load_record
+
+    rec = load_record(walk_csv)
+    problem = problem_from_inspection(inspect_record(rec), IdentifySettings(harmonics=4))
+    u, v, t = problem.y[:, 0], problem.y[:, 1], problem.time_s
+    ground = 0.5 * np.sin(2 * np.pi * 2.7 * t)
+    effects = [
+        GaitAsymmetry(),
+        CubicStiffness(),
+        QuadraticDamping(),
+        HeelImpact(decay_s=0.02),
+        PacingDrift(),
+        StiffnessDrift(),
+        BaseMotion(),
+    ]
+    terms = effect_terms(problem, effects, ground_acc_m_s2=ground)
+    assert terms.columns.shape == (problem.n_samples, 4 + 1 + 1 + 1 + 4 + 2 + 2)
+    assert terms.names[4] == "cubic_stiffness.k3_n_per_m3"
+    assert terms.names[6] == "heel_impact.impact_n"
+    # Force columns are minus the left-hand-side terms.
+    np.testing.assert_allclose(terms.columns[:, 4], -(u**3))
+    np.testing.assert_allclose(terms.columns[:, 5], -np.abs(v) * v)
+    np.testing.assert_allclose(terms.columns[:, 11:13], -np.column_stack([t * u, t * v]))
+    # The heel pulse peaks (at 1) decay_s after every footfall of the problem's steps.
+    first = problem.piece_starts[1]
+    lag = round(0.02 / problem.dt_s)
+    assert terms.columns[first + lag, 6] == pytest.approx(1.0, abs=1e-9)
+    assert np.all(terms.prior_sd > 0)
+    with pytest.raises(UsageError, match="ground"):
+        effect_terms(problem, [BaseMotion()])
