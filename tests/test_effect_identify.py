@@ -50,15 +50,25 @@ def _seed_problem(k3_n_per_m3: float):
     return problem, truth
 
 
+_AUGMENTED: dict[float, tuple] = {}
+
+
+def _augmented(k3: float):
+    """Problem, truth, effect terms and augmented problem, built once per k3 for this module."""
+    if k3 not in _AUGMENTED:
+        problem, truth = _seed_problem(k3)
+        terms = effect_terms(problem, [CubicStiffness()])
+        _AUGMENTED[k3] = (problem, truth, terms, with_effects(problem, terms)[0])
+    return _AUGMENTED[k3]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("k3", [2e6, 0.0])
 def test_exact_with_cubic_stiffness_recovers_k3_and_keeps_c_k(k3):
     """A cubic spring (k3 u^2 about 10 % of K) is recovered within 4 sd and 1 %; C and K stay
     in their bands. With no cubic spring the 95 % band of k3 holds 0."""
-    problem, truth = _seed_problem(k3)
-    terms = effect_terms(problem, [CubicStiffness()])
+    problem, truth, terms, augmented = _augmented(k3)
     assert terms.names == ("cubic_stiffness.k3_n_per_m3",)
-    augmented, _ = with_effects(problem, terms)
     assert augmented.coefficient_names[-1] == "cubic_stiffness.k3_n_per_m3"
     post = exact_posterior(augmented)
     msg = f"C, K {post.mean} +- {post.sd}, truth {truth}"
@@ -80,16 +90,11 @@ def test_exact_with_cubic_stiffness_recovers_k3_and_keeps_c_k(k3):
 @pytest.mark.slow
 def test_rbpf_accepts_effect_columns():
     """The Rao-Blackwellised filter runs on the augmented basis and reports every column."""
-    problem, _ = _seed_problem(2e6)
-    problem = problem.with_prior(
-        type(problem.prior)((800.0, 1100.0), (17000.0, 20000.0), label="narrow")
-    )
-    terms = effect_terms(problem, [CubicStiffness()])
-    augmented, pilot = with_effects(problem, terms)
+    _, _, _, augmented = _augmented(2e6)
     out = run_rbpf(augmented, n_particles=32, seed=1)
     assert out.piece_coefficients_mean.shape == (1, 22)
     k3 = out.piece_coefficients_mean[0, -1]
-    assert abs(k3 / 2e6 - 1) < 0.02, (k3, pilot)
+    assert abs(k3 / 2e6 - 1) < 0.02, k3
 
 
 @pytest.fixture(scope="module")
