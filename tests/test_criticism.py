@@ -345,6 +345,12 @@ def test_cli_diagnose_and_compare(tmp_path: Path) -> None:
     }
     assert first["effect"] == "heel_impact"
     assert Path(obj["report"]).exists()
+    # One-step-ahead residuals of the identified model join the baseline, and the report.
+    assert obj["baseline"]["one_step_rmse_n"] > 0
+    assert 0.0 <= obj["baseline"]["one_step_ljung_box_p"] <= 1.0
+    assert (tmp_path / "rep" / "figures" / "walk_criticism_one_step.png").exists()
+    check = obj["posterior_predictive"]
+    assert 0.0 < check["subharmonic_power"]["p_value"] <= 1.0
     out = _cli("compare", str(path), "--effects", "heel_impact,gait_asymmetry", "--json")
     assert out.returncode == 0, out.stderr
     rows = json.loads(out.stdout)["rows"]

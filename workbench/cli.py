@@ -188,6 +188,7 @@ def _identify_settings(args: argparse.Namespace) -> Any:
         "observe": args.observe,
         "force_proposal": args.force_proposal,
         "force_check": False if args.no_force_check else None,
+        "effects": getattr(args, "effects", None),
     }
     if args.config:
         return IdentifySettings.from_toml(args.config, **overrides)
@@ -327,6 +328,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-force-check",
         action="store_true",
         help="skip the check that C and K do not depend on the force model (saves time)",
+    )
+    p.add_argument(
+        "--effects",
+        metavar="NAME,...",
+        help="effects to identify with the model (e.g. gait_asymmetry,cubic_stiffness); their "
+        "coefficients are shared by the whole record and reported under 'effects'",
     )
     p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
     p.add_argument("--seed", type=int, help="random seed (default 0)")

@@ -9,6 +9,11 @@ from workbench.errors import UsageError
 
 __all__ = ["add_criticism_parser", "parse_effect_names"]
 
+#: Particles of the identification behind diagnose's one-step-ahead residuals.
+ONE_STEP_PARTICLES = 64
+#: Replicate records of the posterior-predictive check in diagnose.
+ONE_STEP_REPLICATES = 99
+
 
 def parse_effect_names(text: str | None) -> list[str]:
     """Split ``NAME,NAME`` into effect names, checking each is known to criticism.
@@ -56,12 +61,28 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
     _check_harmonics(args)
     data = _prepared(args)
-    result = diagnose(data, effects=parse_effect_names(args.effects), harmonics=args.harmonics)
+    names = parse_effect_names(args.effects)
+    result = diagnose(data, effects=names, harmonics=args.harmonics)
+    check = _one_step(args, result, names) if not args.no_one_step else None
     obj = result.to_dict()
+    if check is not None:
+        obj["posterior_predictive"] = check
     lines = [
         f"baseline ({obj['baseline']['model']}): held-out RMSE "
         f"{obj['baseline']['heldout_rmse_n']:.3g} N, fit {obj['baseline']['fit_percent']:.1f} %",
     ]
+    if result.one_step is not None:
+        lines.append(
+            f"one-step-ahead (identified model): RMSE {result.one_step.rmse_n:.3g} N, "
+            f"Ljung-Box p {result.one_step.ljung_box_p:.3g}, log score "
+            f"{result.one_step.log_score:.3f} nats/sample"
+        )
+    if check is not None:
+        lines.append(
+            "posterior-predictive p: sub-harmonic lines "
+            f"{check['subharmonic_power']['p_value']:.3g}, odd/even contrast "
+            f"{check['odd_even_contrast_n']['p_value']:.3g}"
+        )
     for c in obj["candidates"]:
         mark = "*" if c["significant"] else " "
         lines.append(
@@ -75,6 +96,31 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         obj["report"] = str(write_criticism_report(result, args.out))
     _emit(args, obj, "\n".join(lines))
     return 0
+
+
+def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str, Any]:
+    """Identify the record (rbpf), attach one-step-ahead residuals, run the replicate check.
+
+    Returns the posterior-predictive check's JSON object.
+    """
+    from workbench.cli import _load
+    from workbench.diagnostics.posterior_predictive import posterior_predictive
+    from workbench.diagnostics.predictive import attach_one_step, one_step_from_result
+    from workbench.inference.identify import identify
+    from workbench.inference.settings import IdentifySettings
+    from workbench.models.effects import available_effects
+
+    settings = IdentifySettings(
+        method="rbpf",
+        particles=ONE_STEP_PARTICLES,
+        force_check=False,
+        effects=tuple(n for n in names if n in available_effects()),
+    )
+    if args.highpass_hz is not None:
+        settings = settings.replace(highpass_hz=args.highpass_hz)
+    result = identify(_load(args), settings)
+    attach_one_step(diag, one_step_from_result(result))
+    return posterior_predictive(result, replicates=ONE_STEP_REPLICATES).to_dict()
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
@@ -115,6 +161,12 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--effects", metavar="NAME,...", help="effects already in the model")
     p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report")
+    p.add_argument(
+        "--no-one-step",
+        action="store_true",
+        help="skip the identification (rbpf) behind the one-step-ahead predictive residuals "
+        "and the posterior-predictive check",
+    )
     p.set_defaults(handler=_cmd_diagnose)
 
     p = sub.add_parser(

@@ -858,6 +858,9 @@ class Diagnosis:
     residual_n: FloatArray
     prediction_n: FloatArray
     current_effects: tuple[str, ...] = ()
+    #: One-step-ahead residuals of an identified model
+    #: (:func:`workbench.diagnostics.predictive.attach_one_step`), or None.
+    one_step: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         """Return the JSON object of ``workbench diagnose``."""

@@ -9,6 +9,9 @@ steps, with the decisions they take:
 3. set the observation noise (``auto``: maximum marginal likelihood, the default; ``seed``:
    10 % of the RMS of u, u', u''; or a fraction);
 4. run ``rbpf`` (default), ``pf`` (seed-faithful) or ``exact``;
+   with ``settings.effects``, the effects' columns join the force basis as coefficients shared
+   by the whole record (:mod:`workbench.inference.effect_terms`), and the result's
+   ``extra["effects"]`` (``--json`` ``effects``) reports their posterior;
 5. assess identifiability from the posterior: contraction against the prior, C-K correlation
    and the joint correlation of C and K with the force coefficients (for the filters this
    uses the Kalman conditional posterior of the coefficients at a subsample of particles).
@@ -245,12 +248,38 @@ def identify(
     problem, info = _set_noise(problem, settings)
     if adjust_noise is not None:
         problem = adjust_noise(problem)
+    base = problem
+    terms = None
+    if settings.effects:
+        from workbench.inference.effect_terms import effect_terms, with_effects
+
+        terms = effect_terms(
+            problem,
+            list(settings.effects),
+            ground_acc_m_s2=_ground_on(insp, problem),
+            highpass_hz=settings.highpass_hz,
+        )
+        problem, pilot = with_effects(problem, terms)
     result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
     result.extra["inspection_warnings"] = list(insp.warnings)
+    if terms is not None:
+        from workbench.inference.effect_terms import effect_posterior
+
+        post = effect_posterior(base, terms, result.draws, result.weights, seed=settings.seed)
+        post["pilot"] = pilot
+        result.extra["effects"] = post
     if settings.force_check:
         apply_force_model_check(result, problem)
     _downgrade_untrustworthy(result)
     return result
+
+
+def _ground_on(insp: Inspection, problem: IdentificationProblem) -> Any:
+    """Return the record's ground acceleration on the problem's samples, or None."""
+    rec = insp.record
+    if rec.ground_acc_m_s2 is None:
+        return None
+    return np.interp(problem.time_s, rec.time_s, rec.ground_acc_m_s2)
 
 
 def apply_force_model_check(result: IdentificationResult, problem: IdentificationProblem) -> None:

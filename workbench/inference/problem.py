@@ -184,8 +184,9 @@ class ForcePrior:
     def __post_init__(self) -> None:
         mean = np.asarray(self.mean_n, dtype=np.float64)
         sd = np.asarray(self.sd_n, dtype=np.float64)
-        if mean.shape != sd.shape or mean.ndim != 1 or mean.size % 2 != 1:
-            raise UsageError("ForcePrior needs mean_n and sd_n of equal odd length 2 n + 1")
+        # Odd length 2 n + 1 for a Fourier force; effect columns may follow (effect_terms).
+        if mean.shape != sd.shape or mean.ndim != 1 or mean.size < 1:
+            raise UsageError("ForcePrior needs mean_n and sd_n of equal length 2 n + 1 (+ effects)")
         if not (np.all(np.isfinite(sd)) and np.all(sd > 0)):
             raise UsageError("ForcePrior standard deviations must be positive and finite")
         object.__setattr__(self, "mean_n", mean)
@@ -289,6 +290,9 @@ class IdentificationProblem:
     observe : {"all", "acc"}
         Channels the likelihood uses (:data:`OBSERVED_CHANNELS`); an unobserved channel's
         noise sd is :data:`UNOBSERVED_SD_FACTOR` times its RMS.
+    effect_names : tuple of str
+        Names of effect columns that follow the ``2 n + 1`` Fourier columns of ``basis``
+        (:mod:`workbench.inference.effect_terms`); empty without effects.
     """
 
     mass_kg: float
@@ -307,6 +311,7 @@ class IdentificationProblem:
     source: str = "<memory>"
     rms: FloatArray = dataclasses.field(default_factory=lambda: np.ones(3))
     observe: str = "all"
+    effect_names: tuple[str, ...] = ()
 
     def obs_sd_for(self, fraction: float) -> FloatArray:
         """Observation sd of (u, u', u'') for a noise fraction of the observed channels' RMS.
@@ -336,8 +341,8 @@ class IdentificationProblem:
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:
-        """``("a0", "a1", "b1", ...)``."""
-        return FourierForce(self.harmonics).coefficient_names
+        """``("a0", "a1", "b1", ...)``, then the effect columns' names."""
+        return FourierForce(self.harmonics).coefficient_names + tuple(self.effect_names)
 
     @property
     def piece_index(self) -> NDArray[np.int64]:

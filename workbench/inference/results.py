@@ -154,7 +154,7 @@ class IdentificationResult:
     @property
     def piece_blf(self) -> FloatArray:
         """BLF_i of every piece from its posterior-mean coefficients, shape (P, n)."""
-        coef = self.piece_coefficients_mean
+        coef = self.piece_coefficients_mean[:, : 2 * self.problem.harmonics + 1]
         a, b = coef[:, 1::2], coef[:, 2::2]
         return np.sqrt(a**2 + b**2) / (self.mass_kg * G_M_S2)
 
@@ -369,6 +369,8 @@ class IdentificationResult:
         }
         out["warnings"] = self.warnings
         out["settings"] = self.settings
+        if "effects" in self.extra:
+            out["effects"] = self.extra["effects"]
         return out
 
     def summary(self) -> str:

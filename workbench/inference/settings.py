@@ -82,6 +82,25 @@ def parse_obs_noise(value: Any, where: str = "--obs-noise") -> float | str:
     return float(value)
 
 
+def parse_effects(value: Any, where: str = "--effects") -> tuple[str, ...]:
+    """Parse effect names: ``"a,b"`` or a sequence of names, each a registered effect."""
+    from workbench.models.effects import available_effects
+
+    if value is None:
+        return ()
+    items = value.split(",") if isinstance(value, str) else list(value)
+    names = tuple(str(v).strip() for v in items if str(v).strip())
+    known = available_effects()
+    for name in names:
+        if name not in known:
+            raise UsageError(
+                f"{where}: effect {name!r} is not known; choose from {', '.join(known)}"
+            )
+    if len(set(names)) != len(names):
+        raise UsageError(f"{where}: an effect is named twice in {', '.join(names)}")
+    return names
+
+
 @dataclass(frozen=True)
 class IdentifySettings:
     """How to identify one record (see the module docstring for the defaults)."""
@@ -102,8 +121,10 @@ class IdentifySettings:
     force_check: bool = True
     observe: str = "all"
     force_proposal: str = "regression"
+    effects: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "effects", parse_effects(self.effects))
         if self.method not in METHODS:
             raise UsageError(
                 f"--method {self.method!r} is not known; choose one of {', '.join(METHODS)}"

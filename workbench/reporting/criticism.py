@@ -107,6 +107,24 @@ def error_vs_state_figure(diag: Diagnosis, bins: int = 15) -> Figure:
     return fig
 
 
+def one_step_figure(diag: Diagnosis, seconds: float = 6.0) -> Figure:
+    """One-step-ahead GRF residual of the identified model over the first seconds."""
+    one = diag.one_step
+    fig = Figure(figsize=(8, 3))
+    ax = fig.add_subplot()
+    t = one.time_s - one.time_s[0]
+    keep = t <= seconds
+    ax.plot(t[keep], one.residual_n[keep], lw=0.8)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("one-step GRF residual [N]")
+    ax.set_title(
+        f"RMSE {one.rmse_n:.3g} N, Ljung-Box p {one.ljung_box_p:.2g}, "
+        f"log score {one.log_score:.3f} nats/sample"
+    )
+    fig.tight_layout()
+    return fig
+
+
 def scoreboard_figure(rows: list[ScoreRow]) -> Figure:
     """Held-out RMSE per model, baseline first, with the fold-to-fold uncertainty of each drop."""
     fig = Figure(figsize=(6, 3))
@@ -167,6 +185,15 @@ def criticism_section(diag: Diagnosis, out_dir: str | Path, key: str) -> Section
         ("spectrum", residual_spectrum_figure(diag), "Spectrum of the held-out error."),
         ("state", error_vs_state_figure(diag), "Held-out error against state."),
     ]
+    if diag.one_step is not None:
+        one = diag.one_step
+        sec.paragraph(
+            f"One-step-ahead prediction by the identified state-space model (per-step force "
+            f"coefficients, C = {one.damping_ns_per_m:.4g} N s/m, K = "
+            f"{one.stiffness_n_per_m:.5g} N/m): GRF residual RMSE {one.rmse_n:.3g} N, Ljung-Box "
+            f"p {one.ljung_box_p:.3g}, log predictive score {one.log_score:.3f} nats per sample."
+        )
+        figs.append(("one_step", one_step_figure(diag), "One-step-ahead GRF residual."))
     ranked = [c.effect for c in diag.candidates if c.significant]
     if ranked:
         rows = compare(diag.data, [*diag.current_effects, *ranked])
