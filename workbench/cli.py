@@ -171,26 +171,34 @@ def _inspect_text(r: dict[str, Any]) -> str:
 # identify
 # ---------------------------------------------------------------------------------------------
 def _identify_settings(args: argparse.Namespace) -> Any:
+    """Build the identification settings from a subcommand's flags (flags win over ``--config``).
+
+    Subcommands that identify (``identify``, ``sensitivity``, ...) share these flags; a flag a
+    subcommand does not offer counts as not given.
+    """
     from workbench.inference.settings import IdentifySettings
 
+    def flag(name: str) -> Any:
+        return getattr(args, name, None)
+
     overrides = {
-        "method": args.method,
-        "particles": args.particles,
-        "harmonics": args.harmonics,
-        "pacing_hz": args.pacing,
-        "highpass_hz": args.highpass_hz,
-        "obs_noise": args.obs_noise,
-        "time_basis": args.time_basis,
-        "pieces": args.pieces,
-        "prior": args.prior,
-        "seed": args.seed,
-        "state_noise_fraction": args.state_noise,
-        "observe": args.observe,
-        "force_proposal": args.force_proposal,
-        "force_check": False if args.no_force_check else None,
-        "effects": getattr(args, "effects", None),
+        "method": flag("method"),
+        "particles": flag("particles"),
+        "harmonics": flag("harmonics"),
+        "pacing_hz": flag("pacing"),
+        "highpass_hz": flag("highpass_hz"),
+        "obs_noise": flag("obs_noise"),
+        "time_basis": flag("time_basis"),
+        "pieces": flag("pieces"),
+        "prior": flag("prior"),
+        "seed": flag("seed"),
+        "state_noise_fraction": flag("state_noise"),
+        "observe": flag("observe"),
+        "force_proposal": flag("force_proposal"),
+        "force_check": False if flag("no_force_check") else None,
+        "effects": flag("effects"),
     }
-    if args.config:
+    if flag("config"):
         return IdentifySettings.from_toml(args.config, **overrides)
     return IdentifySettings().replace(**overrides)
 

@@ -69,25 +69,10 @@ def load_study_records(args: argparse.Namespace) -> list[tuple[str, Any]]:
 
 
 def _settings(args: argparse.Namespace) -> Any:
-    from workbench.inference.settings import IdentifySettings
+    # The study's own seeds replace the baseline's: the baseline carries no --seed.
+    from workbench.cli import _identify_settings
 
-    overrides = {
-        "method": args.method,
-        "particles": args.particles,
-        "harmonics": args.harmonics,
-        "pacing_hz": args.pacing,
-        "highpass_hz": args.highpass_hz,
-        "obs_noise": args.obs_noise,
-        "time_basis": args.time_basis,
-        "pieces": args.pieces,
-        "prior": args.prior,
-        "state_noise_fraction": args.state_noise,
-        "observe": args.observe,
-        "force_check": False if args.no_force_check else None,
-    }
-    if args.config:
-        return IdentifySettings.from_toml(args.config, **overrides)
-    return IdentifySettings().replace(**overrides)
+    return _identify_settings(argparse.Namespace(**{**vars(args), "seed": None}))
 
 
 def _cmd_sensitivity(args: argparse.Namespace) -> int:
