@@ -1,0 +1,918 @@
+"""Every footstep cross-checked: an emcee posterior per step against a particle filter.
+
+A particle cloud can look converged while being mostly prior or degenerate (DESIGN.md 2.4).
+For every footfall step ``j`` this module samples, with emcee, the posterior that a correct
+filter holds at the step's end, and compares the filter's per-step mean and sd of (C, K)
+with it.
+
+The target of step j (the prior the filter carries into the step)
+    ``p(C, K, beta_j, s | y_0..j) ∝ pi_j(C, K) p(s) p(beta_j | C, K) p(y_j | C, K, beta_j, s)``
+    with ``beta_j = (u_in, u'_in, a0, a1, b1, ...)`` the step's hand-in state and force
+    coefficients (:class:`~workbench.inference.step_model.StepModel`). The parts:
+
+    * ``pi_0`` is the problem's prior box, as in the filters. For ``j > 0`` (``prior=
+      "sequential"``, the default) ``pi_j`` is a Gaussian with the mean and covariance of
+      the MCMC posterior of (C, K) at step ``j - 1``, truncated to the box: the posterior a
+      correct filter carries into the step, in assumed-density form (exact for a Gaussian
+      posterior; one step of data moves a posterior that is already narrow only a little, so
+      the Gaussian form costs little after the first steps). It is built from this module's
+      own previous step, not from the filter under test, so a filter that has gone wrong
+      cannot pass its error on to its reference. ``prior="filter"`` uses the filter's own
+      per-step mean and sd instead (no correlation: the filter keeps marginal moments only),
+      which checks the filter's update of one step in isolation.
+    * The hand-in ``(u, u')`` prior is the exact Kalman hand-over of step ``j - 1``
+      (:func:`workbench.inference.kalman.piece_filter`) at the MCMC posterior mean of (C, K)
+      of that step, chained from the filters' initial state; with u and u' observed (the
+      default) the data pin it, so its dependence on (C, K) is negligible.
+    * ``p(beta | C, K)``: the hand-in and the problem's force prior, drawn afresh per step
+      as in the filters; ``p(y_j | ...)``: the problem's noise model with the observed
+      channels' sd multiplied by the *noise scale* ``s``, prior ``log s ~ N(0, 0.5^2)``
+      (``noise_scale="free"``, the default; ``"fixed"`` holds ``s = 1``, the filters' exact
+      model). A per-step ``s`` far from 1 says that the step's misfit is not the noise the
+      filter assumed.
+    * No process noise on (u, u'): the model of rbpf and exact. The seed-faithful filter
+      (``pf``) runs with a small one; it is compared with this same reference.
+
+Two modes
+    ``"collapsed"`` (default): ``beta`` is integrated out in closed form and emcee samples
+    ``(C, K, log s)``, three dimensions; the force coefficients are then drawn exactly from
+    their Gaussian conditional at every kept draw (Rao-Blackwell completion), so the
+    InferenceData still holds them. Default because it is exact and cheap: the ridge between
+    (C, K) and the force coefficients (DESIGN.md 2.4) is integrated out instead of explored,
+    the autocorrelation time is a few steps, and one call costs about a millisecond.
+    ``"joint"``: emcee samples all ``2 n + 6`` parameters. It needs no linear algebra
+    beyond a residual, but walks along the ridge with autocorrelation times one or two
+    orders longer; the benchmark (``analyses/benchmarks/crosscheck_step.py``) measures it.
+
+Convergence (:func:`workbench.inference.mcmc.run_ensembles`)
+    Several independent ensembles, the 50-tau rule with automatic extension, acceptance
+    fraction, R-hat and bulk/tail ESS across ensembles with arviz. A step whose run does
+    not pass is reported as not converged and is *not* compared.
+
+Agreement per step, for C and K
+    ``z = (pf_mean - mcmc_mean) / mcmc_sd`` (the MCMC is the reference, its Monte Carlo
+    error is negligible at ESS >= 400), ``sd_ratio = pf_sd / mcmc_sd`` and the 1-Wasserstein
+    distance, in MCMC sd, between the filter's per-step normal ``N(pf_mean, pf_sd^2)`` (the
+    filters keep a step's mean and sd, not its cloud) and the MCMC draws. A step agrees when
+    it converged and ``|z| <`` :data:`Z_TOLERANCE` for both. Flags with reasons: MCMC not
+    converged, filter degenerate (ESS), frozen parameter (distinct particle values), filter
+    spread off (sd ratio outside :data:`SD_RATIO_RANGE`), posterior multimodal, mean off.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from workbench.errors import UsageError
+from workbench.inference import kalman as kf
+from workbench.inference.mcmc import McmcResult, run_ensembles
+from workbench.inference.outputs import ParticleFilterOutput
+from workbench.inference.problem import IdentificationProblem
+from workbench.inference.step_model import StepModel
+
+__all__ = [
+    "MODES",
+    "PARAMS",
+    "CrosscheckResult",
+    "StepCheck",
+    "StepTarget",
+    "crosscheck",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Sampling modes, default first.
+MODES = ("collapsed", "joint")
+#: Prior constructions, default first.
+PRIORS = ("sequential", "filter")
+#: Parameters compared (DESIGN.md names).
+PARAMS = ("damping_ns_per_m", "stiffness_n_per_m")
+#: A step agrees when |z| is below this for C and for K.
+Z_TOLERANCE = 2.0
+#: The filter's sd may differ from the MCMC's by this factor before it is flagged.
+SD_RATIO_RANGE = (0.5, 2.0)
+#: Filter ESS below this many particles at a step: degenerate.
+DEGENERATE_ESS = 10.0
+#: At most this many distinct particle values of C or K: frozen (as in results.py).
+FROZEN_UNIQUE_VALUES = 5
+#: Prior sd of the log noise scale.
+LOG_NOISE_SCALE_SD = 0.5
+#: Kept draws per ensemble and step in the InferenceData.
+DRAWS_PER_CHAIN = 100
+
+
+# -- the per-step target ------------------------------------------------------------------
+class StepTarget:
+    """Log posterior density of one step, vectorised over rows (module docstring).
+
+    Parameters
+    ----------
+    model : StepModel
+        The step's regression given (C, K).
+    prior_mean, prior_cov : array_like or None
+        Gaussian prior of (C, K) (truncated to the box), or None for the uniform box alone.
+    box : StiffnessDampingPrior-like
+        ``problem.prior``.
+    mode : {"collapsed", "joint"}
+        Sampled parameters.
+    noise_scale : {"free", "fixed"}
+        Whether ``log s`` is sampled.
+    fixed_damping_stiffness : (float, float), optional
+        Hold C and K fixed (only beta and ``log s`` are sampled; joint mode): the
+        linear-Gaussian case whose posterior is known in closed form.
+    """
+
+    def __init__(
+        self,
+        model: StepModel,
+        prior_mean: FloatArray | None,
+        prior_cov: FloatArray | None,
+        box: Any,
+        *,
+        mode: str = "collapsed",
+        noise_scale: str = "fixed",
+        fixed_damping_stiffness: tuple[float, float] | None = None,
+    ) -> None:
+        if mode not in MODES:
+            raise UsageError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        if noise_scale not in ("free", "fixed"):
+            raise UsageError(f"noise_scale must be 'free' or 'fixed', got {noise_scale!r}")
+        if fixed_damping_stiffness is not None and mode != "joint":
+            raise UsageError("fixed_damping_stiffness needs mode='joint'")
+        self.model = model
+        self.mode = mode
+        self.free_noise = noise_scale == "free"
+        self.fixed = (
+            None if fixed_damping_stiffness is None else np.asarray(fixed_damping_stiffness)
+        )
+        self.box = box
+        self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
+        self.prior_chol: FloatArray | None = None
+        if prior_cov is not None:
+            cov = np.asarray(prior_cov, dtype=float)
+            self.prior_chol = np.linalg.cholesky(0.5 * (cov + cov.T))
+        names: list[str] = [] if self.fixed is not None else list(PARAMS)
+        if self.free_noise:
+            names.append("log_noise_scale")
+        if mode == "joint":
+            names += ["u_in_m", "v_in_m_s", *model.problem.coefficient_names]
+        self.param_names = tuple(names)
+        self.n_dim = len(names)
+        # Column offsets.
+        self._ck = 0 if self.fixed is None else None
+        self._s = (0 if self.fixed is not None else 2) if self.free_noise else None
+        self._beta = (
+            (0 if self.fixed is not None else 2) + (1 if self.free_noise else 0)
+            if mode == "joint"
+            else None
+        )
+        self.calls = 0
+
+    # -- pieces of a row --------------------------------------------------------------
+    def split(self, theta: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Return (C, K, s, beta or empty) of every row."""
+        n = theta.shape[0]
+        if self.fixed is None:
+            c, k = theta[:, 0], theta[:, 1]
+        else:
+            c, k = np.full(n, self.fixed[0]), np.full(n, self.fixed[1])
+        s = np.exp(np.clip(theta[:, self._s], -5.0, 5.0)) if self._s is not None else np.ones(n)
+        beta = theta[:, self._beta :] if self._beta is not None else np.empty((n, 0))
+        return c, k, s, beta
+
+    def log_prior_ck(self, c: FloatArray, k: FloatArray) -> FloatArray:
+        """Log prior of (C, K): the box, times the Gaussian when there is one."""
+        inside = self.box.contains(c, k)
+        out = np.where(inside, 0.0, -np.inf)
+        if self.prior_mean is not None and self.prior_chol is not None and self.fixed is None:
+            dev = np.column_stack([c, k]) - self.prior_mean
+            white = np.linalg.solve(self.prior_chol, dev.T).T
+            out = out - 0.5 * np.sum(white * white, axis=1)
+        return out
+
+    def __call__(self, theta: FloatArray) -> FloatArray:
+        """Log posterior density (unnormalised) of every row of ``theta``."""
+        self.calls += 1
+        theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
+        c, k, s, beta = self.split(theta)
+        out = self.log_prior_ck(c, k)
+        if self._s is not None:
+            log_s = theta[:, self._s]
+            out = out - 0.5 * np.square(log_s / LOG_NOISE_SCALE_SD)
+            out = np.where(np.abs(log_s) < 5.0, out, -np.inf)
+        ok = np.isfinite(out)
+        if not np.any(ok):
+            return out
+        if self.mode == "collapsed":
+            ll = self.model.collapsed_loglik(c[ok], k[ok], s[ok])
+            out[ok] += np.asarray(ll)
+            return out
+        m = self.model
+        eta = np.linalg.solve(m.prior_chol, (beta[ok] - m.beta0).T).T
+        out[ok] += -0.5 * np.sum(eta * eta, axis=1)
+        out[ok] += m.joint_loglik(c[ok], k[ok], beta[ok], s[ok])
+        return out
+
+    def initial(self, rng: np.random.Generator, n_walkers: int) -> FloatArray:
+        """Over-dispersed starting points: (C, K) from the prior, beta from its conditional."""
+        if self.fixed is None:
+            c, k = self._draw_ck(rng, n_walkers)
+        else:
+            c, k = np.full(n_walkers, self.fixed[0]), np.full(n_walkers, self.fixed[1])
+        cols: list[FloatArray] = []
+        if self.fixed is None:
+            cols += [c[:, None], k[:, None]]
+        log_s = 0.2 * rng.standard_normal(n_walkers)
+        if self.free_noise:
+            cols.append(log_s[:, None])
+        if self.mode == "joint":
+            s = np.exp(log_s) if self.free_noise else np.ones(n_walkers)
+            _, mean, root = self.model.collapsed_loglik(c, k, s, return_posterior=True)
+            # Twice the conditional spread: over-dispersed, but on the ridge.
+            beta = mean + 2.0 * np.einsum("bij,bj->bi", root, rng.standard_normal(mean.shape))
+            cols.append(beta)
+        return np.hstack(cols)
+
+    def _draw_ck(self, rng: np.random.Generator, n: int) -> tuple[FloatArray, FloatArray]:
+        if self.prior_mean is None or self.prior_chol is None:
+            return self.box.sample(n, rng)
+        c = np.empty(n)
+        k = np.empty(n)
+        filled = 0
+        for _ in range(100):
+            draw = self.prior_mean + rng.standard_normal((n, 2)) @ self.prior_chol.T
+            keep = draw[self.box.contains(draw[:, 0], draw[:, 1])]
+            take = min(n - filled, keep.shape[0])
+            c[filled : filled + take] = keep[:take, 0]
+            k[filled : filled + take] = keep[:take, 1]
+            filled += take
+            if filled == n:
+                return c, k
+        bc, bk = self.box.sample(n - filled, rng)
+        c[filled:], k[filled:] = bc, bk
+        return c, k
+
+
+# -- results ------------------------------------------------------------------------------
+@dataclass(eq=False)
+class StepCheck:
+    """The cross-check of one step.
+
+    Attributes
+    ----------
+    index : int
+        Step (piece) index.
+    start_s, end_s : float
+        Times of the step's first and last sample [s].
+    pf_mean, pf_sd, mcmc_mean, mcmc_sd : ndarray, shape (2,)
+        (C, K) mean and sd of the filter and of the MCMC.
+    z, sd_ratio, wasserstein : ndarray, shape (2,)
+        Agreement measures (module docstring).
+    converged : bool
+        The MCMC passed every convergence check.
+    agree : bool or None
+        Converged and ``|z| <`` :data:`Z_TOLERANCE` for C and K; None when not converged.
+    flags : list of str
+        One sentence per reason for doubt (empty when all is well).
+    mcmc : McmcResult
+        The step's run.
+    prior_mean, prior_sd : ndarray, shape (2,)
+        The (C, K) prior the step was sampled with (NaN-free; the box's moments at step 0).
+    modal_mean, modal_sd : dict
+        MCMC mean and sd of natural frequency [Hz] and damping ratio.
+    pf_modal_mean, pf_modal_sd : dict
+        The same for the filter (first-order propagation of its mean and sd).
+    noise_scale_mean : float or None
+        MCMC mean of the noise scale (None when fixed).
+    """
+
+    index: int
+    start_s: float
+    end_s: float
+    pf_mean: FloatArray
+    pf_sd: FloatArray
+    mcmc_mean: FloatArray
+    mcmc_sd: FloatArray
+    z: FloatArray
+    sd_ratio: FloatArray
+    wasserstein: FloatArray
+    converged: bool
+    agree: bool | None
+    flags: list[str]
+    mcmc: McmcResult
+    prior_mean: FloatArray
+    prior_sd: FloatArray
+    modal_mean: dict[str, float]
+    modal_sd: dict[str, float]
+    pf_modal_mean: dict[str, float]
+    pf_modal_sd: dict[str, float]
+    noise_scale_mean: float | None
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the step's JSON object (DESIGN.md 4.2 keys first)."""
+
+        def per(values: FloatArray) -> dict[str, float | None]:
+            return {p: _num(v) for p, v in zip(PARAMS, values, strict=True)}
+
+        return {
+            "index": self.index,
+            "pf_mean": per(self.pf_mean),
+            "pf_sd": per(self.pf_sd),
+            "mcmc_mean": per(self.mcmc_mean),
+            "mcmc_sd": per(self.mcmc_sd),
+            "z": per(self.z),
+            "sd_ratio": per(self.sd_ratio),
+            "wasserstein_sd": per(self.wasserstein),
+            "converged": self.converged,
+            "agree": self.agree,
+            "flags": list(self.flags),
+            "start_s": round(self.start_s, 6),
+            "end_s": round(self.end_s, 6),
+            "prior_mean": per(self.prior_mean),
+            "prior_sd": per(self.prior_sd),
+            "mcmc_modal_mean": {k: _num(v) for k, v in self.modal_mean.items()},
+            "mcmc_modal_sd": {k: _num(v) for k, v in self.modal_sd.items()},
+            "pf_modal_mean": {k: _num(v) for k, v in self.pf_modal_mean.items()},
+            "pf_modal_sd": {k: _num(v) for k, v in self.pf_modal_sd.items()},
+            "noise_scale_mean": _num(self.noise_scale_mean),
+            "mcmc": {
+                "n_steps": self.mcmc.n_steps,
+                "tau_max": _num(float(np.nanmax(self.mcmc.tau))),
+                "rhat_max": _num(float(np.nanmax(self.mcmc.rhat))),
+                "ess_bulk_min": _num(float(np.nanmin(self.mcmc.ess_bulk))),
+                "ess_tail_min": _num(float(np.nanmin(self.mcmc.ess_tail))),
+                "acceptance": [_num(a) for a in self.mcmc.acceptance_fraction],
+                "seconds": round(self.mcmc.seconds, 4),
+                "reasons": list(self.mcmc.reasons),
+            },
+        }
+
+
+def _num(x: Any) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+@dataclass(eq=False)
+class CrosscheckResult:
+    """What :func:`crosscheck` returns.
+
+    Attributes
+    ----------
+    method : str
+        The filter compared (``"rbpf"`` or ``"pf"``).
+    mode, prior, noise_scale : str
+        Settings of the MCMC (module docstring).
+    steps : list of StepCheck
+        One per step checked, in record order.
+    inference_data : arviz.InferenceData or None
+        Per-record posterior, sample_stats, log_likelihood, observed_data and prior
+        (:func:`build_inference_data`).
+    seconds : float
+        Wall time of the MCMC over all steps.
+    settings : dict
+        Everything else that defines the run.
+    """
+
+    method: str
+    mode: str
+    prior: str
+    noise_scale: str
+    steps: list[StepCheck]
+    inference_data: Any = None
+    seconds: float = 0.0
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def compared(self) -> list[StepCheck]:
+        """Steps whose MCMC converged (the only ones compared)."""
+        return [s for s in self.steps if s.converged]
+
+    @property
+    def agreement(self) -> float | None:
+        """Fraction of compared steps that agree (None when none converged)."""
+        comp = self.compared
+        if not comp:
+            return None
+        return sum(bool(s.agree) for s in comp) / len(comp)
+
+    @property
+    def flagged_fraction(self) -> float:
+        """Fraction of all steps with at least one flag."""
+        return sum(bool(s.flags) for s in self.steps) / max(1, len(self.steps))
+
+    def disagreements(self) -> list[dict[str, Any]]:
+        """Return the flagged steps: index, time and reasons."""
+        return [
+            {"index": s.index, "start_s": round(s.start_s, 3), "reasons": list(s.flags)}
+            for s in self.steps
+            if s.flags
+        ]
+
+    def verdict(self) -> str:
+        """One sentence: where the filter and the MCMC disagree, if anywhere."""
+        n = len(self.steps)
+        bad = self.disagreements()
+        not_conv = [s.index for s in self.steps if not s.converged]
+        agree = self.agreement
+        part = (
+            f"{self.method} and MCMC agree (|z| < {Z_TOLERANCE:g}) on "
+            f"{sum(bool(s.agree) for s in self.compared)} of {len(self.compared)} compared steps"
+            if agree is not None
+            else "no step's MCMC converged, so nothing was compared"
+        )
+        if not bad:
+            return f"{part}; no step is flagged."
+        where = ", ".join(str(d["index"]) for d in bad[:12]) + (", ..." if len(bad) > 12 else "")
+        conv = f"; MCMC not converged on steps {not_conv}" if not_conv else ""
+        return f"{part}; {len(bad)} of {n} steps flagged (steps {where}){conv}."
+
+    def diagnostics(self) -> dict[str, Any]:
+        """Summary of the MCMC convergence over all steps."""
+        runs = [s.mcmc for s in self.steps]
+
+        def agg(fn: Any, values: list[float]) -> float | None:
+            vals = [v for v in values if math.isfinite(v)]
+            return _num(fn(vals)) if vals else None
+
+        return {
+            "converged_steps": sum(s.converged for s in self.steps),
+            "not_converged_steps": [s.index for s in self.steps if not s.converged],
+            "rhat_max": agg(max, [float(np.nanmax(r.rhat)) for r in runs]),
+            "ess_bulk_min": agg(min, [float(np.nanmin(r.ess_bulk)) for r in runs]),
+            "ess_tail_min": agg(min, [float(np.nanmin(r.ess_tail)) for r in runs]),
+            "tau_max": agg(max, [float(np.nanmax(r.tau)) for r in runs]),
+            "acceptance_min": agg(min, [float(np.min(r.acceptance_fraction)) for r in runs]),
+            "acceptance_max": agg(max, [float(np.max(r.acceptance_fraction)) for r in runs]),
+            "n_ensembles": runs[0].n_ensembles if runs else None,
+            "n_walkers": runs[0].n_walkers if runs else None,
+            "chain_steps_max": max((r.n_steps for r in runs), default=None),
+            "evaluations": sum(r.n_evaluations for r in runs),
+            "seconds": round(self.seconds, 3),
+            "seconds_per_step": round(self.seconds / max(1, len(runs)), 4),
+            "thresholds": {
+                "rhat_max": 1.01,
+                "ess_min": 400,
+                "tau_factor": self.settings.get("tau_factor", 50.0),
+                "acceptance": [0.1, 0.9],
+            },
+        }
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the ``workbench crosscheck`` JSON object (DESIGN.md 4.2)."""
+        return {
+            "method": self.method,
+            "mode": self.mode,
+            "prior": self.prior,
+            "noise_scale": self.noise_scale,
+            "steps": [s.to_json() for s in self.steps],
+            "agreement": _num(self.agreement),
+            "flagged_fraction": round(self.flagged_fraction, 4),
+            "disagreements": self.disagreements(),
+            "verdict": self.verdict(),
+            "mcmc_diagnostics": self.diagnostics(),
+            "tolerances": {"z": Z_TOLERANCE, "sd_ratio": list(SD_RATIO_RANGE)},
+            "settings": self.settings,
+        }
+
+    def posterior_moments(self, step: int | None = None) -> tuple[FloatArray, FloatArray]:
+        """(C, K) mean and covariance of the MCMC at a step (default the last converged)."""
+        pool = self.compared or self.steps
+        if not pool:
+            raise UsageError("the cross-check has no steps")
+        chosen = pool[-1] if step is None else next(s for s in self.steps if s.index == step)
+        r = chosen.mcmc
+        return r.mean[:2].copy(), r.cov[:2, :2].copy()
+
+    def to_netcdf(self, path: str | Path) -> Path:
+        """Write the InferenceData to netCDF (atomically)."""
+        from workbench.fileutil import atomic_path
+
+        if self.inference_data is None:
+            raise UsageError("this cross-check kept no InferenceData (keep_inference_data=False)")
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            self.inference_data.to_netcdf(str(tmp))
+        return path
+
+
+# -- the run ------------------------------------------------------------------------------
+def _step_seed(seed: int, index: int) -> int:
+    state = np.random.SeedSequence([int(seed), int(index)]).generate_state(1, dtype=np.uint32)
+    return int(state[0])
+
+
+def _wasserstein_to_normal(draws: FloatArray, mean: float, sd: float) -> float:
+    """1-Wasserstein distance between the draws and N(mean, sd^2), by quantile coupling."""
+    from scipy.special import ndtri
+
+    x = np.sort(draws)
+    u = (np.arange(x.size) + 0.5) / x.size
+    return float(np.mean(np.abs(x - (mean + sd * ndtri(u)))))
+
+
+def _multimodal(draws: FloatArray) -> bool:
+    """Two separated modes in a marginal: a histogram dip below half the smaller peak.
+
+    A smoothed 40-bin histogram over the central 99.8 %; peaks below 10 % of the highest
+    are ignored (tails). Unimodal skewed or truncated posteriors have no such dip.
+    """
+    lo, hi = np.quantile(draws, [0.001, 0.999])
+    if not hi > lo:
+        return False
+    hist, _ = np.histogram(draws, bins=40, range=(lo, hi))
+    smooth = np.convolve(hist, np.ones(3) / 3.0, mode="same")
+    top = smooth.max()
+    peaks = [
+        i
+        for i in range(1, smooth.size - 1)
+        if smooth[i] >= smooth[i - 1] and smooth[i] > smooth[i + 1] and smooth[i] > 0.1 * top
+    ]
+    for a, b in itertools.pairwise(peaks):
+        if smooth[a:b].min() < 0.5 * min(smooth[a], smooth[b]):
+            return True
+    return False
+
+
+def _modal(c: FloatArray, k: FloatArray, mass: float) -> tuple[FloatArray, FloatArray]:
+    from workbench.models.conversions import damping_ratio, natural_frequency_hz
+
+    return np.asarray(natural_frequency_hz(k, mass)), np.asarray(damping_ratio(c, k, mass))
+
+
+def _pf_step_stats(
+    problem: IdentificationProblem, out: ParticleFilterOutput
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Smallest ESS inside every piece and distinct values of C, K at its end."""
+    p = problem.n_pieces
+    if out.trace_time_s.size == p:
+        return np.asarray(out.ess, dtype=float), np.asarray(out.unique_values)
+    # Per-sample traces (pf): the piece's rows by time.
+    bounds = problem.time_s[problem.piece_starts[:-1]]
+    idx = np.searchsorted(bounds, out.trace_time_s, side="right") - 1
+    ess = np.array([float(np.min(out.ess[idx == j])) for j in range(p)])
+    last = np.array([np.flatnonzero(idx == j)[-1] for j in range(p)])
+    return ess, np.asarray(out.unique_values)[last]
+
+
+def crosscheck(
+    problem: IdentificationProblem,
+    output: ParticleFilterOutput,
+    *,
+    mode: str = "collapsed",
+    prior: str = "sequential",
+    noise_scale: str = "fixed",
+    seed: int = 0,
+    max_pieces: int | None = None,
+    n_ensembles: int = 4,
+    n_walkers: int | None = None,
+    min_steps: int = 300,
+    max_steps: int = 20_000,
+    keep_inference_data: bool = True,
+    progress: bool = False,
+) -> CrosscheckResult:
+    """Cross-check a particle filter's per-step (C, K) posterior with emcee, step by step.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        The problem the filter ran on (its process noise of (u, u') is set to zero for the
+        MCMC, module docstring).
+    output : ParticleFilterOutput
+        The filter's output (``piece_mean``, ``piece_sd``, ESS and distinct-value traces).
+    mode : {"collapsed", "joint"}, default "collapsed"
+        Sampled parameters (module docstring).
+    prior : {"sequential", "filter"}, default "sequential"
+        Construction of the (C, K) prior of steps after the first (module docstring).
+    noise_scale : {"free", "fixed"}, default "free"
+        Whether the observation noise scale is sampled.
+    seed : int, default 0
+        Fixes every random number (each step gets its own stream from the seed).
+    max_pieces : int, optional
+        Check only the first steps (the sequential prior needs every earlier step).
+    n_ensembles, n_walkers, min_steps, max_steps
+        Passed to :func:`~workbench.inference.mcmc.run_ensembles`.
+    keep_inference_data : bool, default True
+        Build the per-record InferenceData (costs the pointwise log-likelihoods).
+    progress : bool, default False
+        Show a tqdm bar over the steps.
+
+    Returns
+    -------
+    CrosscheckResult
+    """
+    from tqdm import tqdm
+
+    if mode not in MODES:
+        raise UsageError(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+    if prior not in PRIORS:
+        raise UsageError(f"--prior must be one of {', '.join(PRIORS)}, got {prior!r}")
+    if output.piece_mean.shape[0] != problem.n_pieces:
+        raise UsageError(
+            f"the filter output has {output.piece_mean.shape[0]} pieces but the problem has "
+            f"{problem.n_pieces}; cross-check the output with the problem it was run on"
+        )
+    n_pieces = problem.n_pieces if max_pieces is None else min(int(max_pieces), problem.n_pieces)
+    if n_pieces < 1:
+        raise UsageError(f"max_pieces must be at least 1, got {max_pieces!r}")
+    prob = problem.with_noise(replace(problem.noise, state_sd=np.zeros(2)))
+    ess, unique = _pf_step_stats(problem, output)
+    t0 = time.perf_counter()
+    x_mean, x_cov = kf.initial_state(prob, 1)
+    prior_mean: FloatArray | None = None
+    prior_cov: FloatArray | None = None
+    checks: list[StepCheck] = []
+    completions: list[dict[str, Any]] = []
+    for j in tqdm(range(n_pieces), desc="crosscheck", unit="step", disable=not progress):
+        model = StepModel(prob, j, x_mean[0], x_cov[0])
+        target = StepTarget(
+            model, prior_mean, prior_cov, prob.prior, mode=mode, noise_scale=noise_scale
+        )
+        walkers = n_walkers or max(32, 4 * target.n_dim + (4 * target.n_dim) % 2)
+
+        def initial(
+            rng: np.random.Generator, t: StepTarget = target, w: int = walkers
+        ) -> FloatArray:
+            return t.initial(rng, w)
+
+        res = run_ensembles(
+            target,
+            initial,
+            n_ensembles=n_ensembles,
+            n_walkers=walkers,
+            seed=_step_seed(seed, j),
+            min_steps=min_steps,
+            max_steps=max_steps,
+            param_names=target.param_names,
+        )
+        check = _compare(prob, output, j, res, target, prior_mean, prior_cov, ess, unique)
+        checks.append(check)
+        if keep_inference_data:
+            completions.append(_completion(model, target, res, _step_seed(seed + 1, j)))
+        # The prior of the next step and its hand-in (module docstring).
+        if prior == "sequential":
+            prior_mean, prior_cov = res.mean[:2].copy(), res.cov[:2, :2].copy()
+        else:
+            prior_mean = np.asarray(output.piece_mean[j], dtype=float)
+            prior_cov = np.diag(np.square(np.maximum(output.piece_sd[j], 1e-9 * prior_mean)))
+        prior_cov = _floor_cov(prior_cov, prob)
+        if j + 1 < n_pieces:
+            hand = kf.piece_filter(prob, j, res.mean[:1], res.mean[1:2], x_mean, x_cov)
+            x_mean, x_cov = hand.x_mean_next, hand.x_cov_next
+    seconds = time.perf_counter() - t0
+    settings = {
+        "seed": int(seed),
+        "n_ensembles": int(n_ensembles),
+        "n_walkers": checks[0].mcmc.n_walkers,
+        "min_steps": int(min_steps),
+        "max_steps": int(max_steps),
+        "tau_factor": 50.0,
+        "pieces_checked": n_pieces,
+        "pieces_in_record": problem.n_pieces,
+        "filter": {"method": output.method, "n_particles": output.n_particles, "seed": output.seed},
+    }
+    result = CrosscheckResult(
+        method=output.method,
+        mode=mode,
+        prior=prior,
+        noise_scale=noise_scale,
+        steps=checks,
+        seconds=seconds,
+        settings=settings,
+    )
+    if keep_inference_data:
+        result.inference_data = build_inference_data(prob, result, completions)
+    return result
+
+
+def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:
+    """Keep a prior covariance symmetric positive definite (a floor of 1e-6 box sd)."""
+    cov = 0.5 * (cov + cov.T)
+    floor = np.square(1e-6 * problem.prior.sd)
+    vals, vecs = np.linalg.eigh(cov)
+    vals = np.maximum(vals, floor.min())
+    return (vecs * vals) @ vecs.T
+
+
+def _compare(
+    problem: IdentificationProblem,
+    output: ParticleFilterOutput,
+    j: int,
+    res: McmcResult,
+    target: StepTarget,
+    prior_mean: FloatArray | None,
+    prior_cov: FloatArray | None,
+    ess: FloatArray,
+    unique: NDArray[np.int64],
+) -> StepCheck:
+    pf_mean = np.asarray(output.piece_mean[j], dtype=float)
+    pf_sd = np.asarray(output.piece_sd[j], dtype=float)
+    m_mean, m_sd = res.mean[:2], res.sd[:2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (pf_mean - m_mean) / m_sd
+        ratio = pf_sd / m_sd
+    w1 = np.array(
+        [
+            _wasserstein_to_normal(res.samples[:, i], pf_mean[i], pf_sd[i]) / m_sd[i]
+            for i in range(2)
+        ]
+    )
+    flags: list[str] = []
+    symbols = ("C", "K")
+    if not res.converged:
+        flags.append("MCMC not converged (not compared): " + " ".join(res.reasons))
+    if ess[j] < DEGENERATE_ESS:
+        flags.append(
+            f"filter degenerate: ESS {ess[j]:.1f} of {output.n_particles} particles in the step"
+        )
+    for i, sym in enumerate(symbols):
+        if unique[j, i] <= FROZEN_UNIQUE_VALUES:
+            flags.append(
+                f"frozen parameter: {sym} has {int(unique[j, i])} distinct particle values"
+            )
+    for i, sym in enumerate(symbols):
+        if _multimodal(res.samples[:, i]):
+            flags.append(f"posterior multimodal in {sym}: one mean and sd do not describe it")
+    if res.converged:
+        for i, sym in enumerate(symbols):
+            if not abs(z[i]) < Z_TOLERANCE:
+                flags.append(f"{sym} mean off: the filter is {z[i]:+.1f} MCMC sd away")
+            if not SD_RATIO_RANGE[0] <= ratio[i] <= SD_RATIO_RANGE[1]:
+                word = "narrow" if ratio[i] < SD_RATIO_RANGE[0] else "wide"
+                flags.append(f"{sym} spread too {word}: filter sd / MCMC sd = {ratio[i]:.2f}")
+    agree = bool(np.all(np.abs(z) < Z_TOLERANCE)) if res.converged else None
+    mass = problem.mass_kg
+    fn, zeta = _modal(res.samples[:, 0], res.samples[:, 1], mass)
+    pf_fn, pf_zeta = _modal(pf_mean[:1], pf_mean[1:], mass)
+    # First-order propagation of the filter's sd (it keeps no joint cloud per step).
+    fn_sd = float(pf_fn[0] * 0.5 * pf_sd[1] / pf_mean[1])
+    zeta_sd = float(pf_zeta[0] * math.hypot(pf_sd[0] / pf_mean[0], 0.5 * pf_sd[1] / pf_mean[1]))
+    if prior_mean is None or prior_cov is None:
+        p_mean, p_sd = problem.prior.mean, problem.prior.sd
+    else:
+        p_mean, p_sd = prior_mean, np.sqrt(np.diag(prior_cov))
+    start, end = problem.piece_starts[j], problem.piece_starts[j + 1] - 1
+    s_col = target.param_names.index("log_noise_scale") if target.free_noise else None
+    return StepCheck(
+        index=j,
+        start_s=float(problem.time_s[start]),
+        end_s=float(problem.time_s[end]),
+        pf_mean=pf_mean,
+        pf_sd=pf_sd,
+        mcmc_mean=m_mean.copy(),
+        mcmc_sd=m_sd.copy(),
+        z=z,
+        sd_ratio=ratio,
+        wasserstein=w1,
+        converged=bool(res.converged),
+        agree=agree,
+        flags=flags,
+        mcmc=res,
+        prior_mean=np.asarray(p_mean, dtype=float),
+        prior_sd=np.asarray(p_sd, dtype=float),
+        modal_mean={"natural_frequency_hz": float(fn.mean()), "damping_ratio": float(zeta.mean())},
+        modal_sd={
+            "natural_frequency_hz": float(fn.std(ddof=1)),
+            "damping_ratio": float(zeta.std(ddof=1)),
+        },
+        pf_modal_mean={"natural_frequency_hz": float(pf_fn[0]), "damping_ratio": float(pf_zeta[0])},
+        pf_modal_sd={"natural_frequency_hz": fn_sd, "damping_ratio": zeta_sd},
+        noise_scale_mean=(
+            float(np.mean(np.exp(res.samples[:, s_col]))) if s_col is not None else None
+        ),
+    )
+
+
+# -- InferenceData ------------------------------------------------------------------------
+def _thin_per_chain(res: McmcResult, n: int) -> tuple[FloatArray, FloatArray]:
+    """``n`` evenly spaced draws per ensemble: (E, n, d) parameters and (E, n) lp."""
+    post = res.inference_data.posterior
+    arr = np.stack([post[name].values for name in res.param_names], axis=-1)
+    lp = res.inference_data.sample_stats["lp"].values
+    idx = np.linspace(0, arr.shape[1] - 1, n).round().astype(int)
+    return arr[:, idx], lp[:, idx]
+
+
+def _completion(
+    model: StepModel, target: StepTarget, res: McmcResult, seed: int
+) -> dict[str, FloatArray]:
+    """Kept draws of one step with beta completed and pointwise log-likelihoods."""
+    draws, lp = _thin_per_chain(res, DRAWS_PER_CHAIN)
+    n_e, n_d, d = draws.shape
+    flat = draws.reshape(-1, d)
+    c, k, s, beta = target.split(flat)
+    if target.mode == "collapsed":
+        rng = np.random.default_rng(seed)
+        _, mean, root = model.collapsed_loglik(c, k, s, return_posterior=True)
+        beta = mean + np.einsum("bij,bj->bi", root, rng.standard_normal(mean.shape))
+    point = model.joint_loglik(c, k, beta, s, pointwise=True)  # (B, L, channels)
+    n_ch = point.shape[2]
+    prior_rng = np.random.default_rng(seed + 7)
+    pc, pk = target._draw_ck(prior_rng, n_e * n_d)
+    return {
+        "damping": c.reshape(n_e, n_d),
+        "stiffness": k.reshape(n_e, n_d),
+        "noise_scale": s.reshape(n_e, n_d),
+        "beta": beta.reshape(n_e, n_d, -1),
+        "lp": lp,
+        "loglik": point.reshape(n_e, n_d, model.length * n_ch),
+        "observed": model.y[:, model.observed].reshape(-1),
+        "time": np.repeat(model.problem.time_s[model.start : model.end], n_ch),
+        "channel": np.tile(np.flatnonzero(model.observed), model.length),
+        "prior_damping": pc.reshape(1, -1),
+        "prior_stiffness": pk.reshape(1, -1),
+    }
+
+
+def build_inference_data(
+    problem: IdentificationProblem, result: CrosscheckResult, parts: Sequence[dict[str, Any]]
+) -> Any:
+    """Assemble the per-record arviz InferenceData of a cross-check.
+
+    Groups: ``posterior`` (C, K, noise scale, natural frequency, damping ratio, hand-in
+    state and force coefficients, dims ``chain`` = ensemble, ``draw``, ``step``),
+    ``sample_stats`` (``lp``), ``log_likelihood`` (``y``: every observed value of every
+    checked step, dim ``obs``, with each draw's own step parameters), ``observed_data``
+    (``y`` with its time, channel and step as coordinates) and ``prior`` (each step's
+    (C, K) prior). Draws are :data:`DRAWS_PER_CHAIN` evenly spaced kept draws per ensemble.
+    """
+    import arviz as az
+
+    steps = [s.index for s in result.steps]
+
+    def stack(key: str) -> FloatArray:
+        return np.stack([p[key] for p in parts], axis=-1)
+
+    damping, stiffness = stack("damping"), stack("stiffness")
+    fn, zeta = _modal(damping, stiffness, problem.mass_kg)
+    beta = np.stack([p["beta"] for p in parts], axis=2)  # (E, D, step, q)
+    names = ["u_in_m", "v_in_m_s", *problem.coefficient_names]
+    loglik = np.concatenate([p["loglik"] for p in parts], axis=2)
+    obs_step = np.concatenate(
+        [np.full(p["observed"].size, i) for i, p in zip(steps, parts, strict=True)]
+    )
+    channel_names = ("u_m", "v_m_s", "acc_m_s2")
+    posterior = {
+        "damping_ns_per_m": damping,
+        "stiffness_n_per_m": stiffness,
+        "noise_scale": stack("noise_scale"),
+        "natural_frequency_hz": fn,
+        "damping_ratio": zeta,
+        "u_in_m": beta[..., 0],
+        "v_in_m_s": beta[..., 1],
+        "force_coefficients_n": beta[..., 2:],
+    }
+    return az.from_dict(
+        posterior=posterior,
+        sample_stats={"lp": stack("lp")},
+        log_likelihood={"y": loglik},
+        observed_data={"y": np.concatenate([p["observed"] for p in parts])},
+        prior={
+            "damping_ns_per_m": stack("prior_damping"),
+            "stiffness_n_per_m": stack("prior_stiffness"),
+        },
+        constant_data={
+            "obs_step": obs_step,
+            "obs_time_s": np.concatenate([p["time"] for p in parts]),
+            "obs_channel": np.concatenate([p["channel"] for p in parts]),
+        },
+        coords={
+            "step": steps,
+            "coefficient": names[2:],
+            "obs": np.arange(loglik.shape[2]),
+        },
+        dims={
+            "damping_ns_per_m": ["step"],
+            "stiffness_n_per_m": ["step"],
+            "noise_scale": ["step"],
+            "natural_frequency_hz": ["step"],
+            "damping_ratio": ["step"],
+            "u_in_m": ["step"],
+            "v_in_m_s": ["step"],
+            "force_coefficients_n": ["step", "coefficient"],
+            "lp": ["step"],
+            "y": ["obs"],
+            "obs_step": ["obs"],
+            "obs_time_s": ["obs"],
+            "obs_channel": ["obs"],
+        },
+        attrs={
+            "source": problem.source,
+            "method": result.method,
+            "mode": result.mode,
+            "prior_construction": result.prior,
+            "noise_scale": result.noise_scale,
+            "channels": ",".join(channel_names),
+        },
+    )
