@@ -336,6 +336,9 @@ def build_parser() -> argparse.ArgumentParser:
     from workbench.simulate_cli import add_simulate_parser
 
     add_simulate_parser(sub, out_opts)
+    from workbench.cli_crosscheck import add_crosscheck_parser
+
+    add_crosscheck_parser(sub, out_opts)
 
     p = sub.add_parser(
         "demo",

@@ -77,6 +77,7 @@ from workbench.inference import kalman as kf
 from workbench.inference.mcmc import McmcResult, run_ensembles
 from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.problem import IdentificationProblem
+from workbench.inference.results import IdentificationResult
 from workbench.inference.step_model import StepModel
 
 __all__ = [
@@ -551,11 +552,16 @@ def _modal(c: FloatArray, k: FloatArray, mass: float) -> tuple[FloatArray, Float
     return np.asarray(natural_frequency_hz(k, mass)), np.asarray(damping_ratio(c, k, mass))
 
 
+FilterRun = ParticleFilterOutput | IdentificationResult
+
+
 def _pf_step_stats(
-    problem: IdentificationProblem, out: ParticleFilterOutput
+    problem: IdentificationProblem, out: FilterRun
 ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Smallest ESS inside every piece and distinct values of C, K at its end."""
     p = problem.n_pieces
+    if out.ess is None or out.unique_values is None or out.trace_time_s is None:
+        raise UsageError(f"a {out.method} result has no filter traces; cross-check rbpf or pf")
     if out.trace_time_s.size == p:
         return np.asarray(out.ess, dtype=float), np.asarray(out.unique_values)
     # Per-sample traces (pf): the piece's rows by time.
@@ -568,7 +574,7 @@ def _pf_step_stats(
 
 def crosscheck(
     problem: IdentificationProblem,
-    output: ParticleFilterOutput,
+    output: FilterRun,
     *,
     mode: str = "collapsed",
     prior: str = "sequential",
@@ -589,8 +595,8 @@ def crosscheck(
     problem : IdentificationProblem
         The problem the filter ran on (its process noise of (u, u') is set to zero for the
         MCMC, module docstring).
-    output : ParticleFilterOutput
-        The filter's output (``piece_mean``, ``piece_sd``, ESS and distinct-value traces).
+    output : ParticleFilterOutput or IdentificationResult
+        The filter's run (``piece_mean``, ``piece_sd``, ESS and distinct-value traces).
     mode : {"collapsed", "joint"}, default "collapsed"
         Sampled parameters (module docstring).
     prior : {"sequential", "filter"}, default "sequential"
@@ -618,6 +624,8 @@ def crosscheck(
         raise UsageError(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
     if prior not in PRIORS:
         raise UsageError(f"--prior must be one of {', '.join(PRIORS)}, got {prior!r}")
+    if output.piece_mean is None or output.piece_sd is None:
+        raise UsageError(f"a {output.method} result has no per-step values; cross-check rbpf or pf")
     if output.piece_mean.shape[0] != problem.n_pieces:
         raise UsageError(
             f"the filter output has {output.piece_mean.shape[0]} pieces but the problem has "
@@ -680,7 +688,11 @@ def crosscheck(
         "tau_factor": 50.0,
         "pieces_checked": n_pieces,
         "pieces_in_record": problem.n_pieces,
-        "filter": {"method": output.method, "n_particles": output.n_particles, "seed": output.seed},
+        "filter": {
+            "method": output.method,
+            "n_particles": output.n_particles,
+            "seed": getattr(output, "seed", None),
+        },
     }
     result = CrosscheckResult(
         method=output.method,
@@ -707,7 +719,7 @@ def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:
 
 def _compare(
     problem: IdentificationProblem,
-    output: ParticleFilterOutput,
+    output: FilterRun,
     j: int,
     res: McmcResult,
     target: StepTarget,
@@ -716,6 +728,8 @@ def _compare(
     ess: FloatArray,
     unique: NDArray[np.int64],
 ) -> StepCheck:
+    if output.piece_mean is None or output.piece_sd is None:  # pragma: no cover - checked
+        raise UsageError("the filter run has no per-step values")
     pf_mean = np.asarray(output.piece_mean[j], dtype=float)
     pf_sd = np.asarray(output.piece_sd[j], dtype=float)
     m_mean, m_sd = res.mean[:2], res.sd[:2]
@@ -916,3 +930,59 @@ def build_inference_data(
             "channels": ",".join(channel_names),
         },
     )
+
+
+# -- identifiability from the MCMC --------------------------------------------------------
+def mcmc_identifiability(
+    problem: IdentificationProblem, result: CrosscheckResult
+) -> dict[str, Any]:
+    """Return the identifiability report of the MCMC posterior of the last converged step.
+
+    With the sequential prior the last step's posterior is the whole record's (in
+    assumed-density form), so its sd against the prior box's, the C-K correlation and the
+    largest correlation of C and K with that step's force coefficients (from the kept draws
+    with the coefficients completed) grade the record as
+    :func:`~workbench.inference.identifiability.identifiability_report` does for the filters.
+    Returns an empty dict when no step converged or the prior was the filter's own.
+    """
+    from workbench.inference.identifiability import identifiability_report
+
+    if result.prior != "sequential" or not result.compared:
+        return {}
+    last = result.compared[-1]
+    mean, cov = last.mcmc.mean[:2], last.mcmc.cov[:2, :2]
+    sd = np.sqrt(np.diag(cov))
+    corr = float(cov[0, 1] / (sd[0] * sd[1]))
+    force = (float("nan"), float("nan"))
+    idata = result.inference_data
+    if idata is not None:
+        post = idata.posterior.sel(step=last.index)
+        c = post["damping_ns_per_m"].values.reshape(-1)
+        k = post["stiffness_n_per_m"].values.reshape(-1)
+        coef = post["force_coefficients_n"].values.reshape(c.size, -1)
+        mat = np.corrcoef(np.column_stack([c, k, coef]), rowvar=False)
+        force = (float(np.nanmax(np.abs(mat[0, 2:]))), float(np.nanmax(np.abs(mat[1, 2:]))))
+    box = problem.prior
+    lo = np.array([box.damping_ns_per_m[0], box.stiffness_n_per_m[0]])
+    hi = np.array([box.damping_ns_per_m[1], box.stiffness_n_per_m[1]])
+    edge = (np.abs(mean - lo) < 2 * sd) | (np.abs(hi - mean) < 2 * sd)
+    report = identifiability_report(
+        sd, box.sd, corr, force, on_prior_edge=(bool(edge[0]), bool(edge[1]))
+    ).to_json()
+    report["source"] = f"MCMC posterior after step {last.index} (sequential prior)"
+    return report
+
+
+def apply_mcmc_identifiability(
+    ident: Any, problem: IdentificationProblem, result: CrosscheckResult
+) -> None:
+    """Replace an identification result's identifiability report by the MCMC's, where run.
+
+    The filter's own report is kept under ``"filter_report"``; nothing changes when the
+    MCMC gives no report (no converged step).
+    """
+    report = mcmc_identifiability(problem, result)
+    if not report:
+        return
+    report["filter_report"] = dict(ident.identifiability)
+    ident.identifiability = report
