@@ -26,6 +26,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     from workbench.inference.crosscheck import apply_mcmc_identifiability, crosscheck
     from workbench.inference.identify import identify
     from workbench.inference.settings import IdentifySettings
+    from workbench.records.inspection import inspect_record
 
     overrides = {
         "method": args.method,
@@ -42,13 +43,15 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     if settings.pieces != "steps":
         raise UsageError("crosscheck works per footfall step; identify with --pieces steps")
     record = _load(args)
-    ident = identify(record, settings, rescale=args.rescale_to_mass, progress=False)
-    problem = ident.problem
-    if args.max_steps is not None and args.max_steps > problem.n_pieces:
+    insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=args.rescale_to_mass)
+    n_steps = len(insp.steps.boundaries) - 1
+    if args.max_steps is not None and args.max_steps > n_steps:
         raise UsageError(
-            f"--max-steps {args.max_steps}: {record.name} has only {problem.n_pieces} whole "
-            f"steps; give at most {problem.n_pieces}"
+            f"--max-steps {args.max_steps}: {record.name} has only {n_steps} whole steps; "
+            f"give at most {n_steps}"
         )
+    ident = identify(insp, settings, progress=False)
+    problem = ident.problem
     result = crosscheck(
         problem,
         ident,

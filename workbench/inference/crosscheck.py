@@ -88,6 +88,8 @@ __all__ = [
     "StepCheck",
     "StepTarget",
     "crosscheck",
+    "default_moves",
+    "recompare",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -721,7 +723,9 @@ def crosscheck(
             param_names=target.param_names,
             moves=default_moves() if moves is None else moves,
         )
-        check = _compare(prob, output, j, res, target, prior_mean, prior_cov, ess, unique)
+        check = _compare(
+            prob, output, j, res, target.free_noise, prior_mean, prior_cov, ess, unique
+        )
         checks.append(check)
         if keep_inference_data:
             completions.append(_completion(model, target, res, _step_seed(seed + 1, j)))
@@ -766,6 +770,46 @@ def crosscheck(
     return result
 
 
+def recompare(
+    problem: IdentificationProblem, result: CrosscheckResult, output: FilterRun
+) -> CrosscheckResult:
+    """Compare another filter run with the MCMC runs of an existing cross-check.
+
+    With the sequential prior the MCMC of every step depends on the record alone, not on
+    the filter, so one set of runs serves every filter (rbpf and pf, several particle
+    counts); only the comparison is redone. The InferenceData is shared.
+    """
+    if result.prior != "sequential":
+        raise UsageError("only a cross-check with the sequential prior can be reused")
+    if output.piece_mean is None or output.piece_mean.shape[0] != problem.n_pieces:
+        raise UsageError("the filter run does not belong to this problem")
+    ess, unique = _pf_step_stats(problem, output)
+    checks = []
+    for old in result.steps:
+        target_names = old.mcmc.param_names
+        free = "log_noise_scale" in target_names
+        checks.append(
+            _compare(
+                problem,
+                output,
+                old.index,
+                old.mcmc,
+                free,
+                None if old.index == 0 else old.prior_mean,
+                None if old.index == 0 else np.diag(np.square(old.prior_sd)),
+                ess,
+                unique,
+            )
+        )
+    settings = dict(result.settings)
+    settings["filter"] = {
+        "method": output.method,
+        "n_particles": output.n_particles,
+        "seed": getattr(output, "seed", None),
+    }
+    return replace(result, method=output.method, steps=checks, settings=settings)
+
+
 def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:
     """Keep a prior covariance symmetric positive definite (a floor of 1e-6 box sd)."""
     cov = 0.5 * (cov + cov.T)
@@ -780,7 +824,7 @@ def _compare(
     output: FilterRun,
     j: int,
     res: McmcResult,
-    target: StepTarget,
+    free_noise: bool,
     prior_mean: FloatArray | None,
     prior_cov: FloatArray | None,
     ess: FloatArray,
@@ -835,7 +879,7 @@ def _compare(
     else:
         p_mean, p_sd = prior_mean, np.sqrt(np.diag(prior_cov))
     start, end = problem.piece_starts[j], problem.piece_starts[j + 1] - 1
-    s_col = target.param_names.index("log_noise_scale") if target.free_noise else None
+    s_col = res.param_names.index("log_noise_scale") if free_noise else None
     return StepCheck(
         index=j,
         start_s=float(problem.time_s[start]),
