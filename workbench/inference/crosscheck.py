@@ -11,38 +11,47 @@ The target of step j (the prior the filter carries into the step)
     coefficients (:class:`~workbench.inference.step_model.StepModel`). The parts:
 
     * ``pi_0`` is the problem's prior box, as in the filters. For ``j > 0`` (``prior=
-      "sequential"``, the default) ``pi_j`` is a Gaussian with the mean and covariance of
-      the MCMC posterior of (C, K) at step ``j - 1``, truncated to the box: the posterior a
-      correct filter carries into the step, in assumed-density form (exact for a Gaussian
-      posterior; one step of data moves a posterior that is already narrow only a little, so
-      the Gaussian form costs little after the first steps). It is built from this module's
+      "sequential"``, the default) ``pi_j`` is a normal fitted to the MCMC draws of (C, K)
+      at step ``j - 1`` in the box's logit coordinates (:func:`box_logit`): the posterior a
+      correct filter carries into the step, in assumed-density form. The logit map lets a
+      posterior that leans against a face of the box keep its shape, which a normal in
+      (C, K) cut at the box does not. It is built from this module's
       own previous step, not from the filter under test, so a filter that has gone wrong
       cannot pass its error on to its reference. ``prior="filter"`` uses the filter's own
       per-step mean and sd instead (no correlation: the filter keeps marginal moments only),
       which checks the filter's update of one step in isolation.
-    * The hand-in ``(u, u')`` prior is the exact Kalman hand-over of step ``j - 1``
-      (:func:`workbench.inference.kalman.piece_filter`) at the MCMC posterior mean of (C, K)
-      of that step, chained from the filters' initial state; with u and u' observed (the
-      default) the data pin it, so its dependence on (C, K) is negligible.
+    * The hand-in ``(u, u')`` prior of every walker is the exact Kalman hand-over of step
+      ``j - 1`` at the walker's own (C, K)
+      (:meth:`~workbench.inference.step_model.StepModel.hand_over`), starting from the
+      hand-in of step ``j - 1`` at the MCMC posterior mean of (C, K) (a chain of
+      :func:`workbench.inference.kalman.piece_filter` hand-overs from the filters' initial
+      state). With u and u' observed the filter forgets its start within a step, so one
+      step of exact history is enough: on a simulated walk the resulting posterior stayed
+      within 0.1 posterior sd of the exact one over 11 steps, while a hand-in fixed at the
+      posterior mean drifted to 1.8 sd (K) by the last step.
     * ``p(beta | C, K)``: the hand-in and the problem's force prior, drawn afresh per step
       as in the filters; ``p(y_j | ...)``: the problem's noise model with the observed
-      channels' sd multiplied by the *noise scale* ``s``, prior ``log s ~ N(0, 0.5^2)``
-      (``noise_scale="free"``, the default; ``"fixed"`` holds ``s = 1``, the filters' exact
-      model). A per-step ``s`` far from 1 says that the step's misfit is not the noise the
-      filter assumed.
+      channels' sd multiplied by the *noise scale* ``s``. ``noise_scale="fixed"`` (the
+      default) holds ``s = 1``: the filters' own model, so that a disagreement is the
+      filter's fault and not a difference of models. ``"free"`` samples ``log s`` (prior
+      ``N(0, 0.5^2)``): a per-step ``s`` far from 1 says that the step's misfit is not the
+      noise the filter assumed (on a simulated walk with the seed's 10 % noise setting
+      ``s`` came out near 0.1, and the (C, K) posterior was then far narrower than the
+      filter's, as it should be for a different model).
     * No process noise on (u, u'): the model of rbpf and exact. The seed-faithful filter
       (``pf``) runs with a small one; it is compared with this same reference.
 
 Two modes
     ``"collapsed"`` (default): ``beta`` is integrated out in closed form and emcee samples
-    ``(C, K, log s)``, three dimensions; the force coefficients are then drawn exactly from
+    (C, K) (and ``log s`` when free); the force coefficients are then drawn exactly from
     their Gaussian conditional at every kept draw (Rao-Blackwell completion), so the
     InferenceData still holds them. Default because it is exact and cheap: the ridge between
     (C, K) and the force coefficients (DESIGN.md 2.4) is integrated out instead of explored,
-    the autocorrelation time is a few steps, and one call costs about a millisecond.
-    ``"joint"``: emcee samples all ``2 n + 6`` parameters. It needs no linear algebra
-    beyond a residual, but walks along the ridge with autocorrelation times one or two
-    orders longer; the benchmark (``analyses/benchmarks/crosscheck_step.py``) measures it.
+    the autocorrelation time is a few steps, and one call costs a few milliseconds.
+    ``"joint"``: emcee samples all ``2 n + 5`` parameters (``2 n + 6`` with ``log s``). It
+    needs no linear algebra beyond a residual, but walks along the ridge with
+    autocorrelation times two orders longer; the benchmark
+    (``analyses/benchmarks/crosscheck_step.py``) measures it.
 
 Convergence (:func:`workbench.inference.mcmc.run_ensembles`)
     Several independent ensembles, the 50-tau rule with automatic extension, acceptance
@@ -112,6 +121,32 @@ FROZEN_UNIQUE_VALUES = 5
 LOG_NOISE_SCALE_SD = 0.5
 #: Kept draws per ensemble and step in the InferenceData.
 DRAWS_PER_CHAIN = 100
+
+
+def _bounds(box: Any) -> tuple[FloatArray, FloatArray]:
+    lo = np.array([box.damping_ns_per_m[0], box.stiffness_n_per_m[0]], dtype=float)
+    hi = np.array([box.damping_ns_per_m[1], box.stiffness_n_per_m[1]], dtype=float)
+    return lo, hi
+
+
+def box_logit(box: Any, point: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Map (C, K) rows inside the prior box to logit coordinates; also log |Jacobian|.
+
+    ``x = log((theta - lo) / (hi - theta))`` per parameter; a normal in x is a prior that
+    lives in the box and may pile up against a face of it, which a normal in (C, K) cut at
+    the box cannot do without its moments drifting (module docstring).
+    """
+    lo, hi = _bounds(box)
+    a, b = point - lo, hi - point
+    x = np.log(a) - np.log(b)
+    log_jac = np.sum(np.log(hi - lo) - np.log(a) - np.log(b), axis=1)
+    return x, log_jac
+
+
+def box_expit(box: Any, x: FloatArray) -> FloatArray:
+    """Inverse of :func:`box_logit`: logit coordinates to (C, K) rows."""
+    lo, hi = _bounds(box)
+    return lo + (hi - lo) / (1.0 + np.exp(-np.clip(x, -700.0, 700.0)))
 
 
 # -- the proposal ------------------------------------------------------------------------
@@ -189,6 +224,13 @@ class StepTarget:
     fixed_damping_stiffness : (float, float), optional
         Hold C and K fixed (only beta and ``log s`` are sampled; joint mode): the
         linear-Gaussian case whose posterior is known in closed form.
+    prior_logit : bool, default False
+        Read the Gaussian prior as one over the box's logit coordinates
+        (:func:`box_logit`), not over (C, K) themselves.
+    previous : StepModel, optional
+        The previous step's model: when given, the hand-in ``(u, u')`` of every row is that
+        step's exact hand-over at the row's own (C, K) (module docstring), not the fixed
+        hand-in of ``model``.
     """
 
     def __init__(
@@ -201,6 +243,8 @@ class StepTarget:
         mode: str = "collapsed",
         noise_scale: str = "fixed",
         fixed_damping_stiffness: tuple[float, float] | None = None,
+        prior_logit: bool = False,
+        previous: StepModel | None = None,
     ) -> None:
         if mode not in MODES:
             raise UsageError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
@@ -215,6 +259,8 @@ class StepTarget:
             None if fixed_damping_stiffness is None else np.asarray(fixed_damping_stiffness)
         )
         self.box = box
+        self.prior_logit = bool(prior_logit)
+        self.previous = previous
         self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
         self.prior_chol: FloatArray | None = None
         if prior_cov is not None:
@@ -254,8 +300,13 @@ class StepTarget:
         inside = self.box.contains(c, k)
         out = np.where(inside, 0.0, -np.inf)
         if self.prior_mean is not None and self.prior_chol is not None and self.fixed is None:
-            dev = np.column_stack([c, k]) - self.prior_mean
-            white = np.linalg.solve(self.prior_chol, dev.T).T
+            point = np.column_stack([c, k])
+            if self.prior_logit:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    point, log_jac = box_logit(self.box, point)
+                out = out + np.where(inside, log_jac, 0.0)
+                point = np.where(inside[:, None], point, 0.0)
+            white = np.linalg.solve(self.prior_chol, (point - self.prior_mean).T).T
             out = out - 0.5 * np.sum(white * white, axis=1)
         return out
 
@@ -272,15 +323,25 @@ class StepTarget:
         ok = np.isfinite(out)
         if not np.any(ok):
             return out
+        hand_in = self.hand_in(c[ok], k[ok])
         if self.mode == "collapsed":
-            ll = self.model.collapsed_loglik(c[ok], k[ok], s[ok])
+            ll = self.model.collapsed_loglik(c[ok], k[ok], s[ok], hand_in=hand_in)
             out[ok] += np.asarray(ll)
             return out
         m = self.model
-        eta = np.linalg.solve(m.prior_chol, (beta[ok] - m.beta0).T).T
-        out[ok] += -0.5 * np.sum(eta * eta, axis=1)
-        out[ok] += m.joint_loglik(c[ok], k[ok], beta[ok], s[ok])
+        beta0, chol = m.prior_for(int(ok.sum()), hand_in)
+        eta = np.linalg.solve(chol, (beta[ok] - beta0)[:, :, None])[:, :, 0]
+        # log N(beta; beta0, L L^T) up to a constant: the hand-in factor depends on (C, K).
+        log_det = np.sum(np.log(np.abs(np.diagonal(chol[:, :2, :2], axis1=1, axis2=2))), axis=1)
+        out[ok] += -0.5 * np.sum(eta * eta, axis=1) - log_det
+        out[ok] += m.joint_loglik(c[ok], k[ok], beta[ok], s[ok], hand_in=hand_in)
         return out
+
+    def hand_in(self, c: FloatArray, k: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+        """Per-row hand-in (mean, Cholesky factor), or None for the model's fixed one."""
+        if self.previous is None:
+            return None
+        return self.previous.hand_over(c, k)
 
     def initial(self, rng: np.random.Generator, n_walkers: int) -> FloatArray:
         """Over-dispersed starting points: (C, K) from the prior, beta from its conditional."""
@@ -296,7 +357,9 @@ class StepTarget:
             cols.append(log_s[:, None])
         if self.mode == "joint":
             s = np.exp(log_s) if self.free_noise else np.ones(n_walkers)
-            _, mean, root = self.model.collapsed_loglik(c, k, s, return_posterior=True)
+            _, mean, root = self.model.collapsed_loglik(
+                c, k, s, return_posterior=True, hand_in=self.hand_in(c, k)
+            )
             # Twice the conditional spread: over-dispersed, but on the ridge.
             beta = mean + 2.0 * np.einsum("bij,bj->bi", root, rng.standard_normal(mean.shape))
             cols.append(beta)
@@ -305,6 +368,11 @@ class StepTarget:
     def _draw_ck(self, rng: np.random.Generator, n: int) -> tuple[FloatArray, FloatArray]:
         if self.prior_mean is None or self.prior_chol is None:
             return self.box.sample(n, rng)
+        if self.prior_logit:
+            draw = box_expit(
+                self.box, self.prior_mean + rng.standard_normal((n, 2)) @ self.prior_chol.T
+            )
+            return draw[:, 0], draw[:, 1]
         c = np.empty(n)
         k = np.empty(n)
         filled = 0
@@ -706,10 +774,18 @@ def crosscheck(
     prior_cov: FloatArray | None = None
     checks: list[StepCheck] = []
     completions: list[dict[str, Any]] = []
+    previous: StepModel | None = None
     for j in tqdm(range(n_pieces), desc="crosscheck", unit="step", disable=not progress):
         model = StepModel(prob, j, x_mean[0], x_cov[0])
         target = StepTarget(
-            model, prior_mean, prior_cov, prob.prior, mode=mode, noise_scale=noise_scale
+            model,
+            prior_mean,
+            prior_cov,
+            prob.prior,
+            mode=mode,
+            noise_scale=noise_scale,
+            prior_logit=True,
+            previous=previous,
         )
         walkers = n_walkers or max(32, 4 * target.n_dim + (4 * target.n_dim) % 2)
 
@@ -730,21 +806,30 @@ def crosscheck(
             moves=default_moves() if moves is None else moves,
         )
         check = _compare(
-            prob, output, j, res, target.free_noise, prior_mean, prior_cov, ess, unique
+            prob, output, j, res, target.free_noise, _prior_moments(target), ess, unique
         )
         checks.append(check)
         if keep_inference_data:
             completions.append(_completion(model, target, res, _step_seed(seed + 1, j)))
         # The prior of the next step and its hand-in (module docstring).
         if prior == "sequential":
-            prior_mean, prior_cov = res.mean[:2].copy(), res.cov[:2, :2].copy()
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x, _ = box_logit(prob.prior, res.samples[:, :2])
+            x = x[np.all(np.isfinite(x), axis=1)]
+            prior_mean, prior_cov = x.mean(axis=0), np.atleast_2d(np.cov(x, rowvar=False))
         else:
-            prior_mean = np.asarray(output.piece_mean[j], dtype=float)
-            prior_cov = np.diag(np.square(np.maximum(output.piece_sd[j], 1e-9 * prior_mean)))
+            # The filter's per-step normal, mapped to logit coordinates (delta method).
+            mean = np.asarray(output.piece_mean[j], dtype=float)
+            lo, hi = _bounds(prob.prior)
+            mean = np.clip(mean, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+            slope = (hi - lo) / ((mean - lo) * (hi - mean))
+            prior_mean = box_logit(prob.prior, mean[None])[0][0]
+            prior_cov = np.diag(np.square(np.maximum(output.piece_sd[j] * slope, 1e-6)))
         prior_cov = _floor_cov(prior_cov, prob)
         if j + 1 < n_pieces:
             hand = kf.piece_filter(prob, j, res.mean[:1], res.mean[1:2], x_mean, x_cov)
             x_mean, x_cov = hand.x_mean_next, hand.x_cov_next
+            previous = model
     seconds = time.perf_counter() - t0
     settings = {
         "seed": int(seed),
@@ -801,8 +886,7 @@ def recompare(
                 old.index,
                 old.mcmc,
                 free,
-                None if old.index == 0 else old.prior_mean,
-                None if old.index == 0 else np.diag(np.square(old.prior_sd)),
+                (old.prior_mean, old.prior_sd),
                 ess,
                 unique,
             )
@@ -817,12 +901,20 @@ def recompare(
 
 
 def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:
-    """Keep a prior covariance symmetric positive definite (a floor of 1e-6 box sd)."""
+    """Keep a prior covariance (logit coordinates) symmetric positive definite."""
     cov = 0.5 * (cov + cov.T)
-    floor = np.square(1e-6 * problem.prior.sd)
     vals, vecs = np.linalg.eigh(cov)
-    vals = np.maximum(vals, floor.min())
+    vals = np.maximum(vals, 1e-12)
     return (vecs * vals) @ vecs.T
+
+
+def _prior_moments(target: StepTarget) -> tuple[FloatArray, FloatArray]:
+    """(C, K) mean and sd of a step's prior (the box's, or from 4000 fixed-seed draws)."""
+    if target.prior_mean is None:
+        return target.box.mean, target.box.sd
+    c, k = target._draw_ck(np.random.default_rng(0), 4000)
+    draws = np.column_stack([c, k])
+    return draws.mean(axis=0), draws.std(axis=0, ddof=1)
 
 
 def _compare(
@@ -831,8 +923,7 @@ def _compare(
     j: int,
     res: McmcResult,
     free_noise: bool,
-    prior_mean: FloatArray | None,
-    prior_cov: FloatArray | None,
+    prior_moments: tuple[FloatArray, FloatArray],
     ess: FloatArray,
     unique: NDArray[np.int64],
 ) -> StepCheck:
@@ -880,10 +971,7 @@ def _compare(
     # First-order propagation of the filter's sd (it keeps no joint cloud per step).
     fn_sd = float(pf_fn[0] * 0.5 * pf_sd[1] / pf_mean[1])
     zeta_sd = float(pf_zeta[0] * math.hypot(pf_sd[0] / pf_mean[0], 0.5 * pf_sd[1] / pf_mean[1]))
-    if prior_mean is None or prior_cov is None:
-        p_mean, p_sd = problem.prior.mean, problem.prior.sd
-    else:
-        p_mean, p_sd = prior_mean, np.sqrt(np.diag(prior_cov))
+    p_mean, p_sd = prior_moments
     start, end = problem.piece_starts[j], problem.piece_starts[j + 1] - 1
     s_col = res.param_names.index("log_noise_scale") if free_noise else None
     return StepCheck(
@@ -934,11 +1022,12 @@ def _completion(
     n_e, n_d, d = draws.shape
     flat = draws.reshape(-1, d)
     c, k, s, beta = target.split(flat)
+    hand_in = target.hand_in(c, k)
     if target.mode == "collapsed":
         rng = np.random.default_rng(seed)
-        _, mean, root = model.collapsed_loglik(c, k, s, return_posterior=True)
+        _, mean, root = model.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
         beta = mean + np.einsum("bij,bj->bi", root, rng.standard_normal(mean.shape))
-    point = model.joint_loglik(c, k, beta, s, pointwise=True)  # (B, L, channels)
+    point = model.joint_loglik(c, k, beta, s, pointwise=True, hand_in=hand_in)
     n_ch = point.shape[2]
     prior_rng = np.random.default_rng(seed + 7)
     pc, pk = target._draw_ck(prior_rng, n_e * n_d)

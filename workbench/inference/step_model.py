@@ -128,13 +128,22 @@ class StepModel:
         self._unobs_rows = np.flatnonzero(w_unobs.reshape(-1))
 
     # -- design ------------------------------------------------------------------------
-    def responses(self, damping: ArrayLike, stiffness: ArrayLike) -> FloatArray:
+    def responses(
+        self,
+        damping: ArrayLike,
+        stiffness: ArrayLike,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
+    ) -> FloatArray:
         """Whitened design ``[G | e]`` of the piece for B pairs.
 
         Parameters
         ----------
         damping, stiffness : array_like, shape (B,)
             C [N s/m] and K [N/m].
+        hand_in : (ndarray (B, 2), ndarray (B, 2, 2)), optional
+            A hand-in ``(u, u')`` mean and lower Cholesky factor per pair, replacing the
+            model's own (the columns of ``beta``'s hand-in part are then whitened by the
+            pair's own factor).
 
         Returns
         -------
@@ -144,6 +153,21 @@ class StepModel:
             every prior-whitened column of ``beta``; ``[..., q]``: minus the residual of
             the data from the prior-mean prediction (not yet divided by the noise sd).
         """
+        buf = self._run(damping, stiffness, hand_in)
+        b, n_s, q = buf.shape[0], self.length, self.q
+        # Rows 1 .. 5 L of the flattened buffer hold every observation, and forces between
+        # them, which the row weights zero; the last column becomes data minus prediction.
+        rows = buf.reshape(b, -1, q + 1)[:, 1 : 5 * n_s + 1]
+        rows[..., q] -= self._y_rows[None]
+        return rows
+
+    def _run(
+        self,
+        damping: ArrayLike,
+        stiffness: ArrayLike,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
+    ) -> FloatArray:
+        """Run the recursion; return its whole buffer (B, L + 1, 5, q + 1) (see responses)."""
         c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
         k = np.atleast_1d(np.asarray(stiffness, dtype=np.float64))
         phi, g0, g1 = transition_matrices(
@@ -158,8 +182,12 @@ class StepModel:
         # i to rows 0-2 of block i + 1, i.e. (u''_i, u_{i+1}, u'_{i+1}).
         buf = np.zeros((b, n_s + 1, 5, q1))
         buf[:, :n_s, 3:5] = self._force_pairs[None]
-        buf[:, 0, 1:3, :q] = self.prior_chol[None, :2, :]
-        buf[:, 0, 1:3, q] = self.beta0[None, :2]
+        if hand_in is None:
+            buf[:, 0, 1:3, :q] = self.prior_chol[None, :2, :]
+            buf[:, 0, 1:3, q] = self.beta0[None, :2]
+        else:
+            buf[:, 0, 1:3, :2] = hand_in[1]
+            buf[:, 0, 1:3, q] = hand_in[0]
         if self.piece > 0:
             # The new piece's share of the boundary interval (kalman module, time convention).
             buf[:, 0, 1:3] += g1[:, :, None] * self._force_pairs[0, 0][None, None, :]
@@ -173,11 +201,7 @@ class StepModel:
         step[:, 1:, 3] = g1
         for i in range(n_s):
             np.matmul(step, buf[:, i, 1:5], out=buf[:, i + 1, 0:3])
-        # Rows 1 .. 5 L of the flattened buffer hold every observation, and forces between
-        # them, which the row weights zero; the last column becomes data minus prediction.
-        rows = buf.reshape(b, -1, q1)[:, 1 : 5 * n_s + 1]
-        rows[..., q] -= self._y_rows[None]
-        return rows
+        return buf
 
     # -- likelihoods -------------------------------------------------------------------
     def _log_det_r(self, noise_scale: FloatArray) -> FloatArray:
@@ -197,6 +221,45 @@ class StepModel:
             gram += np.matmul(unobs.transpose(0, 2, 1), unobs)
         return gram
 
+    def hand_over(
+        self,
+        damping: ArrayLike,
+        stiffness: ArrayLike,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Hand-over ``(u, u')`` to the next piece given this piece's data, per pair.
+
+        The state at the next piece's first sample, before that piece's share of the
+        boundary interval (the convention of
+        :attr:`workbench.inference.kalman.PieceResult.x_mean_next`), with this piece's
+        ``beta`` integrated out (noise scale 1, the filters' model).
+
+        Returns
+        -------
+        mean : ndarray, shape (B, 2)
+        chol : ndarray, shape (B, 2, 2)
+            Lower Cholesky factor of the covariance.
+        """
+        if self.end >= self.problem.n_samples:
+            raise UsageError("the last piece of the record hands over to nothing")
+        buf = self._run(damping, stiffness, hand_in)
+        b, n_s, q = buf.shape[0], self.length, self.q
+        nxt = buf[:, n_s, 1:3].copy()  # (B, 2, q + 1): the state after the last interval
+        rows = buf.reshape(b, -1, q + 1)[:, 1 : 5 * n_s + 1]
+        rows[..., q] -= self._y_rows[None]
+        gram = self._gram(rows, np.ones(b))
+        idx = np.arange(q)
+        gram[:, idx, idx] += 1.0
+        chol_aug = np.linalg.cholesky(gram)
+        chol = chol_aug[:, :q, :q]
+        half = chol_aug[:, q, :q]
+        # eta | y ~ N(-L^-T half, L^-T L^-1); the hand-over is affine in eta.
+        proj = np.linalg.solve(chol, nxt[:, :, :q].transpose(0, 2, 1))  # L^-1 V^T, (B, q, 2)
+        mean = nxt[:, :, q] - np.einsum("bqi,bq->bi", proj, half)
+        cov = proj.transpose(0, 2, 1) @ proj
+        cov = 0.5 * (cov + cov.transpose(0, 2, 1))
+        return mean, np.linalg.cholesky(cov)
+
     def collapsed_loglik(
         self,
         damping: ArrayLike,
@@ -204,6 +267,7 @@ class StepModel:
         noise_scale: ArrayLike | None = None,
         *,
         return_posterior: bool = False,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
     ) -> FloatArray | tuple[FloatArray, FloatArray, FloatArray]:
         """``log p(y_piece | C, K, s)`` with ``beta`` integrated out, for B pairs.
 
@@ -216,6 +280,8 @@ class StepModel:
         return_posterior : bool, default False
             Also return the conditional posterior of ``beta`` given (C, K, s): its mean
             (B, q) and a square root (B, q, q) of its covariance.
+        hand_in : (ndarray (B, 2), ndarray (B, 2, 2)), optional
+            Per-row hand-in mean and Cholesky factor (see :meth:`responses`).
 
         Returns
         -------
@@ -223,7 +289,7 @@ class StepModel:
         """
         c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
         s = np.ones(c.size) if noise_scale is None else np.asarray(noise_scale, dtype=np.float64)
-        rows = self.responses(c, stiffness)
+        rows = self.responses(c, stiffness, hand_in)
         q = self.q
         gram = self._gram(rows, 1.0 / np.square(s))
         idx = np.arange(q)
@@ -247,9 +313,21 @@ class StepModel:
         # of the rows is minus the residual, so ``half`` is -L^-1 h.
         chol_inv = np.linalg.inv(chol)
         eta = -np.einsum("bji,bj->bi", chol_inv, half)
-        beta_mean = self.beta0[None] + eta @ self.prior_chol.T
-        beta_sqrt = self.prior_chol[None] @ chol_inv.transpose(0, 2, 1)
+        beta0, prior_chol = self.prior_for(c.size, hand_in)
+        beta_mean = beta0 + np.einsum("bij,bj->bi", prior_chol, eta)
+        beta_sqrt = prior_chol @ chol_inv.transpose(0, 2, 1)
         return loglik, beta_mean, beta_sqrt
+
+    def prior_for(
+        self, n: int, hand_in: tuple[FloatArray, FloatArray] | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Prior mean (n, q) and lower Cholesky factor (n, q, q) of beta, per row."""
+        beta0 = np.repeat(self.beta0[None], n, axis=0)
+        chol = np.repeat(self.prior_chol[None], n, axis=0)
+        if hand_in is not None:
+            beta0[:, :2] = hand_in[0]
+            chol[:, :2, :2] = hand_in[1]
+        return beta0, chol
 
     def joint_loglik(
         self,
@@ -259,6 +337,7 @@ class StepModel:
         noise_scale: ArrayLike | None = None,
         *,
         pointwise: bool = False,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
     ) -> FloatArray:
         """``log p(y_piece | C, K, beta, s)`` (no integration), for B rows.
 
@@ -274,6 +353,8 @@ class StepModel:
             Return the log density of every observed value, shape (B, L, n_observed_channels),
             instead of the sum (the unobserved channels are left out: they carry no
             information).
+        hand_in : (ndarray (B, 2), ndarray (B, 2, 2)), optional
+            Per-row hand-in mean and Cholesky factor (see :meth:`responses`).
 
         Returns
         -------
@@ -281,8 +362,10 @@ class StepModel:
         """
         c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
         s = np.ones(c.size) if noise_scale is None else np.asarray(noise_scale, dtype=np.float64)
-        eta = np.linalg.solve(self.prior_chol, (np.asarray(beta) - self.beta0[None]).T).T
-        rows = self.responses(c, stiffness)
+        beta0, prior_chol = self.prior_for(c.size, hand_in)
+        dev = np.asarray(beta, dtype=np.float64) - beta0
+        eta = np.linalg.solve(prior_chol, dev[:, :, None])[:, :, 0]
+        rows = self.responses(c, stiffness, hand_in)
         q = self.q
         # Data minus prediction at beta, per row, then per sample and channel (u, u', u'').
         resid = -(rows[..., q] + np.einsum("brq,bq->br", rows[..., :q], eta))
