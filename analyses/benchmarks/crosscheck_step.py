@@ -8,15 +8,16 @@ One footfall step of a simulated walk
 (:func:`~workbench.synth.simulate.simulate_walking`, 70 kg, 1.8 Hz, 10 s at 100 Hz, 3 N
 noise, from rest, seed 11; seed observation noise, no process noise; n harmonics), with a
 Gaussian prior on (C, K) (10 % above / 5 % below the truth, sd 25 % / 15 %) inside the
-problem's prior box and the hand-in state of the Kalman filter at the true (C, K) after
-the earlier steps. Sampled by :func:`workbench.inference.mcmc.run_ensembles` (4
-ensembles, lockstep) in three ways:
+problem's prior box; every walker's hand-in is the previous step's exact hand-over at its
+own (C, K), from that step's hand-in at the true (C, K). Sampled by
+:func:`workbench.inference.mcmc.run_ensembles` (4 ensembles, lockstep) in three ways:
 
 ``reference``
-    The named reference: the collapsed (C, K) posterior with its likelihood from the piece
-    Kalman filter (:func:`workbench.inference.kalman.piece_filter`) and the runner's
-    default differential-evolution moves -- the cross-check as it stood before the
-    closed-form step likelihood.
+    The named reference: the same collapsed (C, K) posterior with its likelihood from the
+    piece Kalman filter (:func:`workbench.inference.kalman.piece_filter`, two pieces per
+    call: the previous step for every row's own hand-in, then the step) and the runner's
+    defaults (differential-evolution moves, first chunk of 500 steps) -- the cross-check as
+    it stood before the closed-form step likelihood.
 ``collapsed``
     What ``workbench crosscheck`` runs by default: the same posterior with the closed-form
     step likelihood (:class:`workbench.inference.step_model.StepModel`) and the
@@ -54,8 +55,13 @@ from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 
 
-def step_setup(harmonics: int, step: int) -> tuple[Any, StepModel, np.ndarray, np.ndarray, Any]:
-    """Return the problem, the step's model, the prior mean and sd, and the hand-in."""
+def step_setup(
+    harmonics: int, step: int
+) -> tuple[Any, StepModel, StepModel, np.ndarray, np.ndarray, Any]:
+    """Return the problem, the step's and the previous step's models, the prior, a hand-in.
+
+    The prior is a mean and sd of (C, K); the hand-in that of the previous step.
+    """
     sim = simulate_walking(
         mass_kg=70.0,
         pacing_hz=1.8,
@@ -69,15 +75,22 @@ def step_setup(harmonics: int, step: int) -> tuple[Any, StepModel, np.ndarray, n
     problem = build_problem(insp.com, insp.steps, harmonics=harmonics, state_fraction=0.0)
     truth = np.array([sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]])
     xm, xc = kf.initial_state(problem, 1)
-    for piece in range(step):
+    for piece in range(step - 1):
         res = kf.piece_filter(problem, piece, truth[:1], truth[1:], xm, xc)
         xm, xc = res.x_mean_next, res.x_cov_next
-    model = StepModel(problem, step, xm[0], xc[0])
-    return problem, model, truth * np.array([1.1, 0.95]), truth * np.array([0.25, 0.15]), (xm, xc)
+    previous = StepModel(problem, step - 1, xm[0], xc[0])
+    res = kf.piece_filter(problem, step - 1, truth[:1], truth[1:], xm, xc)
+    model = StepModel(problem, step, res.x_mean_next[0], res.x_cov_next[0])
+    prior_mean, prior_sd = truth * np.array([1.1, 0.95]), truth * np.array([0.25, 0.15])
+    return problem, model, previous, prior_mean, prior_sd, (xm, xc)
 
 
 class _Reference:
-    """The collapsed target with the piece Kalman filter's likelihood (the old way)."""
+    """The same collapsed target with the piece Kalman filter: two pieces per call.
+
+    The previous piece from its fixed hand-in gives every row its own hand-over, the step's
+    piece from there its likelihood -- what :class:`StepTarget` does in closed form.
+    """
 
     def __init__(self, problem: Any, step: int, prior: StepTarget, hand_in: Any) -> None:
         self.problem, self.step, self.prior = problem, step, prior
@@ -90,13 +103,17 @@ class _Reference:
         ok = np.isfinite(out)
         n = int(ok.sum())
         if n:
-            out[ok] += kf.piece_filter(
+            c, k = theta[ok, 0], theta[ok, 1]
+            hand = kf.piece_filter(
                 self.problem,
-                self.step,
-                theta[ok, 0],
-                theta[ok, 1],
+                self.step - 1,
+                c,
+                k,
                 np.repeat(self.xm, n, axis=0),
                 np.repeat(self.xc, n, axis=0),
+            )
+            out[ok] += kf.piece_filter(
+                self.problem, self.step, c, k, hand.x_mean_next, hand.x_cov_next
             ).loglik
         return out
 
@@ -120,21 +137,23 @@ def main() -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args()
 
-    problem, model, centre, scale, hand_in = step_setup(args.harmonics, args.step)
+    problem, model, previous, centre, scale, hand_in = step_setup(args.harmonics, args.step)
     cov = np.diag(scale**2)
-    collapsed = StepTarget(model, centre, cov, problem.prior)
-    joint = StepTarget(model, centre, cov, problem.prior, mode="joint")
+    collapsed = StepTarget(model, centre, cov, problem.prior, previous=previous)
+    joint = StepTarget(model, centre, cov, problem.prior, mode="joint", previous=previous)
     reference = _Reference(problem, args.step, collapsed, hand_in)
     probe = collapsed.initial(np.random.default_rng(0), 2 * args.walkers)  # one lockstep call
 
-    runs: list[tuple[str, Any, Any, Any]] = []
+    # The reference as the cross-check stood before: DE moves and the runner's first chunk
+    # of 500 steps; the others as ``workbench crosscheck`` runs them.
+    runs: list[tuple[str, Any, Any, Any, int]] = []
     if not args.no_reference:
-        runs.append(("reference", reference, collapsed, "de"))
-    runs.append(("collapsed", collapsed, collapsed, default_moves()))
+        runs.append(("reference", reference, collapsed, "de", 500))
+    runs.append(("collapsed", collapsed, collapsed, default_moves(), 100))
     if not args.no_joint:
-        runs.append(("joint", joint, joint, default_moves()))
+        runs.append(("joint", joint, joint, default_moves(), 100))
     rows = []
-    for name, target, starter, moves in runs:
+    for name, target, starter, moves, first_chunk in runs:
         target.calls = 0
         walkers = max(args.walkers, 2 * starter.n_dim + 2)
         w0, c0 = time.perf_counter(), time.process_time()
@@ -143,7 +162,7 @@ def main() -> None:
             lambda rng, s=starter, w=walkers: s.initial(rng, w),
             seed=args.seed,
             n_walkers=walkers,
-            min_steps=100,
+            min_steps=first_chunk,
             moves=moves,
             param_names=starter.param_names,
         )
