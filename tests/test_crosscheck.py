@@ -181,9 +181,10 @@ def synthetic_crosschecks() -> list[tuple]:
     """Two seeded synthetic walks, each with its MCMC cross-check against rbpf."""
     out = []
     for seed in (11, 12):
-        problem, truth = _walk(seed, harmonics=5, duration_s=7.0)
+        problem, truth = _walk(seed, harmonics=4, duration_s=6.0)
         rbpf = run_rbpf(problem, n_particles=256, seed=seed)
-        result = crosscheck(problem, rbpf, seed=seed)
+        # The InferenceData is tested with the command below; not needed here.
+        result = crosscheck(problem, rbpf, seed=seed, keep_inference_data=False)
         out.append((problem, truth, rbpf, result))
     return out
 
@@ -197,7 +198,7 @@ def test_rbpf_and_mcmc_agree_on_synthetic_walks(synthetic_crosschecks: list[tupl
     assert agree >= 0.9
     # The MCMC is the record's posterior, not the prior: it contracts along the record.
     for *_, result in synthetic_crosschecks:
-        assert result.steps[-1].mcmc_sd[0] < 0.5 * result.steps[0].mcmc_sd[0]
+        assert np.all(result.steps[-1].mcmc_sd < 0.75 * result.steps[0].mcmc_sd)
         assert result.agreement == pytest.approx(np.mean([bool(s.agree) for s in result.steps]))
         payload = json.loads(json.dumps(result.to_json()))
         first = payload["steps"][0]
@@ -260,9 +261,9 @@ def test_crosscheck_command_on_the_real_treadmill_record(
             "crosscheck",
             str(treadmill_segment),
             "--harmonics",
-            "6",
-            "--max-steps",
             "4",
+            "--max-steps",
+            "3",
             "--json",
             "--out",
             str(tmp_path),
@@ -270,8 +271,8 @@ def test_crosscheck_command_on_the_real_treadmill_record(
     )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
-    assert len(out["steps"]) == 4
-    assert [s["index"] for s in out["steps"]] == list(range(4))
+    assert len(out["steps"]) == 3
+    assert [s["index"] for s in out["steps"]] == list(range(3))
     for s in out["steps"]:
         for key in ("pf_mean", "pf_sd", "mcmc_mean", "mcmc_sd", "z"):
             assert set(s[key]) == {"damping_ns_per_m", "stiffness_n_per_m"}
@@ -287,7 +288,7 @@ def test_crosscheck_command_on_the_real_treadmill_record(
         assert group in idata.groups()
     n_obs = idata.observed_data["y"].size
     assert idata.log_likelihood["y"].shape[-1] == n_obs
-    assert idata.posterior["damping_ns_per_m"].shape[-1] == 4
+    assert idata.posterior["damping_ns_per_m"].shape[-1] == 3
     assert all(Path(p).is_file() for p in out["figures"])
 
 
