@@ -62,6 +62,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         max_pieces=args.max_steps,
         n_ensembles=args.ensembles,
         n_walkers=args.walkers,
+        history=args.history,
         progress=not args.json,
     )
     apply_mcmc_identifiability(ident, problem, result)
@@ -145,6 +146,13 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         choices=["fixed", "free"],
         default="fixed",
         help="hold the filter's observation noise (default) or sample a per-step scale of it",
+    )
+    p.add_argument(
+        "--history",
+        type=_positive_int,
+        metavar="N",
+        help="sequential prior: keep only the last N earlier steps exact (default all; faster "
+        "on long records, approximate)",
     )
     p.add_argument("--max-steps", type=_positive_int, metavar="N", help="check the first N steps")
     p.add_argument("--ensembles", type=_positive_int, default=4, metavar="N", help="(4)")

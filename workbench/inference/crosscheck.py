@@ -11,24 +11,24 @@ The target of step j (the prior the filter carries into the step)
     coefficients (:class:`~workbench.inference.step_model.StepModel`). The parts:
 
     * ``pi_0`` is the problem's prior box, as in the filters. For ``j > 0`` (``prior=
-      "sequential"``, the default) ``pi_j`` is a normal fitted to the MCMC draws of (C, K)
-      at step ``j - 1`` in the box's logit coordinates (:func:`box_logit`): the posterior a
-      correct filter carries into the step, in assumed-density form. The logit map lets a
-      posterior that leans against a face of the box keep its shape, which a normal in
-      (C, K) cut at the box does not. It is built from this module's
-      own previous step, not from the filter under test, so a filter that has gone wrong
-      cannot pass its error on to its reference. ``prior="filter"`` uses the filter's own
-      per-step mean and sd instead (no correlation: the filter keeps marginal moments only),
-      which checks the filter's update of one step in isolation.
-    * The hand-in ``(u, u')`` prior of every walker is the exact Kalman hand-over of step
-      ``j - 1`` at the walker's own (C, K)
-      (:meth:`~workbench.inference.step_model.StepModel.hand_over`), starting from the
-      hand-in of step ``j - 1`` at the MCMC posterior mean of (C, K) (a chain of
-      :func:`workbench.inference.kalman.piece_filter` hand-overs from the filters' initial
-      state). With u and u' observed the filter forgets its start within a step, so one
-      step of exact history is enough: on a simulated walk the resulting posterior stayed
-      within 0.1 posterior sd of the exact one over 11 steps, while a hand-in fixed at the
-      posterior mean drifted to 1.8 sd (K) by the last step.
+      "sequential"``, the default) ``pi_j`` is the posterior a correct filter carries into
+      the step, built from the record and not from the filter under test (so a filter that
+      has gone wrong cannot hand its error to its reference): the box times the exact
+      likelihood of the earlier steps at each walker's (C, K), every step's hand-in state
+      the previous step's exact hand-over at the walker's (C, K)
+      (:meth:`~workbench.inference.step_model.StepModel.loglik_and_hand_over`) from the
+      filters' initial state. The target is then the exact filtering posterior
+      ``p(C, K | y_0..j)``, the one the rbpf approximates. Its cost per call grows with j;
+      ``history=N`` keeps only the last N steps exact and stands for the ones before by a
+      normal fitted to the MCMC draws of step ``j - N - 1`` in the box's logit coordinates
+      (:func:`box_logit`), the hand-in of that step fixed at its posterior mean. That
+      assumed-density shortcut is only as good as the normal's tails: on the real treadmill
+      record, whose first step puts (C, K) ten posterior sd away from where the next steps
+      take them, a window of 4 steps anchored on the first step's fit missed the exact
+      posterior of step 5 by several sd, while the full history matched it. Hence the
+      default ``history=None``. ``prior="filter"`` uses the filter's own per-step mean
+      and sd (no correlation: the filter keeps marginal moments only) as a logit-normal
+      prior, which checks the filter's update of one step in isolation.
     * ``p(beta | C, K)``: the hand-in and the problem's force prior, drawn afresh per step
       as in the filters; ``p(y_j | ...)``: the problem's noise model with the observed
       channels' sd multiplied by the *noise scale* ``s``. ``noise_scale="fixed"`` (the
@@ -119,6 +119,9 @@ DEGENERATE_ESS = 10.0
 FROZEN_UNIQUE_VALUES = 5
 #: Prior sd of the log noise scale.
 LOG_NOISE_SCALE_SD = 0.5
+#: Earlier steps whose exact likelihood joins each step's target (sequential prior);
+#: None: all of them (module docstring).
+HISTORY_STEPS: int | None = None
 #: Kept draws per ensemble and step in the InferenceData.
 DRAWS_PER_CHAIN = 100
 
@@ -228,9 +231,12 @@ class StepTarget:
         Read the Gaussian prior as one over the box's logit coordinates
         (:func:`box_logit`), not over (C, K) themselves.
     previous : StepModel, optional
-        The previous step's model: when given, the hand-in ``(u, u')`` of every row is that
-        step's exact hand-over at the row's own (C, K) (module docstring), not the fixed
-        hand-in of ``model``.
+        The model of the step before the first in ``history`` (or before ``model``): when
+        given, the hand-in ``(u, u')`` of every row is that step's exact hand-over at the
+        row's own (C, K) (module docstring), not the fixed hand-in of ``model``.
+    history : sequence of StepModel
+        Steps between ``previous`` and ``model`` whose exact likelihood at each row's
+        (C, K) joins the prior (with hand-overs chained row by row), module docstring.
     """
 
     def __init__(
@@ -245,6 +251,7 @@ class StepTarget:
         fixed_damping_stiffness: tuple[float, float] | None = None,
         prior_logit: bool = False,
         previous: StepModel | None = None,
+        history: Sequence[StepModel] = (),
     ) -> None:
         if mode not in MODES:
             raise UsageError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
@@ -261,6 +268,7 @@ class StepTarget:
         self.box = box
         self.prior_logit = bool(prior_logit)
         self.previous = previous
+        self.history = tuple(history)
         self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
         self.prior_chol: FloatArray | None = None
         if prior_cov is not None:
@@ -323,7 +331,8 @@ class StepTarget:
         ok = np.isfinite(out)
         if not np.any(ok):
             return out
-        hand_in = self.hand_in(c[ok], k[ok])
+        hand_in, history_ll = self.hand_in_and_history(c[ok], k[ok])
+        out[ok] += history_ll
         if self.mode == "collapsed":
             ll = self.model.collapsed_loglik(c[ok], k[ok], s[ok], hand_in=hand_in)
             out[ok] += np.asarray(ll)
@@ -339,9 +348,18 @@ class StepTarget:
 
     def hand_in(self, c: FloatArray, k: FloatArray) -> tuple[FloatArray, FloatArray] | None:
         """Per-row hand-in (mean, Cholesky factor), or None for the model's fixed one."""
-        if self.previous is None:
-            return None
-        return self.previous.hand_over(c, k)
+        return self.hand_in_and_history(c, k)[0]
+
+    def hand_in_and_history(
+        self, c: FloatArray, k: FloatArray
+    ) -> tuple[tuple[FloatArray, FloatArray] | None, FloatArray]:
+        """Per-row hand-in of ``model`` and the history's log-likelihood at each row."""
+        hand_in = None if self.previous is None else self.previous.hand_over(c, k)
+        total = np.zeros(c.size)
+        for step in self.history:
+            ll, hand_in = step.loglik_and_hand_over(c, k, hand_in)
+            total += ll
+        return hand_in, total
 
     def initial(self, rng: np.random.Generator, n_walkers: int) -> FloatArray:
         """Over-dispersed starting points: (C, K) from the prior, beta from its conditional."""
@@ -713,6 +731,7 @@ def crosscheck(
     min_steps: int = 100,
     max_steps: int = 20_000,
     moves: Any = None,
+    history: int | None = HISTORY_STEPS,
     keep_inference_data: bool = True,
     progress: bool = False,
 ) -> CrosscheckResult:
@@ -741,6 +760,10 @@ def crosscheck(
         length.
     moves : optional
         emcee moves; default :func:`default_moves` (``"de"`` is the runner's own default).
+    history : int or None, default :data:`HISTORY_STEPS`
+        With the sequential prior: how many earlier steps enter the target through their
+        exact likelihood (None: all of them, the exact filtering posterior, at a cost per
+        call that grows with the step index); the normal fit stands for the steps before.
     keep_inference_data : bool, default True
         Build the per-record InferenceData (costs the pointwise log-likelihoods).
     progress : bool, default False
@@ -770,13 +793,25 @@ def crosscheck(
     ess, unique = _pf_step_stats(problem, output)
     t0 = time.perf_counter()
     x_mean, x_cov = kf.initial_state(prob, 1)
-    prior_mean: FloatArray | None = None
-    prior_cov: FloatArray | None = None
     checks: list[StepCheck] = []
     completions: list[dict[str, Any]] = []
-    previous: StepModel | None = None
+    models: list[StepModel] = []
+    fits: list[tuple[FloatArray, FloatArray]] = []  # logit-normal fit of each step's posterior
+    if history is not None and (isinstance(history, bool) or int(history) < 0):
+        raise UsageError(f"history must be a whole number >= 0 or None, got {history!r}")
     for j in tqdm(range(n_pieces), desc="crosscheck", unit="step", disable=not progress):
         model = StepModel(prob, j, x_mean[0], x_cov[0])
+        if prior == "sequential":
+            window = j if history is None else min(int(history), j)
+        else:
+            window = 0
+        anchor = j - window - 1  # the step whose posterior fit is the prior, if any
+        if prior == "sequential":
+            prior_mean, prior_cov = fits[anchor] if anchor >= 0 else (None, None)
+        elif j > 0:
+            prior_mean, prior_cov = _filter_prior(prob, output, j - 1)
+        else:
+            prior_mean, prior_cov = None, None
         target = StepTarget(
             model,
             prior_mean,
@@ -785,7 +820,8 @@ def crosscheck(
             mode=mode,
             noise_scale=noise_scale,
             prior_logit=True,
-            previous=previous,
+            previous=models[anchor] if anchor >= 0 else None,
+            history=models[anchor + 1 : j],
         )
         walkers = n_walkers or max(32, 4 * target.n_dim + (4 * target.n_dim) % 2)
 
@@ -811,25 +847,15 @@ def crosscheck(
         checks.append(check)
         if keep_inference_data:
             completions.append(_completion(model, target, res, _step_seed(seed + 1, j)))
-        # The prior of the next step and its hand-in (module docstring).
-        if prior == "sequential":
-            with np.errstate(divide="ignore", invalid="ignore"):
-                x, _ = box_logit(prob.prior, res.samples[:, :2])
-            x = x[np.all(np.isfinite(x), axis=1)]
-            prior_mean, prior_cov = x.mean(axis=0), np.atleast_2d(np.cov(x, rowvar=False))
-        else:
-            # The filter's per-step normal, mapped to logit coordinates (delta method).
-            mean = np.asarray(output.piece_mean[j], dtype=float)
-            lo, hi = _bounds(prob.prior)
-            mean = np.clip(mean, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
-            slope = (hi - lo) / ((mean - lo) * (hi - mean))
-            prior_mean = box_logit(prob.prior, mean[None])[0][0]
-            prior_cov = np.diag(np.square(np.maximum(output.piece_sd[j] * slope, 1e-6)))
-        prior_cov = _floor_cov(prior_cov, prob)
+        # The posterior fit that later steps' priors use, and the next plug-in hand-in.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x, _ = box_logit(prob.prior, res.samples[:, :2])
+        x = x[np.all(np.isfinite(x), axis=1)]
+        fits.append((x.mean(axis=0), _floor_cov(np.atleast_2d(np.cov(x, rowvar=False)), prob)))
+        models.append(model)
         if j + 1 < n_pieces:
             hand = kf.piece_filter(prob, j, res.mean[:1], res.mean[1:2], x_mean, x_cov)
             x_mean, x_cov = hand.x_mean_next, hand.x_cov_next
-            previous = model
     seconds = time.perf_counter() - t0
     settings = {
         "seed": int(seed),
@@ -898,6 +924,20 @@ def recompare(
         "seed": getattr(output, "seed", None),
     }
     return replace(result, method=output.method, steps=checks, settings=settings)
+
+
+def _filter_prior(
+    problem: IdentificationProblem, output: FilterRun, j: int
+) -> tuple[FloatArray, FloatArray]:
+    """Return the filter's per-step normal at step ``j`` in logit coordinates."""
+    if output.piece_mean is None or output.piece_sd is None:  # pragma: no cover - checked
+        raise UsageError("the filter run has no per-step values")
+    mean = np.asarray(output.piece_mean[j], dtype=float)
+    lo, hi = _bounds(problem.prior)
+    mean = np.clip(mean, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
+    slope = (hi - lo) / ((mean - lo) * (hi - mean))
+    centre = box_logit(problem.prior, mean[None])[0][0]
+    return centre, np.diag(np.square(np.maximum(output.piece_sd[j] * slope, 1e-6)))
 
 
 def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:

@@ -240,6 +240,22 @@ class StepModel:
         chol : ndarray, shape (B, 2, 2)
             Lower Cholesky factor of the covariance.
         """
+        return self.loglik_and_hand_over(damping, stiffness, hand_in)[1]
+
+    def loglik_and_hand_over(
+        self,
+        damping: ArrayLike,
+        stiffness: ArrayLike,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
+    ) -> tuple[FloatArray, tuple[FloatArray, FloatArray]]:
+        """Collapsed log-likelihood (noise scale 1) and hand-over, from one run.
+
+        Returns
+        -------
+        loglik : ndarray, shape (B,)
+        (mean, chol) : ndarrays, shapes (B, 2) and (B, 2, 2)
+            As :meth:`hand_over`.
+        """
         if self.end >= self.problem.n_samples:
             raise UsageError("the last piece of the record hands over to nothing")
         buf = self._run(damping, stiffness, hand_in)
@@ -253,12 +269,18 @@ class StepModel:
         chol_aug = np.linalg.cholesky(gram)
         chol = chol_aug[:, :q, :q]
         half = chol_aug[:, q, :q]
+        loglik = (
+            -0.5 * np.square(chol_aug[:, q, q])
+            - np.sum(np.log(chol_aug[:, idx, idx]), axis=1)
+            - 0.5 * self._log_det_r(np.ones(b))
+            - 1.5 * _LOG_2PI * self.length
+        )
         # eta | y ~ N(-L^-T half, L^-T L^-1); the hand-over is affine in eta.
         proj = np.linalg.solve(chol, nxt[:, :, :q].transpose(0, 2, 1))  # L^-1 V^T, (B, q, 2)
         mean = nxt[:, :, q] - np.einsum("bqi,bq->bi", proj, half)
         cov = proj.transpose(0, 2, 1) @ proj
         cov = 0.5 * (cov + cov.transpose(0, 2, 1))
-        return mean, np.linalg.cholesky(cov)
+        return loglik, (mean, np.linalg.cholesky(cov))
 
     def collapsed_loglik(
         self,
