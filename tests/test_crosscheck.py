@@ -181,7 +181,7 @@ def synthetic_crosschecks() -> list[tuple]:
     """Two seeded synthetic walks, each with its MCMC cross-check against rbpf."""
     out = []
     for seed in (11, 12):
-        problem, truth = _walk(seed, harmonics=4, duration_s=6.0)
+        problem, truth = _walk(seed, harmonics=4, duration_s=4.5)
         rbpf = run_rbpf(problem, n_particles=256, seed=seed)
         # The InferenceData is tested with the command below; not needed here.
         result = crosscheck(problem, rbpf, seed=seed, keep_inference_data=False)
@@ -192,7 +192,7 @@ def synthetic_crosschecks() -> list[tuple]:
 @pytest.mark.slow
 def test_rbpf_and_mcmc_agree_on_synthetic_walks(synthetic_crosschecks: list[tuple]) -> None:
     steps = [s for *_, result in synthetic_crosschecks for s in result.steps]
-    assert len(steps) >= 16
+    assert len(steps) >= 12
     assert all(s.converged for s in steps), [s.flags for s in steps if not s.converged]
     agree = np.mean([s.agree for s in steps])
     assert agree >= 0.9
