@@ -22,22 +22,22 @@ The target of step j (the prior the filter carries into the step)
       ``history=N`` keeps only the last N steps exact and stands for the ones before by a
       normal fitted to the MCMC draws of step ``j - N - 1`` in the box's logit coordinates
       (:func:`box_logit`), the hand-in of that step fixed at its posterior mean. That
-      assumed-density shortcut is only as good as the normal's tails: on the real treadmill
-      record, whose first step puts (C, K) ten posterior sd away from where the next steps
-      take them, a window of 4 steps anchored on the first step's fit missed the exact
-      posterior of step 5 by several sd, while the full history matched it. Hence the
-      default ``history=None``. ``prior="filter"`` uses the filter's own per-step mean
-      and sd (no correlation: the filter keeps marginal moments only) as a logit-normal
-      prior, which checks the filter's update of one step in isolation.
+      assumed-density shortcut is only as good as the normal's tails: when a later step
+      moves (C, K) many posterior sd away from the anchor step's posterior (the start of
+      the real treadmill record does), the normal's light tails hold the walkers back and
+      the result is not the exact posterior. Hence the default ``history=None``.
+      ``prior="filter"`` uses the filter's own per-step mean and sd (no correlation: the
+      filter keeps marginal moments only) as a logit-normal prior, which checks the
+      filter's update of one step in isolation.
     * ``p(beta | C, K)``: the hand-in and the problem's force prior, drawn afresh per step
       as in the filters; ``p(y_j | ...)``: the problem's noise model with the observed
       channels' sd multiplied by the *noise scale* ``s``. ``noise_scale="fixed"`` (the
       default) holds ``s = 1``: the filters' own model, so that a disagreement is the
       filter's fault and not a difference of models. ``"free"`` samples ``log s`` (prior
       ``N(0, 0.5^2)``): a per-step ``s`` far from 1 says that the step's misfit is not the
-      noise the filter assumed (on a simulated walk with the seed's 10 % noise setting
-      ``s`` came out near 0.1, and the (C, K) posterior was then far narrower than the
-      filter's, as it should be for a different model).
+      noise the filter assumed (with a noise setting far from the record's, ``s`` moves
+      far from 1 and the (C, K) posterior differs from the filter's, as it should for a
+      different model).
     * No process noise on (u, u'): the model of rbpf and exact. The seed-faithful filter
       (``pf``) runs with a small one; it is compared with this same reference.
 
@@ -47,7 +47,8 @@ Two modes
     their Gaussian conditional at every kept draw (Rao-Blackwell completion), so the
     InferenceData still holds them. Default because it is exact and cheap: the ridge between
     (C, K) and the force coefficients (DESIGN.md 2.4) is integrated out instead of explored,
-    the autocorrelation time is a few steps, and one call costs a few milliseconds.
+    the autocorrelation time is a few steps, and one call costs a few milliseconds per
+    step of history.
     ``"joint"``: emcee samples all ``2 n + 5`` parameters (``2 n + 6`` with ``log s``). It
     needs no linear algebra beyond a residual, but walks along the ridge with
     autocorrelation times two orders longer; the benchmark
@@ -200,10 +201,9 @@ class GaussianFitMove(emcee.moves.RedBlueMove):
 def default_moves() -> list[tuple[Any, float]]:
     """Return the move mixture of the per-step MCMC: 80 % Gaussian-fit, 20 % DE.
 
-    Measured on step 5 of the benchmark record (``analyses/benchmarks/crosscheck_step.py``,
-    collapsed, 32 walkers, 4 ensembles): the largest tau was 9.7 steps with the runner's DE
-    moves, 3.4 with half and half, 2.1 with 80/20 and 1.8 with the Gaussian fit alone; the
-    DE share is kept for posteriors that a normal fits badly.
+    On the step of ``analyses/benchmarks/crosscheck_step.py`` the largest tau falls from
+    about 8.5 steps with the runner's DE moves to about 2 with this mixture (the benchmark
+    prints both); the DE share is kept for posteriors that a normal fits badly.
     """
     return [(GaussianFitMove(), 0.8), (emcee.moves.DEMove(), 0.2)]
 
