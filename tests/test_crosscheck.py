@@ -225,6 +225,22 @@ def test_a_starved_filter_is_flagged_on_most_steps(synthetic_crosschecks: list[t
     assert flagged / total > 0.5
 
 
+@pytest.mark.slow
+def test_a_seed_filter_with_few_particles_is_flagged(synthetic_crosschecks: list[tuple]) -> None:
+    """The seed-faithful pf (per-sample traces) with 50 particles: degenerate, flagged."""
+    from workbench.inference.pf import run_pf
+
+    flagged, total = 0, 0
+    for problem, _, _, result in synthetic_crosschecks:
+        pf_problem = problem.with_noise(problem.noise_from_fractions(problem.noise.obs_fraction))
+        bad = recompare(problem, result, run_pf(pf_problem, n_particles=50, seed=1))
+        assert bad.method == "pf" and len(bad.steps) == problem.n_pieces
+        flagged += sum(bool(s.flags) for s in bad.steps)
+        total += len(bad.steps)
+        assert any("filter degenerate" in f for s in bad.steps for f in s.flags)
+    assert flagged / total > 0.5
+
+
 def test_multimodality_detector() -> None:
     rng = np.random.default_rng(1)
     assert _multimodal(np.concatenate([rng.normal(-3, 1, 4000), rng.normal(3, 1, 4000)]))
