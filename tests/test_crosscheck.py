@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from workbench.cli import main
+from workbench.errors import UsageError
 from workbench.inference import kalman as kf
 from workbench.inference.crosscheck import (
     StepTarget,
@@ -317,3 +318,22 @@ def test_crosscheck_command_rejects_too_many_steps(
     assert code == 2
     err = json.loads(capsys.readouterr().out)["error"]
     assert "--max-steps 999" in err and "give at most" in err
+
+
+@pytest.mark.slow
+def test_a_short_history_window_uses_the_fitted_prior() -> None:
+    """``history=1``: steps after the second sample a logit-normal prior from the MCMC."""
+    problem, _ = _walk(11, harmonics=2, duration_s=3.0)
+    rbpf = run_rbpf(problem, n_particles=64, seed=0)
+    result = crosscheck(problem, rbpf, seed=2, history=1, keep_inference_data=False)
+    assert len(result.steps) == problem.n_pieces >= 3
+    box_sd = problem.prior.sd
+    # Steps 0 and 1 see the box alone (step 1 through step 0's exact likelihood); from step 2
+    # the prior is the fit of an earlier step's posterior, far narrower than the box.
+    np.testing.assert_allclose(result.steps[0].prior_sd, box_sd)
+    np.testing.assert_allclose(result.steps[1].prior_sd, box_sd)
+    for step in result.steps[2:]:
+        assert np.all(step.prior_sd < 0.5 * box_sd)
+        assert step.converged, step.flags
+    with pytest.raises(UsageError):
+        crosscheck(problem, rbpf, history=-1, max_pieces=1)
