@@ -364,6 +364,9 @@ def build_parser() -> argparse.ArgumentParser:
     from workbench.cli_criticism import add_criticism_parser
 
     add_criticism_parser(sub, out_opts)
+    from workbench.cli_crosscheck import add_crosscheck_parser
+
+    add_crosscheck_parser(sub, out_opts)
 
     p = sub.add_parser(
         "demo",

@@ -1,23 +1,35 @@
-"""Seconds per footstep of the collapsed per-step MCMC, with and without lockstep batching.
+"""Seconds per footstep of the per-step MCMC cross-check, collapsed and joint mode.
 
 Usage: ``python analyses/benchmarks/crosscheck_step.py [--harmonics 10] [--step 5]
-[--walkers 32] [--json]``
+[--walkers 32] [--no-reference] [--no-joint] [--json]``
 (main environment, one pinned core by default, ``--cores N`` to change).
 
-The target is the collapsed posterior of (C, K) given one footfall step, as the per-step
-cross-check of issue 4 will use it: a Gaussian prior on (C, K) (10 % above / 5 % below the
-truth, sd 25 % / 15 %) times ``log p(y_step | hand-in state, C, K)`` from
-:func:`workbench.inference.kalman.piece_filter`, the force coefficients integrated out, the
-hand-in state fixed to the filter's at the true (C, K) after the earlier steps. The record:
-:func:`~workbench.synth.simulate.simulate_walking`, 70 kg, 1.8 Hz, 10 s at 100 Hz, 3 N
-noise, from rest, seed 11; footfall pieces, ``--harmonics`` force harmonics.
+One footfall step of a simulated walk
+(:func:`~workbench.synth.simulate.simulate_walking`, 70 kg, 1.8 Hz, 10 s at 100 Hz, 3 N
+noise, from rest, seed 11; seed observation noise, no process noise; n harmonics), with a
+Gaussian prior on (C, K) (10 % above / 5 % below the truth, sd 25 % / 15 %) inside the
+problem's prior box; every walker's hand-in is the previous step's exact hand-over at its
+own (C, K), from that step's hand-in at the true (C, K). Sampled by
+:func:`workbench.inference.mcmc.run_ensembles` (4 ensembles, lockstep) in three ways:
 
-:func:`workbench.inference.mcmc.run_ensembles` samples it with its defaults (4 ensembles of
-32 walkers, DE moves, the 50-tau rule) twice: with the ensembles' requests batched into one
-call per round (``lockstep=True``, the default) and one ensemble after the other
-(``lockstep=False``, the named reference of this benchmark). Printed per mode: seconds,
-log-density evaluations, calls, steps, largest tau, smallest bulk ESS and ESS per second.
-The issue's target is under 1 s per step on one core.
+``reference``
+    The named reference: the same collapsed (C, K) posterior with its likelihood from the
+    piece Kalman filter (:func:`workbench.inference.kalman.piece_filter`, two pieces per
+    call: the previous step for every row's own hand-in, then the step) and the runner's
+    defaults (differential-evolution moves, first chunk of 500 steps) -- the cross-check as
+    it stood before the closed-form step likelihood.
+``collapsed``
+    What ``workbench crosscheck`` runs by default: the same posterior with the closed-form
+    step likelihood (:class:`workbench.inference.step_model.StepModel`) and the
+    Gaussian-fit + DE move mixture (:func:`workbench.inference.crosscheck.default_moves`).
+``joint``
+    All ``2 n + 5`` parameters (C, K, hand-in state, force coefficients) sampled
+    (``--mode joint``), same moves.
+
+Printed per row: wall and CPU seconds, log-density evaluations (rows), calls, chain steps,
+largest tau, smallest bulk ESS and ESS per CPU second, the cost of one call, the posterior
+mean and sd of (C, K); and the speed-up of ``collapsed`` over the reference. The issue's
+target is under 1 s per step, collapsed, on one core.
 """
 
 from __future__ import annotations
@@ -35,14 +47,21 @@ _CORES = pin_cores(sys.argv)
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
 from workbench.inference import kalman as kf  # noqa: E402
+from workbench.inference.crosscheck import StepTarget, default_moves  # noqa: E402
 from workbench.inference.mcmc import run_ensembles  # noqa: E402
 from workbench.inference.problem import build_problem  # noqa: E402
+from workbench.inference.step_model import StepModel  # noqa: E402
 from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 
 
-def step_target(harmonics: int, step: int) -> tuple[Any, np.ndarray, np.ndarray, dict[str, int]]:
-    """Return the collapsed log density of one step, its prior mean and sd, call counts."""
+def step_setup(
+    harmonics: int, step: int
+) -> tuple[Any, StepModel, StepModel, np.ndarray, np.ndarray, Any]:
+    """Return the problem, the step's and the previous step's models, the prior, a hand-in.
+
+    The prior is a mean and sd of (C, K); the hand-in that of the previous step.
+    """
     sim = simulate_walking(
         mass_kg=70.0,
         pacing_hz=1.8,
@@ -53,34 +72,57 @@ def step_target(harmonics: int, step: int) -> tuple[Any, np.ndarray, np.ndarray,
         seed=11,
     )
     insp = inspect_record(sim.record, highpass_hz=0.15)
-    problem = build_problem(insp.com, insp.steps, harmonics=harmonics)
+    problem = build_problem(insp.com, insp.steps, harmonics=harmonics, state_fraction=0.0)
     truth = np.array([sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]])
     xm, xc = kf.initial_state(problem, 1)
-    for piece in range(step):
+    for piece in range(step - 1):
         res = kf.piece_filter(problem, piece, truth[:1], truth[1:], xm, xc)
         xm, xc = res.x_mean_next, res.x_cov_next
-    prior_mean = truth * np.array([1.1, 0.95])
-    prior_sd = truth * np.array([0.25, 0.15])
-    counts = {"calls": 0}
+    previous = StepModel(problem, step - 1, xm[0], xc[0])
+    res = kf.piece_filter(problem, step - 1, truth[:1], truth[1:], xm, xc)
+    model = StepModel(problem, step, res.x_mean_next[0], res.x_cov_next[0])
+    prior_mean, prior_sd = truth * np.array([1.1, 0.95]), truth * np.array([0.25, 0.15])
+    return problem, model, previous, prior_mean, prior_sd, (xm, xc)
 
-    def log_density(theta: np.ndarray) -> np.ndarray:
-        counts["calls"] += 1
-        out = np.full(theta.shape[0], -np.inf)
-        ok = np.all(theta > 0, axis=1)
+
+class _Reference:
+    """The same collapsed target with the piece Kalman filter: two pieces per call.
+
+    The previous piece from its fixed hand-in gives every row its own hand-over, the step's
+    piece from there its likelihood -- what :class:`StepTarget` does in closed form.
+    """
+
+    def __init__(self, problem: Any, step: int, prior: StepTarget, hand_in: Any) -> None:
+        self.problem, self.step, self.prior = problem, step, prior
+        self.xm, self.xc = hand_in
+        self.calls = 0
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        out = self.prior.log_prior_ck(theta[:, 0], theta[:, 1])
+        ok = np.isfinite(out)
         n = int(ok.sum())
         if n:
-            loglik = kf.piece_filter(
-                problem,
-                step,
-                theta[ok, 0],
-                theta[ok, 1],
-                np.repeat(xm, n, axis=0),
-                np.repeat(xc, n, axis=0),
+            c, k = theta[ok, 0], theta[ok, 1]
+            hand = kf.piece_filter(
+                self.problem,
+                self.step - 1,
+                c,
+                k,
+                np.repeat(self.xm, n, axis=0),
+                np.repeat(self.xc, n, axis=0),
+            )
+            out[ok] += kf.piece_filter(
+                self.problem, self.step, c, k, hand.x_mean_next, hand.x_cov_next
             ).loglik
-            out[ok] = loglik - 0.5 * np.sum(((theta[ok] - prior_mean) / prior_sd) ** 2, axis=1)
         return out
 
-    return log_density, prior_mean, prior_sd, counts
+
+def _per_call_ms(fn: Any, rows: np.ndarray, repeats: int = 50) -> float:
+    t0 = time.process_time()
+    for _ in range(repeats):
+        fn(rows)
+    return (time.process_time() - t0) / repeats * 1e3
 
 
 def main() -> None:
@@ -88,47 +130,75 @@ def main() -> None:
     parser.add_argument("--harmonics", type=int, default=10)
     parser.add_argument("--step", type=int, default=5)
     parser.add_argument("--seed", type=int, default=2024)
-    parser.add_argument(
-        "--walkers", type=int, default=None, help="walkers per ensemble (runner default 32)"
-    )
+    parser.add_argument("--walkers", type=int, default=32, help="per ensemble (32)")
+    parser.add_argument("--no-reference", action="store_true", help="skip the reference")
+    parser.add_argument("--no-joint", action="store_true", help="skip the joint mode")
     parser.add_argument("--cores", type=int, default=1, help="CPUs (pinned; default 1)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args()
 
-    log_density, centre, scale, counts = step_target(args.harmonics, args.step)
+    problem, model, previous, centre, scale, hand_in = step_setup(args.harmonics, args.step)
+    cov = np.diag(scale**2)
+    collapsed = StepTarget(model, centre, cov, problem.prior, previous=previous)
+    joint = StepTarget(model, centre, cov, problem.prior, mode="joint", previous=previous)
+    reference = _Reference(problem, args.step, collapsed, hand_in)
+    probe = collapsed.initial(np.random.default_rng(0), 2 * args.walkers)  # one lockstep call
 
-    def initial(gen: np.random.Generator) -> np.ndarray:
-        return np.abs(centre + scale * gen.standard_normal((args.walkers or 32, 2)))
-
+    # The reference as the cross-check stood before: DE moves and the runner's first chunk
+    # of 500 steps; the others as ``workbench crosscheck`` runs them.
+    runs: list[tuple[str, Any, Any, Any, int]] = []
+    if not args.no_reference:
+        runs.append(("reference", reference, collapsed, "de", 500))
+    runs.append(("collapsed", collapsed, collapsed, default_moves(), 100))
+    if not args.no_joint:
+        runs.append(("joint", joint, joint, default_moves(), 100))
     rows = []
-    for lockstep in (True, False):
-        counts["calls"] = 0
-        t0 = time.perf_counter()
+    for name, target, starter, moves, first_chunk in runs:
+        target.calls = 0
+        walkers = max(args.walkers, 2 * starter.n_dim + 2)
+        w0, c0 = time.perf_counter(), time.process_time()
         res = run_ensembles(
-            log_density, initial, seed=args.seed, lockstep=lockstep, n_walkers=args.walkers
+            target,
+            lambda rng, s=starter, w=walkers: s.initial(rng, w),
+            seed=args.seed,
+            n_walkers=walkers,
+            min_steps=first_chunk,
+            moves=moves,
+            param_names=starter.param_names,
         )
-        seconds = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        call_rows = (
+            probe if name != "joint" else joint.initial(np.random.default_rng(0), 2 * walkers)
+        )
         rows.append(
             {
-                "lockstep": lockstep,
-                "seconds": seconds,
+                "mode": name,
+                "seconds": wall,
+                "cpu_seconds": cpu,
                 "evaluations": res.n_evaluations,
-                "calls": counts["calls"],
+                "calls": target.calls,
                 "steps": res.n_steps,
+                "walkers": walkers,
                 "tau_max": float(np.max(res.tau)),
                 "ess_bulk_min": float(np.min(res.ess_bulk)),
-                "ess_bulk_per_s": float(np.min(res.ess_bulk)) / seconds,
+                "ess_bulk_per_cpu_s": float(np.min(res.ess_bulk)) / cpu,
+                "ms_per_call": _per_call_ms(target, call_rows),
+                "rows_per_call": int(call_rows.shape[0]),
                 "converged": res.converged,
-                "mean": res.mean.tolist(),
-                "sd": res.sd.tolist(),
+                "mean": res.mean[:2].tolist(),
+                "sd": res.sd[:2].tolist(),
             }
         )
+    by = {r["mode"]: r for r in rows}
     result = {
         "benchmark": "crosscheck_step",
-        "reference": "run_ensembles(lockstep=False)",
+        "reference": "collapsed posterior with the piece Kalman filter likelihood, DE moves",
         "harmonics": args.harmonics,
         "step": args.step,
-        "speedup": rows[1]["seconds"] / rows[0]["seconds"],
+        "step_samples": model.length,
+        "speedup": (by["reference"]["cpu_seconds"] / by["collapsed"]["cpu_seconds"])
+        if "reference" in by
+        else None,
         "rows": rows,
         "environment": {"cores_used": _CORES, "affinity": affinity()},
     }
@@ -136,21 +206,23 @@ def main() -> None:
         print(json.dumps(result, indent=2))
         return
     print(
-        f"collapsed (C, K) posterior of step {args.step}, n = {args.harmonics}, "
-        f"{args.walkers or 32} walkers x 4 ensembles, {_CORES} core(s); target < 1 s per step"
+        f"step {args.step} ({model.length} samples), n = {args.harmonics}, 4 ensembles, "
+        f"{_CORES} core(s); target < 1 s per step (collapsed)"
     )
     print(
-        f"{'mode':<10} {'s':>7} {'evals':>8} {'calls':>6} {'steps':>6} {'tau':>6} "
-        f"{'ESS':>7} {'ESS/s':>7}"
+        f"{'mode':<10} {'wall s':>7} {'cpu s':>7} {'evals':>7} {'calls':>6} {'steps':>6} "
+        f"{'tau':>6} {'ESS':>7} {'ESS/s':>7} {'ms/call':>8}  C mean (sd), K mean (sd)"
     )
-    for row in rows:
-        mode = "lockstep" if row["lockstep"] else "one by one"
+    for r in rows:
         print(
-            f"{mode:<10} {row['seconds']:>7.2f} {row['evaluations']:>8} {row['calls']:>6} "
-            f"{row['steps']:>6} {row['tau_max']:>6.1f} {row['ess_bulk_min']:>7.0f} "
-            f"{row['ess_bulk_per_s']:>7.1f}"
+            f"{r['mode']:<10} {r['seconds']:>7.2f} {r['cpu_seconds']:>7.2f} {r['evaluations']:>7} "
+            f"{r['calls']:>6} {r['steps']:>6} {r['tau_max']:>6.1f} {r['ess_bulk_min']:>7.0f} "
+            f"{r['ess_bulk_per_cpu_s']:>7.0f} {r['ms_per_call']:>8.2f}  "
+            f"{r['mean'][0]:.0f} ({r['sd'][0]:.0f}), {r['mean'][1]:.0f} ({r['sd'][1]:.0f})"
+            + ("" if r["converged"] else "  NOT CONVERGED")
         )
-    print(f"lockstep speedup over one by one: {result['speedup']:.2f}x (same samples)")
+    if result["speedup"] is not None:
+        print(f"collapsed speed-up over the reference (CPU time): {result['speedup']:.1f}x")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,339 @@
+"""Per-step MCMC cross-check: closed-form step likelihood, exact posteriors, agreement, CLI."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from workbench.cli import main
+from workbench.errors import UsageError
+from workbench.inference import kalman as kf
+from workbench.inference.crosscheck import (
+    StepTarget,
+    _multimodal,
+    crosscheck,
+    default_moves,
+    recompare,
+)
+from workbench.inference.mcmc import run_ensembles
+from workbench.inference.problem import IdentificationProblem, build_problem
+from workbench.inference.rbpf import run_rbpf
+from workbench.inference.step_model import StepModel
+from workbench.records.inspection import inspect_record
+from workbench.synth.simulate import simulate_walking
+
+REAL = Path(__file__).resolve().parents[1] / "workbench" / "datasets" / "real"
+
+
+def _walk(seed: int, harmonics: int, duration_s: float = 10.0, **kw: object) -> tuple:
+    sim = simulate_walking(
+        mass_kg=70.0,
+        pacing_hz=1.8,
+        duration_s=duration_s,
+        sample_rate_hz=100,
+        noise_sd_n=3.0,
+        start="rest",
+        seed=seed,
+    )
+    insp = inspect_record(sim.record, highpass_hz=0.15)
+    problem = build_problem(insp.com, insp.steps, harmonics=harmonics, state_fraction=0.0, **kw)
+    truth = np.array([sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]])
+    return problem, truth
+
+
+def _hand_in(problem: IdentificationProblem, piece: int, ck: np.ndarray) -> tuple:
+    xm, xc = kf.initial_state(problem, 1)
+    for j in range(piece):
+        res = kf.piece_filter(problem, j, ck[:1], ck[1:], xm, xc)
+        xm, xc = res.x_mean_next, res.x_cov_next
+    return xm, xc
+
+
+# -- the closed-form step likelihood ------------------------------------------------------
+@pytest.mark.parametrize("observe", ["all", "acc"])
+@pytest.mark.parametrize("discretisation", ["foh", "euler"])
+def test_step_likelihood_equals_piece_kalman_filter(observe: str, discretisation: str) -> None:
+    problem, truth = _walk(11, harmonics=4, duration_s=5.0, observe=observe)
+    rng = np.random.default_rng(0)
+    c = truth[0] * rng.uniform(0.3, 2.0, 24)
+    k = truth[1] * rng.uniform(0.5, 1.5, 24)
+    for piece in (0, 1, 3):
+        xm, xc = _hand_in(problem, piece, truth)
+        ref = kf.piece_filter(
+            problem,
+            piece,
+            c,
+            k,
+            np.repeat(xm, c.size, 0),
+            np.repeat(xc, c.size, 0),
+            discretisation=discretisation,
+        )
+        model = StepModel(problem, piece, xm[0], xc[0], discretisation=discretisation)
+        ll, beta_mean, beta_root = model.collapsed_loglik(c, k, return_posterior=True)
+        scale = np.max(np.abs(ref.loglik))
+        np.testing.assert_allclose(ll, ref.loglik, rtol=0, atol=1e-10 * scale)
+        theta_sd = problem.force_prior.sd_n
+        np.testing.assert_allclose(
+            (beta_mean[:, 2:] - ref.theta_mean) / theta_sd, 0.0, rtol=0, atol=1e-8
+        )
+        cov = beta_root @ beta_root.transpose(0, 2, 1)
+        assert ref.theta_cov is not None
+        outer = np.outer(theta_sd, theta_sd)
+        np.testing.assert_allclose((cov[:, 2:, 2:] - ref.theta_cov) / outer, 0.0, atol=1e-9)
+
+
+def test_joint_and_collapsed_likelihoods_are_one_gaussian_model() -> None:
+    """log p(y) = log p(y | beta) + log p(beta) - log p(beta | y) at any beta."""
+    problem, truth = _walk(11, harmonics=3, duration_s=5.0)
+    xm, xc = _hand_in(problem, 2, truth)
+    model = StepModel(problem, 2, xm[0], xc[0])
+    c, k, s = truth[:1] * [0.8], truth[1:] * [1.1], np.array([1.3])
+    ll, mean, root = model.collapsed_loglik(c, k, s, return_posterior=True)
+    beta = mean + 0.7 * root[0] @ np.linspace(-1, 1, model.q)[None].T.ravel()
+
+    def log_normal(x: np.ndarray, m: np.ndarray, r: np.ndarray) -> float:
+        white = np.linalg.solve(r, x - m)
+        return float(
+            -0.5 * white @ white - np.log(abs(np.linalg.det(r))) - 0.5 * x.size * np.log(2 * np.pi)
+        )
+
+    joint = model.joint_loglik(c, k, beta, s)[0]
+    rhs = (
+        joint
+        + log_normal(beta[0], model.beta0, model.prior_chol)
+        - log_normal(beta[0], mean[0], root[0])
+    )
+    assert rhs == pytest.approx(ll[0], abs=1e-8 * abs(ll[0]))
+    point = model.joint_loglik(c, k, beta, s, pointwise=True)
+    assert point.shape == (1, model.length, 3)
+    assert point.sum() == pytest.approx(joint, rel=1e-12)
+
+
+# -- MCMC against closed-form posteriors --------------------------------------------------
+def test_joint_mode_with_fixed_c_k_matches_the_gaussian_posterior() -> None:
+    """Linear-Gaussian with (C, K) fixed: emcee means within 0.1 sd, sds within 10 %."""
+    problem, truth = _walk(11, harmonics=1, duration_s=5.0)
+    xm, xc = _hand_in(problem, 3, truth)
+    model = StepModel(problem, 3, xm[0], xc[0])
+    target = StepTarget(
+        model, None, None, problem.prior, mode="joint", fixed_damping_stiffness=(truth[0], truth[1])
+    )
+    res = run_ensembles(
+        target,
+        lambda rng: target.initial(rng, 32),
+        n_walkers=32,
+        seed=5,
+        min_steps=150,
+        moves=default_moves(),
+        param_names=target.param_names,
+    )
+    assert res.converged, res.reasons
+    _, mean, root = model.collapsed_loglik(truth[:1], truth[1:], return_posterior=True)
+    sd = np.sqrt(np.diag(root[0] @ root[0].T))
+    assert np.all(np.abs(res.mean - mean[0]) < 0.1 * sd)
+    assert np.all(np.abs(res.sd / sd - 1) < 0.1)
+
+
+def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
+    """(C, K) posterior of one step on a fine grid vs the crosscheck's collapsed MCMC."""
+    problem, truth = _walk(11, harmonics=4, duration_s=5.0)
+    xm, xc = _hand_in(problem, 3, truth)
+    model = StepModel(problem, 3, xm[0], xc[0])
+    prior_mean = truth * np.array([1.1, 0.95])
+    prior_cov = np.diag((truth * np.array([0.25, 0.15])) ** 2)
+    target = StepTarget(model, prior_mean, prior_cov, problem.prior)
+    res = run_ensembles(
+        target,
+        lambda rng: target.initial(rng, 32),
+        n_walkers=32,
+        seed=9,
+        min_steps=150,
+        moves=default_moves(),
+        param_names=target.param_names,
+    )
+    assert res.converged, res.reasons
+    # Grid over +-6 MCMC sd (the exact moments do not depend on where the MCMC is).
+    cg = np.linspace(res.mean[0] - 6 * res.sd[0], res.mean[0] + 6 * res.sd[0], 161)
+    kg = np.linspace(res.mean[1] - 6 * res.sd[1], res.mean[1] + 6 * res.sd[1], 161)
+    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
+    logp = np.concatenate(
+        [
+            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
+            for i in range(0, cc.size, 2000)
+        ]
+    )
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    # The grid must hold the whole posterior: negligible mass on its rim.
+    rim = (cc == cg[0]) | (cc == cg[-1]) | (kk == kg[0]) | (kk == kg[-1])
+    assert w[rim].sum() < 1e-6
+    mean = np.array([w @ cc, w @ kk])
+    sd = np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
+    assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
+    assert np.all(np.abs(res.sd / sd - 1) < 0.1)
+
+
+# -- agreement with the filters -----------------------------------------------------------
+@pytest.fixture(scope="module")
+def synthetic_crosschecks() -> list[tuple]:
+    """Two seeded synthetic walks, each with its MCMC cross-check against rbpf."""
+    out = []
+    for seed in (11, 12):
+        problem, truth = _walk(seed, harmonics=4, duration_s=4.5)
+        rbpf = run_rbpf(problem, n_particles=256, seed=seed)
+        # The InferenceData is tested with the command below; not needed here.
+        result = crosscheck(problem, rbpf, seed=seed, keep_inference_data=False)
+        out.append((problem, truth, rbpf, result))
+    return out
+
+
+@pytest.mark.slow
+def test_rbpf_and_mcmc_agree_on_synthetic_walks(synthetic_crosschecks: list[tuple]) -> None:
+    steps = [s for *_, result in synthetic_crosschecks for s in result.steps]
+    assert len(steps) >= 12
+    assert all(s.converged for s in steps), [s.flags for s in steps if not s.converged]
+    agree = np.mean([s.agree for s in steps])
+    assert agree >= 0.9
+    # The MCMC is the record's posterior, not the prior: it contracts along the record.
+    for *_, result in synthetic_crosschecks:
+        assert np.all(result.steps[-1].mcmc_sd < 0.75 * result.steps[0].mcmc_sd)
+        assert result.agreement == pytest.approx(np.mean([bool(s.agree) for s in result.steps]))
+        payload = json.loads(json.dumps(result.to_json()))
+        first = payload["steps"][0]
+        for key in ("index", "pf_mean", "pf_sd", "mcmc_mean", "mcmc_sd", "z"):
+            assert key in first
+        assert payload["mcmc_diagnostics"]["rhat_max"] < 1.01
+        assert payload["mcmc_diagnostics"]["ess_bulk_min"] >= 400
+
+
+@pytest.mark.slow
+def test_a_starved_filter_is_flagged_on_most_steps(synthetic_crosschecks: list[tuple]) -> None:
+    """Too few particles and no jitter: the cloud freezes, and the cross-check says so."""
+    flagged, total = 0, 0
+    for problem, _, _, result in synthetic_crosschecks:
+        starved = run_rbpf(problem, n_particles=8, seed=3, shrinkage=1.0, exact_moves=0)
+        bad = recompare(problem, result, starved)
+        flagged += sum(bool(s.flags) for s in bad.steps)
+        total += len(bad.steps)
+        # Same MCMC, only the filter changed.
+        assert [s.mcmc_mean.tolist() for s in bad.steps] == [
+            s.mcmc_mean.tolist() for s in result.steps
+        ]
+        assert any("frozen parameter" in f for s in bad.steps for f in s.flags)
+    assert flagged / total > 0.5
+
+
+@pytest.mark.slow
+def test_a_seed_filter_with_few_particles_is_flagged(synthetic_crosschecks: list[tuple]) -> None:
+    """The seed-faithful pf (per-sample traces) with 50 particles: degenerate, flagged."""
+    from workbench.inference.pf import run_pf
+
+    flagged, total = 0, 0
+    for problem, _, _, result in synthetic_crosschecks:
+        pf_problem = problem.with_noise(problem.noise_from_fractions(problem.noise.obs_fraction))
+        bad = recompare(problem, result, run_pf(pf_problem, n_particles=50, seed=1))
+        assert bad.method == "pf" and len(bad.steps) == problem.n_pieces
+        flagged += sum(bool(s.flags) for s in bad.steps)
+        total += len(bad.steps)
+        assert any("filter degenerate" in f for s in bad.steps for f in s.flags)
+    assert flagged / total > 0.5
+
+
+def test_multimodality_detector() -> None:
+    rng = np.random.default_rng(1)
+    assert _multimodal(np.concatenate([rng.normal(-3, 1, 4000), rng.normal(3, 1, 4000)]))
+    assert not _multimodal(rng.normal(0, 1, 8000))
+    assert not _multimodal(rng.exponential(1.0, 8000))
+    assert not _multimodal(rng.uniform(0, 1, 8000) ** 0.5)
+
+
+# -- the command on the real treadmill record ----------------------------------------------
+@pytest.fixture(scope="module")
+def treadmill_segment(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The first 6 s of the real treadmill record, as CSV with its sidecar."""
+    from workbench.records.io import load_record, save_record
+    from workbench.records.record import Record
+
+    rec = load_record(REAL / "treadmill_01_01_grf.mot")
+    keep = rec.time_s < rec.time_s[0] + 6.0
+    seg = Record(
+        time_s=rec.time_s[keep], grf_n=rec.grf_n[keep], mass_kg=rec.mass_kg, subject="treadmill"
+    )
+    path = tmp_path_factory.mktemp("treadmill") / "treadmill_segment.csv"
+    save_record(seg, path)
+    return path
+
+
+@pytest.mark.slow
+def test_crosscheck_command_on_the_real_treadmill_record(
+    treadmill_segment: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import arviz as az
+
+    code = main(
+        [
+            "crosscheck",
+            str(treadmill_segment),
+            "--harmonics",
+            "4",
+            "--max-steps",
+            "3",
+            "--json",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["steps"]) == 3
+    assert [s["index"] for s in out["steps"]] == list(range(3))
+    for s in out["steps"]:
+        for key in ("pf_mean", "pf_sd", "mcmc_mean", "mcmc_sd", "z"):
+            assert set(s[key]) == {"damping_ns_per_m", "stiffness_n_per_m"}
+    # It says where the filter and the MCMC disagree, if anywhere.
+    flagged = [s["index"] for s in out["steps"] if s["flags"]]
+    assert [d["index"] for d in out["disagreements"]] == flagged
+    assert out["agreement"] is None or 0.0 <= out["agreement"] <= 1.0
+    assert isinstance(out["verdict"], str) and out["verdict"]
+    assert "mcmc_diagnostics" in out and out["mcmc_diagnostics"]["n_ensembles"] == 4
+    assert out["identifiability"].get("source", "").startswith("MCMC")
+    idata = az.from_netcdf(out["netcdf"])
+    for group in ("posterior", "sample_stats", "log_likelihood", "observed_data", "prior"):
+        assert group in idata.groups()
+    n_obs = idata.observed_data["y"].size
+    assert idata.log_likelihood["y"].shape[-1] == n_obs
+    assert idata.posterior["damping_ns_per_m"].shape[-1] == 3
+    assert all(Path(p).is_file() for p in out["figures"])
+
+
+def test_crosscheck_command_rejects_too_many_steps(
+    treadmill_segment: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(
+        ["crosscheck", str(treadmill_segment), "--harmonics", "2", "--max-steps", "999", "--json"]
+    )
+    assert code == 2
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert "--max-steps 999" in err and "give at most" in err
+
+
+@pytest.mark.slow
+def test_a_short_history_window_uses_the_fitted_prior() -> None:
+    """``history=1``: steps after the second sample a logit-normal prior from the MCMC."""
+    problem, _ = _walk(11, harmonics=2, duration_s=3.0)
+    rbpf = run_rbpf(problem, n_particles=64, seed=0)
+    result = crosscheck(problem, rbpf, seed=2, history=1, keep_inference_data=False)
+    assert len(result.steps) == problem.n_pieces >= 3
+    box_sd = problem.prior.sd
+    # Steps 0 and 1 see the box alone (step 1 through step 0's exact likelihood); from step 2
+    # the prior is the fit of an earlier step's posterior, far narrower than the box.
+    np.testing.assert_allclose(result.steps[0].prior_sd, box_sd)
+    np.testing.assert_allclose(result.steps[1].prior_sd, box_sd)
+    for step in result.steps[2:]:
+        assert np.all(step.prior_sd < 0.5 * box_sd)
+        assert step.converged, step.flags
+    with pytest.raises(UsageError):
+        crosscheck(problem, rbpf, history=-1, max_pieces=1)
