@@ -482,9 +482,7 @@ def run_population_demo(
         if real_manifest is None:
             real_dir = out / "real"
             real_dir.mkdir(parents=True, exist_ok=True)
-            rows = [
-                f"{embedded_path(k)},{EMBEDDED[k].mass_kg}" for k in ("treadmill", "insole")
-            ]
+            rows = [f"{embedded_path(k)},{EMBEDDED[k].mass_kg}" for k in ("treadmill", "insole")]
             real_manifest = real_dir / "manifest.csv"
             atomic_write_text(real_manifest, "path,mass_kg\n" + "\n".join(rows) + "\n")
         real_batch = out / "batch_real"
