@@ -2,10 +2,10 @@
 
 Usage::
 
-    python analyses/sensitivity_noise.py [--part synthetic|pf|real|all] [--replicates 3]
+    python analyses/sensitivity_noise.py [--part synthetic|pf|study|real|all] [--replicates 3]
         [--seed 0] [--workers 1] [--real-seconds 20] [--out analyses/out/sensitivity_noise]
 
-Three studies, each written to its own folder under ``--out`` (tables, statements, report
+Four studies, each written to its own folder under ``--out`` (tables, statements, report
 with tornado charts) by :func:`workbench.sensitivity.study.run_sensitivity`:
 
 ``synthetic``
@@ -19,6 +19,12 @@ with tornado charts) by :func:`workbench.sensitivity.study.run_sensitivity`:
 ``pf``
     The same record with the seed's particle filter (``pf``, 1000 particles), over the random
     walks of C and K and the number of particles: the settings that act only in ``pf``.
+``study``
+    Records of the synthetic population study (:mod:`workbench.population.study`; the first
+    ``--study-people`` participants, every pacing case once: 22 records of 4 s by default)
+    with the study's settings (one piece on absolute time, u'' observed, 3 harmonics, 64
+    particles), over the observation and process noise, the harmonics and the particles;
+    effects pooled over the records (``pooled_effects.csv``).
 ``real``
     The embedded real records (insole: 20 s from 10 s, rescaled to M g; treadmill: 20 s of
     its steady 2.2 Hz stretch from 75 s) with the default settings (``rbpf``, 10 harmonics,
@@ -49,6 +55,17 @@ Notes. Commands and what they printed (the numbers are in each folder's
 - Not distinguishable from Monte Carlo noise: 16 or 64 particles instead of 32, 8
   harmonics instead of 4, the exact method instead of rbpf, the step-phase clock.
 
+``python analyses/sensitivity_noise.py --part study --replicates 2`` (22 records, about 4 min)
+
+- Pooled over the 22 records (mean effect, 95 % half-width across records): halving or
+  doubling the particles (32, 128) and 6 harmonics instead of 3 move neither f_n nor the
+  damping ratio distinguishably (f_n within +-0.0017 Hz). The observation noise moves the
+  damping ratio consistently but little (x0.5: -0.0009 +- 0.0006; x2: +0.0036 +- 0.0022)
+  and f_n not distinguishably. The seed's process noise of (u, u') (0.5 %) shifts f_n by
+  -0.020 +- 0.011 Hz. Two harmonics for a three-harmonic force shift f_n by +0.18 +- 0.17 Hz
+  (and scatter the damping ratio by 0.11 from record to record): the one setting that
+  matters on these records.
+
 ``python analyses/sensitivity_noise.py --part pf`` (seed's particle filter, 1000 particles)
 
 - The seed-faithful filter does not recover the truth on this record at any level: its
@@ -77,12 +94,19 @@ Notes. Commands and what they printed (the numbers are in each folder's
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
 
 from workbench.datasets import embedded_path
 from workbench.inference.settings import IdentifySettings
+from workbench.population.study import (
+    STUDY_SETTINGS,
+    StudyDesign,
+    simulate_study_record,
+    study_plan,
+)
 from workbench.records.inspection import inspect_record
 from workbench.records.io import load_record
 from workbench.reporting.document import Report
@@ -103,6 +127,12 @@ SYNTHETIC_LEVELS = [
     "method=rbpf,exact",
 ]
 PF_LEVELS = ["damping_noise=1,0.5,2", "stiffness_noise=1,0.5,2", "particles=1000,500,2000"]
+STUDY_LEVELS = [
+    "obs_noise=1,0.5,2",
+    "particles=64,32,128",
+    "harmonics=3,2,6",
+    "state_noise=0,0.005",
+]
 REAL_LEVELS = [
     "obs_noise=1,0.5,2",
     "state_noise=0,0.005",
@@ -151,10 +181,30 @@ def real_records(seconds: float) -> list[tuple[str, Any]]:
     return [("insole", insole), ("treadmill", tread)]
 
 
+def study_records(n_people: int, seed: int) -> list[tuple[str, Any]]:
+    """Return records of the synthetic population study (``workbench.population.study``).
+
+    The first ``n_people`` participants of the study's plan, every pacing case once: records
+    from the study's generating laws, in the model class its settings assume.
+    """
+    design = StudyDesign(n_male=max(1, n_people - n_people // 2), n_female=n_people // 2)
+    plan = study_plan(dataclasses.replace(design, n_records=None), seed=seed)
+    first = plan.drop_duplicates(subset=["subject", "case"]).head(11 * n_people)
+    return [
+        (f"{row['subject']}-{row['case']}", simulate_study_record(row, design))
+        for _, row in first.iterrows()
+    ]
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the studies and return what they found."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["synthetic", "pf", "real", "all"], default="all")
+    parser.add_argument(
+        "--part", choices=["synthetic", "pf", "study", "real", "all"], default="all"
+    )
+    parser.add_argument(
+        "--study-people", type=int, default=2, help="participants of the study part (11 cases each)"
+    )
     parser.add_argument("--replicates", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, default=1)
@@ -169,6 +219,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     if args.part in ("pf", "all"):
         base = demo_settings().replace(method="pf", particles=1000)
         found["pf"] = _run("pf", [demo_record()], base, PF_LEVELS, args)
+    if args.part in ("study", "all"):
+        base = IdentifySettings(**STUDY_SETTINGS, particles=64)
+        records = study_records(args.study_people, args.seed)
+        found["study"] = _run("study", records, base, STUDY_LEVELS, args)
     if args.part in ("real", "all"):
         base = IdentifySettings(particles=128)
         found["real"] = _run("real", real_records(args.real_seconds), base, REAL_LEVELS, args)

@@ -357,7 +357,9 @@ def run_batch(
                 "or choose an empty folder"
             )
         old = _read_json(meta_path)
-        if old is not None and old.get("settings") != _clean_json(settings_json):
+        # Compare as JSON reads it back (tuples become lists, for example).
+        stored_form = json.loads(json.dumps(_clean_json(settings_json)))
+        if old is not None and old.get("settings") != stored_form:
             raise UsageError(
                 f"--resume: the batch in {out} was run with other identification settings; "
                 "use the same flags, or a new --out folder"
