@@ -10,17 +10,9 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import UsageError
+from workbench.simulate_cli import _floats
 
 __all__ = ["add_hsi_parser"]
-
-
-def _floats(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not a comma-separated list of numbers"
-        ) from None
 
 
 def _positive(args: argparse.Namespace, *names: str) -> None:
