@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.walks import walking_problem
 from workbench.cli import main
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
@@ -19,27 +20,15 @@ from workbench.inference.crosscheck import (
     recompare,
 )
 from workbench.inference.mcmc import run_ensembles
-from workbench.inference.problem import IdentificationProblem, build_problem
+from workbench.inference.problem import IdentificationProblem
 from workbench.inference.rbpf import run_rbpf
 from workbench.inference.step_model import StepModel
-from workbench.records.inspection import inspect_record
-from workbench.synth.simulate import simulate_walking
 
 REAL = Path(__file__).resolve().parents[1] / "workbench" / "datasets" / "real"
 
 
 def _walk(seed: int, harmonics: int, duration_s: float = 10.0, **kw: object) -> tuple:
-    sim = simulate_walking(
-        mass_kg=70.0,
-        pacing_hz=1.8,
-        duration_s=duration_s,
-        sample_rate_hz=100,
-        noise_sd_n=3.0,
-        start="rest",
-        seed=seed,
-    )
-    insp = inspect_record(sim.record, highpass_hz=0.15)
-    problem = build_problem(insp.com, insp.steps, harmonics=harmonics, state_fraction=0.0, **kw)
+    problem, sim = walking_problem(seed, duration_s, harmonics, state_fraction=0.0, **kw)
     truth = np.array([sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]])
     return problem, truth
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from tests.walks import simulated_walk
 from workbench.diagnostics.criticism import diagnose, prepare
 from workbench.diagnostics.predictive import (
     attach_one_step,
@@ -21,15 +22,7 @@ from workbench.synth.simulate import simulate_walking
 
 
 def _walk(duration_s: float):
-    return simulate_walking(
-        mass_kg=70.0,
-        pacing_hz=1.8,
-        duration_s=duration_s,
-        sample_rate_hz=100.0,
-        noise_sd_n=3.0,
-        start="rest",
-        seed=7,
-    )
+    return simulated_walk(7, duration_s)
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.walks import walking_problem
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
 from workbench.inference.outputs import ParticleFilterOutput
@@ -19,17 +20,7 @@ from workbench.synth.simulate import simulate_walking
 
 
 def _walking_problem(seed: int, duration_s: float, harmonics: int) -> IdentificationProblem:
-    sim = simulate_walking(
-        mass_kg=70.0,
-        pacing_hz=1.8,
-        duration_s=duration_s,
-        sample_rate_hz=100,
-        noise_sd_n=3.0,
-        start="rest",
-        seed=seed,
-    )
-    insp = inspect_record(sim.record, highpass_hz=0.15)
-    return build_problem(insp.com, insp.steps, harmonics=harmonics)
+    return walking_problem(seed, duration_s, harmonics)[0]
 
 
 @pytest.fixture(scope="module")
