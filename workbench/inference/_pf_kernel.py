@@ -137,6 +137,15 @@ def systematic_ancestors(w: np.ndarray, uniform: float, out: np.ndarray) -> None
 
 
 @_jit
+def _gather_in_place(values: np.ndarray, idx: np.ndarray, scratch: np.ndarray) -> None:
+    """``values[:] = values[idx]`` through ``scratch`` (same dtype and length)."""
+    for p in range(idx.shape[0]):
+        scratch[p] = values[idx[p]]
+    for p in range(idx.shape[0]):
+        values[p] = scratch[p]
+
+
+@_jit
 def _resample_in_place(
     k: int,
     rng: np.random.Generator,
@@ -158,23 +167,10 @@ def _resample_in_place(
     n_part = w.shape[0]
     systematic_ancestors(w, rng.random(), idx)
     for row in range(4):
-        src = state[row]
-        for p in range(n_part):
-            scratch[p] = src[idx[p]]
-        for p in range(n_part):
-            src[p] = scratch[p]
-    for p in range(n_part):
-        scratch[p] = acc[idx[p]]
-    for p in range(n_part):
-        acc[p] = scratch[p]
-    for p in range(n_part):
-        int_scratch[p] = pointer[idx[p]]
-    for p in range(n_part):
-        pointer[p] = int_scratch[p]
-    for p in range(n_part):
-        int_scratch[p] = origin[idx[p]]
-    for p in range(n_part):
-        origin[p] = int_scratch[p]
+        _gather_in_place(state[row], idx, scratch)
+    _gather_in_place(acc, idx, scratch)
+    _gather_in_place(pointer, idx, int_scratch)
+    _gather_in_place(origin, idx, int_scratch)
     log_w = -math.log(n_part)
     for p in range(n_part):
         lw[p] = log_w
