@@ -228,6 +228,14 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands."""
+    # What `population` and `report` both read: a batch's results and which records count.
+    fit_opts = argparse.ArgumentParser(add_help=False)
+    fit_opts.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    fit_opts.add_argument(
+        "--keep-not-identified",
+        action="store_true",
+        help="also use records whose C or K is flagged not identified",
+    )
     p = sub.add_parser(
         "sample",
         parents=[out_opts],
@@ -275,38 +283,26 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser(
         "population",
-        parents=[out_opts],
+        parents=[out_opts, fit_opts],
         help="fit population laws (f_n, zeta, BLF1 against pacing; lognormal BLF2/3)",
         description="Fit the population laws to a batch's results: OLS of natural frequency, "
         "damping ratio and BLF1 on pacing with confidence and prediction bands, normality "
         "tests of the residuals, lognormal BLF2 and BLF3 beside GEV by AIC. Records whose C "
         "or K is not identified are excluded (counted in the output).",
     )
-    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument(
-        "--keep-not-identified",
-        action="store_true",
-        help="also use records whose C or K is flagged not identified",
-    )
     p.set_defaults(handler=_cmd_population)
 
     p = sub.add_parser(
         "report",
-        parents=[out_opts],
+        parents=[out_opts, fit_opts],
         help="Table-2-style population report (HTML, Markdown, CSV tables, figures)",
         description="Fit the population laws to a batch's results and write a report: the "
         "seed's Table 2 beside this study, the laws with intervals and normality tests, "
         "BLF2/BLF3 fits, figures like the seed's figs. 11-14; self-contained HTML, Markdown "
         "and every table as CSV.",
     )
-    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
     p.add_argument("--out", required=True, metavar="DIR", help="report folder")
-    p.add_argument(
-        "--keep-not-identified",
-        action="store_true",
-        help="also use records whose C or K is flagged not identified",
-    )
     p.add_argument(
         "--title", default="Population laws of the SMD pedestrian model", help="report title"
     )
