@@ -3,8 +3,9 @@
 Usage::
 
     python analyses/hidden_effect.py [--seed 3] [--out DIR]      # the story
-    python analyses/hidden_effect.py --sweep 10                   # what is found, per effect
+    python analyses/hidden_effect.py --sweep 10 [--raw-error]     # what is found, per effect
     python analyses/hidden_effect.py --real [--out DIR]           # the two embedded records
+    python analyses/hidden_effect.py --baseline-stiffness 6       # the baseline's own K, C
 
 The story (default)
     A pedestrian is simulated walking on the spot with realistic step-to-step variability
@@ -12,8 +13,8 @@ The story (default)
     left/right asymmetry. We pretend not to know it and follow the loop of DESIGN.md 2.5:
 
     1. *Compare*: predict every block of three steps from a model fitted to the other
-       steps (a force shape shared by all steps plus ``K u + C u'``) and measure the
-       held-out error.
+       steps (a force shape shared by all steps plus ``K u + C u'``, each step allowed its
+       own size and timing of that shape) and measure the held-out error.
     2. *Locate*: where does the error live? By gait phase, by step (odd against even), by
        frequency (at multiples of ``f_p`` or at odd multiples of ``f_p / 2``?).
     3. *Explain*: rank the catalogue of effects by the held-out error each removes, with a
@@ -22,11 +23,16 @@ The story (default)
     5. *Re-score*: the scoreboard (held-out RMSE, fit %, Ljung-Box p, predictive score),
        with a wrong effect for contrast.
 
-``--sweep N``
+``--sweep N [--raw-error]``
     For every catalogued effect and for records without any effect, N seeded records
-    (20-40 s, 100-1000 Hz, 55-95 kg, pacing 1.6-2.3 Hz, varied variability and noise):
-    how often the hidden effect is ranked first and significant, how often it is
-    significant at all, and how often a record without an effect raises an alarm.
+    (``workbench.synth.hidden_effect_walk``: 20-120 s, 100-1000 Hz, 55-95 kg, pacing
+    1.6-2.3 Hz, varied variability and noise; the effect's three sizes of
+    ``HIDDEN_EFFECT_LEVELS`` in turn; ``--only NAME,...`` for some rows): how often the
+    hidden effect is ranked first and significant (or significant and named
+    indistinguishable from the first), how often ``compare`` with it cuts the held-out RMSE
+    by more than its uncertainty, how often a wrong effect does, and how often a record
+    without an effect raises an alarm. ``--raw-error`` scores the raw error instead of the
+    error beyond each step's own size and timing.
 
 ``--real``
     Diagnose the two embedded real records (the treadmill trial, the insole record).
@@ -44,59 +50,21 @@ import numpy as np
 from workbench.datasets import EMBEDDED, embedded_path
 from workbench.diagnostics.criticism import (
     CATALOGUE,
+    baseline_columns,
     compare,
     diagnose,
     error_by_gait_phase,
     error_by_step,
     prepare,
     residual_spectrum,
+    slow_pacing_change,
 )
 from workbench.models import (
-    CubicStiffness,
-    Effect,
     GaitAsymmetry,
-    HeelImpact,
-    PacingDrift,
-    QuadraticDamping,
     SMDModel,
-    StiffnessDrift,
 )
 from workbench.records.io import load_record
-from workbench.synth import simulate_walking
-
-#: Hidden effects of the sweep: clearly present but realistic sizes (base motion: the
-#: walking surface vibrates at 2.7 Hz with 1 m/s^2).
-SWEEP_EFFECTS: dict[str, Any] = {
-    "gait_asymmetry": GaitAsymmetry(a_half_n=60.0, b_half_n=30.0),
-    "cubic_stiffness": CubicStiffness(k3_n_per_m3=2e6),
-    "quadratic_damping": QuadraticDamping(c2_ns2_per_m2=1000.0),
-    "heel_impact": HeelImpact(impact_n=150.0, decay_s=0.015),
-    "pacing_drift": PacingDrift(drift_cos_n_per_s=4.0, drift_sin_n_per_s=-3.0),
-    "stiffness_drift": StiffnessDrift(dk_n_per_m_s=100.0),
-    "base_motion": "ground",
-}
-
-
-def walking_record(
-    seed: int, effects: list[Effect], ground: bool = False, amplitude_sd: float | None = None
-) -> Any:
-    """Simulate a seeded walking record whose generator details vary with the seed."""
-    rng = np.random.default_rng(1000 + seed)
-    sd_a = float(rng.uniform(0.02, 0.06))
-    return simulate_walking(
-        duration_s=float(rng.uniform(20, 40)),
-        sample_rate_hz=float(rng.choice([100, 200, 500, 1000])),
-        noise_sd_n=float(rng.uniform(2, 15)),
-        seed=seed,
-        pacing_hz=float(rng.uniform(1.6, 2.3)),
-        mass_kg=float(rng.uniform(55, 95)),
-        step_duration_sd=float(rng.uniform(0.01, 0.03)),
-        amplitude_sd=sd_a if amplitude_sd is None else amplitude_sd,
-        phase_sd_rad=float(rng.uniform(0.02, 0.06)),
-        start="steady",
-        effects=effects,
-        ground_acc_m_s2=(lambda t: np.sin(2 * np.pi * 2.7 * np.asarray(t))) if ground else None,
-    ).record
+from workbench.synth import hidden_effect_walk, varied_walk
 
 
 def _odd_even_contrast(data: Any, residual: np.ndarray, bins: int = 20) -> float:
@@ -112,14 +80,17 @@ def _odd_even_contrast(data: Any, residual: np.ndarray, bins: int = 20) -> float
 def story(seed: int, out: Path | None) -> None:
     """Print the loop on one record with a hidden asymmetry; write a report under ``out``."""
     hidden = GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)
-    rec = walking_record(seed, [hidden])
+    rec = varied_walk(seed, [hidden], duration_s=(20.0, 40.0)).record
     print(f"A {rec.duration_s:.0f} s record at {rec.sample_rate_hz:.0f} Hz, {rec.mass_kg:.0f} kg.")
     print("(Hidden from the analysis: left and right steps differ.)\n")
 
     data = prepare(rec)
     diag = diagnose(data)
     base = diag.baseline
-    print("1. Compare: each block of 3 steps predicted from the other steps")
+    print(
+        "1. Compare: each block of 3 steps predicted from the other steps (beyond each step's\n"
+        "   own size and timing of the shared force shape)"
+    )
     print(
         f"   held-out RMSE {base['heldout_rmse_n']:.1f} N on a GRF of {base['grf_rms_n']:.0f} N "
         f"RMS; fit {base['fit_percent']:.1f} %; Ljung-Box p {base['ljung_box_p']:.2g}"
@@ -174,47 +145,104 @@ def story(seed: int, out: Path | None) -> None:
         print("\nreport:", write_criticism_report(diag, out))
 
 
-def sweep(n: int) -> None:
-    """Print, per hidden effect, how often diagnose finds it (first and significant)."""
-    print(f"{'hidden effect':<30} {'first+sig':>9} {'sig':>5}  most often first instead")
-    rows = [(name, name, None) for name in ["none", *CATALOGUE]]
+def sweep(n: int, step_variation: bool = True, only: list[str] | None = None) -> None:
+    """Print, per hidden effect, what diagnose and compare make of N varied records."""
+    print(
+        "N seeded records per row (hidden_effect_walk): 20-120 s, 100-1000 Hz, 55-95 kg, pacing\n"
+        "1.6-2.3 Hz, the three sizes of HIDDEN_EFFECT_LEVELS in turn. first+sig: ranked first\n"
+        "and significant; found: that, or\n"
+        "significant and named indistinguishable from the first; cut: compare with the hidden\n"
+        "effect cuts the held-out RMSE by more than its fold-to-fold uncertainty; wrong: pairs\n"
+        "(record, other effect not named indistinguishable) where the other effect does that;\n"
+        "after: where the other effect does that added after the hidden one.\n"
+    )
+    head = (
+        f"{'hidden effect':<32} {'first+sig':>9} {'found':>6} {'cut':>6} {'wrong':>7} {'after':>7}"
+    )
+    print(head + "  notes")
+    rows: list[tuple[str, str, float | None]] = [("none", "none", None)]
+    rows += [(name, name, None) for name in CATALOGUE]
     # State-acting effects show only through step-to-step variation: the same with the
     # force amplitudes varying 15 % from step to step instead of 2-6 %.
     rows += [(f"{n} (steps 15 %)", n, 0.15) for n in ("cubic_stiffness", "quadratic_damping")]
+    if only:
+        rows = [r for r in rows if r[1] in only]
     for label, name, sd_a in rows:
-        first = sig = inseparable = twins = 0
+        first = found = cut = wrong = wrong_after = pairs = inseparable = big = big_cut = 0
         max_t = -np.inf
         instead: dict[str, int] = {}
+        wrong_names: dict[str, int] = {}
         for seed in range(n):
-            spec = SWEEP_EFFECTS.get(name)
-            ground = spec == "ground"
-            effects = [] if name == "none" or ground else [spec]
-            diag = diagnose(walking_record(seed, effects, ground=ground, amplitude_sd=sd_a))
+            rec = hidden_effect_walk(name, seed, amplitude_sd=sd_a).record
+            data = prepare(rec)
+            diag = diagnose(data, step_variation=step_variation)
             cands = {c.effect: c for c in diag.candidates}
             if name == "none":
-                sig += any(c.significant for c in diag.candidates)
+                found += any(c.significant for c in diag.candidates)
                 max_t = max([max_t, *(c.t_ratio for c in diag.candidates)])
                 continue
             top = diag.candidates[0]
+            mine = cands[name]
             first += top.effect == name and top.significant
-            sig += cands[name].significant
-            inseparable += "cannot be separated" in cands[name].evidence
-            twins += bool(
-                cands[name].significant
-                and top.effect != name
-                and top.effect in cands[name].indistinguishable_from
+            found += bool(
+                (top.effect == name and top.significant)
+                or (mine.significant and top.effect in mine.indistinguishable_from)
             )
+            inseparable += "cannot be separated" in mine.evidence
             if top.effect != name and top.significant:
                 instead[top.effect] = instead.get(top.effect, 0) + 1
-        other = max(instead, key=lambda k: instead[k]) if instead else "-"
+            row = compare(data, [name], step_variation=step_variation)[1]
+            cut += row.rmse_drop_fraction > row.rmse_drop_se
+            if mine.score >= 0.5:
+                big += 1
+                big_cut += row.rmse_drop_fraction >= 0.2
+            for other, cand in cands.items():
+                if other == name or other in mine.indistinguishable_from or not cand.testable:
+                    continue
+                pairs += 1
+                w = compare(data, [other], step_variation=step_variation)[1]
+                if w.rmse_drop_fraction > w.rmse_drop_se:
+                    wrong += 1
+                    wrong_names[other] = wrong_names.get(other, 0) + 1
+                after = compare(data, [name, other], step_variation=step_variation)[2]
+                wrong_after += after.rmse_drop_fraction > after.rmse_drop_se
         if name == "none":
-            label = "(no effect: alarms)"
-            other = f"(largest t ratio of any candidate {max_t:.1f}; threshold 3)"
-        elif inseparable:
-            other += f"; called inseparable in {inseparable}/{n}"
-        if twins:
-            other += f"; significant and named indistinguishable from the first in {twins}/{n}"
-        print(f"{label:<30} {first:>5}/{n:<3} {sig:>3}/{n:<3} {other}")
+            print(
+                f"{'(no effect: alarms)':<32} {'-':>9} {found:>3}/{n:<2}{'-':>6} {'-':>7} "
+                f"{'-':>7}  largest t ratio of any candidate {max_t:.1f} (threshold 3)"
+            )
+            continue
+        notes = []
+        if instead:
+            notes.append("first instead: " + ", ".join(f"{k} {v}" for k, v in instead.items()))
+        if inseparable:
+            notes.append(f"called inseparable {inseparable}/{n}")
+        if wrong_names:
+            notes.append("wrong: " + ", ".join(f"{k} {v}" for k, v in wrong_names.items()))
+        if big:
+            notes.append(f"carries >= half the error in {big}: RMSE cut >= 20 % in {big_cut}")
+        print(
+            f"{label:<32} {first:>5}/{n:<3} {found:>3}/{n:<2} {cut:>3}/{n:<2} {wrong:>3}/{pairs:<3}"
+            f" {wrong_after:>3}/{pairs:<3}  {'; '.join(notes)}"
+        )
+
+
+def baseline_stiffness(n: int) -> None:
+    """Print the baseline regression's own K and C against the walker's, on N records.
+
+    The baseline's ``K u + C u'`` lies mostly in the span of the shared force shape, so its
+    fitted K and C are not estimates of the walker's; this shows by how much.
+    """
+    print(f"{'seed':>4} {'K true':>8} {'K fit':>8} {'ratio':>6} {'C true':>7} {'C fit':>7}")
+    for seed in range(n):
+        sim = hidden_effect_walk("none", seed)
+        truth = sim.record.metadata["truth"]
+        data = prepare(sim.record)
+        x = baseline_columns(data)
+        coef, *_ = np.linalg.lstsq(x, data.target_n, rcond=None)
+        k_fit, c_fit = -coef[-2], -coef[-1]
+        k, c = truth["stiffness_n_per_m"], truth["damping_ns_per_m"]
+        print(f"{seed:>4} {k:>8.0f} {k_fit:>8.0f} {k_fit / k:>6.2f} {c:>7.0f} {c_fit:>7.0f}")
 
 
 def real(out: Path | None) -> None:
@@ -232,9 +260,12 @@ def real(out: Path | None) -> None:
         diag = diagnose(data)
         print(f"== {key}: {meta.description}")
         b = diag.baseline
+        rate = slow_pacing_change(data)
+        slow = 0.0 if rate is None else float(np.std(rate)) / data.pacing_hz
         print(
-            f"   {b['steps']} steps at {b['pacing_hz']:.2f} Hz; baseline held-out RMSE "
-            f"{b['heldout_rmse_n']:.1f} N, fit {b['fit_percent']:.1f} %"
+            f"   {b['steps']} steps at {b['pacing_hz']:.2f} Hz (slow pacing varies by "
+            f"{100 * slow:.1f} % sd); baseline held-out RMSE {b['heldout_rmse_n']:.1f} N, "
+            f"fit {b['fit_percent']:.1f} %"
         )
         for c in diag.candidates:
             mark = "*" if c.significant else " "
@@ -256,10 +287,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=3, help="seed of the story's record (3)")
     ap.add_argument("--sweep", type=int, metavar="N", help="N records per effect instead")
     ap.add_argument("--real", action="store_true", help="diagnose the embedded real records")
+    ap.add_argument("--only", help="sweep: only these rows (comma-separated effect names, or none)")
+    ap.add_argument(
+        "--raw-error",
+        action="store_true",
+        help="sweep: score the raw error (step_variation=False) instead",
+    )
+    ap.add_argument(
+        "--baseline-stiffness",
+        type=int,
+        metavar="N",
+        help="print the baseline's fitted K, C against the truth on N records without effects",
+    )
     ap.add_argument("--out", type=Path, help="write an HTML/Markdown report here")
     args = ap.parse_args(argv)
+    if args.baseline_stiffness:
+        baseline_stiffness(args.baseline_stiffness)
+        return 0
     if args.sweep:
-        sweep(args.sweep)
+        only = args.only.split(",") if args.only else None
+        sweep(args.sweep, step_variation=not args.raw_error, only=only)
     elif args.real:
         real(args.out)
     else:

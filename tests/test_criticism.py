@@ -14,7 +14,10 @@ from scipy import stats
 
 from workbench.diagnostics.criticism import (
     CATALOGUE,
+    SLOW_STEPS,
+    StepVariation,
     _build_cv,
+    _moving_average,
     compare,
     diagnose,
     feature_group_from_effect,
@@ -24,7 +27,6 @@ from workbench.diagnostics.criticism import (
 )
 from workbench.models import (
     BaseMotion,
-    CubicStiffness,
     Effect,
     EffectContext,
     GaitAsymmetry,
@@ -39,7 +41,7 @@ from workbench.models import (
     unregister_effect,
 )
 from workbench.records.io import save_record
-from workbench.synth import simulate_walking
+from workbench.synth import hidden_effect_walk, simulate_walking, varied_walk
 
 
 def _record(seed: int, effects=(), ground=None, base: int = 100):  # type: ignore[no-untyped-def]
@@ -102,6 +104,28 @@ def test_catalogue_terms_match_their_formulas() -> None:
 
 
 # -- engine -----------------------------------------------------------------------------
+def test_step_variation_takes_out_each_steps_own_size_and_timing() -> None:
+    """The map removes per-step jitter of the shape's size and timing exactly, keeps their
+    slow part and anything else, and is linear."""
+    data = prepare(varied_walk(4, duration_s=(30.0, 30.0)).record)
+    sv = StepVariation(data)
+    rng = np.random.default_rng(0)
+    n = data.n_steps
+    coef = rng.normal(size=(n, 2))
+    slow_coef = np.column_stack([_moving_average(coef[:, i], min(SLOW_STEPS, n)) for i in range(2)])
+    per_step = np.einsum("sa,sa->s", sv.columns, coef[data.step])
+    kept = np.einsum("sa,sa->s", sv.columns, slow_coef[data.step])
+    slow = sv.columns @ np.array([0.7, -0.2]) * (1.0 + data.time_s / data.time_s[-1])
+    other = np.sin(2 * np.pi * 13.0 * data.time_s)  # nothing like the shape
+    np.testing.assert_allclose(sv(per_step), kept, atol=1e-9 * np.abs(per_step).max())
+    # A slow change of size is kept up to the moving average's curvature at the ends.
+    assert np.std(sv(slow) - slow) < 0.05 * np.std(slow)
+    assert np.std(sv(other) - other) < 0.2 * np.std(other)
+    a, b = rng.normal(size=(2, data.time_s.size))
+    np.testing.assert_allclose(sv(2.0 * a - b), 2.0 * sv(a) - sv(b), atol=1e-9)
+    np.testing.assert_allclose(sv(np.column_stack([a, b]))[:, 1], sv(b), atol=1e-12)
+
+
 def test_fold_errors_equal_a_direct_refit() -> None:
     """The Gram-matrix shortcut gives the held-out error of refitting on the other folds."""
     data = prepare(_record(0, effects=[GaitAsymmetry(a_half_n=30.0)]))
@@ -133,11 +157,38 @@ def test_ljung_box_matches_its_definition() -> None:
 
 
 # -- must-show properties that hold -------------------------------------------------------
+# -- detection on varied walks: the generator's details vary with the seed -----------------
+#: Records per effect in the detection tests: seeds 100-104 of ``hidden_effect_walk``
+#: (20-120 s, 100-1000 Hz, 55-95 kg, pacing 1.6-2.3 Hz, noise and step variability varied,
+#: the three sizes of each effect in turn). ``analyses/hidden_effect.py --sweep 10`` draws
+#: seeds 0-9 of the same generator; these are other draws.
+DETECTION_SEEDS = range(100, 105)
+#: How many of the five records must find the effect (ranked first and significant, or
+#: significant and named indistinguishable from the first); the sweep's rates are in the
+#: README, section "Model criticism".
+DETECTION_NEEDED = {
+    "gait_asymmetry": 5,
+    "heel_impact": 5,
+    "base_motion": 5,
+    "pacing_drift": 3,
+    "stiffness_drift": 3,
+}
+
+
+def _found(diag, name: str) -> bool:  # type: ignore[no-untyped-def]
+    top = diag.candidates[0]
+    mine = next(c for c in diag.candidates if c.effect == name)
+    return bool(
+        (top.effect == name and top.significant)
+        or (mine.significant and top.effect in mine.indistinguishable_from)
+    )
+
+
 @pytest.mark.slow
 def test_no_false_alarm_without_an_effect() -> None:
     alarms = 0
-    for seed in range(10):
-        diag = diagnose(_record(seed, base=5))
+    for seed in range(100, 110):
+        diag = diagnose(hidden_effect_walk("none", seed).record)
         alarms += any(c.significant for c in diag.candidates)
         assert [c.score for c in diag.candidates if c.testable] == sorted(
             (c.score for c in diag.candidates if c.testable), reverse=True
@@ -145,119 +196,83 @@ def test_no_false_alarm_without_an_effect() -> None:
     assert alarms <= 1
 
 
-@pytest.mark.parametrize(
-    ("seed", "impact_n", "decay_s"), [(1, 200.0, 0.015), (2, 250.0, 0.02), (3, 120.0, 0.012)]
-)
-def test_heel_impact_is_found_and_compare_cuts_the_error(
-    seed: int, impact_n: float, decay_s: float
-) -> None:
-    rec = _record(seed, effects=[HeelImpact(impact_n=impact_n, decay_s=decay_s)])
-    data = prepare(rec)
-    diag = diagnose(data)
-    assert diag.candidates[0].effect == "heel_impact"
-    assert diag.candidates[0].significant
-    right = compare(data, ["heel_impact"])
-    wrong = compare(data, ["gait_asymmetry"])
-    assert right[1].rmse_drop_fraction > right[1].rmse_drop_se
-    assert wrong[1].rmse_drop_fraction < wrong[1].rmse_drop_se
-    if diag.candidates[0].score >= 0.5:  # the effect carries half of the baseline error
-        assert right[1].rmse_drop_fraction >= 0.2
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_gait_asymmetry_is_found(seed: int) -> None:
-    data = prepare(_record(seed, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)]))
-    diag = diagnose(data)
-    assert diag.candidates[0].effect == "gait_asymmetry"
-    assert diag.candidates[0].significant
-    assert "every second step" in diag.verdict
-    right = compare(data, ["gait_asymmetry"])[1]
-    wrong = compare(data, ["heel_impact"])[1]
-    assert right.rmse_drop_fraction > right.rmse_drop_se
-    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_pacing_drift_is_found(seed: int) -> None:
-    rec = _record(seed, effects=[PacingDrift(drift_cos_n_per_s=4.0, drift_sin_n_per_s=-3.0)])
-    data = prepare(rec)
-    diag = diagnose(data)
-    assert diag.candidates[0].effect == "pacing_drift"
-    assert diag.candidates[0].significant
-    rows = compare(data, ["pacing_drift"])
-    assert rows[1].rmse_drop_fraction > rows[1].rmse_drop_se
-
-
-def _cubic_walk(seed: int, amplitude_sd: float):  # type: ignore[no-untyped-def]
-    return simulate_walking(
-        duration_s=30.0,
-        sample_rate_hz=200.0,
-        noise_sd_n=5.0,
-        seed=seed,
-        amplitude_sd=amplitude_sd,
-        start="steady",
-        effects=[CubicStiffness(k3_n_per_m3=5e6)],
-    ).record
-
-
-@pytest.mark.parametrize("seed", [0, 1])
-def test_state_effect_on_periodic_walking_is_called_inseparable(seed: int) -> None:
-    """u^3 lies almost wholly in the span of the force shape and K u: say so, do not guess."""
-    diag = diagnose(_cubic_walk(seed, amplitude_sd=0.05))
-    cubic = next(c for c in diag.candidates if c.effect == "cubic_stiffness")
-    assert not cubic.significant
-    assert cubic.separable_fraction < 0.05
-    assert "cannot be separated" in cubic.evidence
-    assert "cubic_stiffness" in diag.verdict and "cannot be separated" in diag.verdict
-
-
-@pytest.mark.parametrize("seed", [1, 3])
-def test_state_effect_is_found_when_steps_vary_enough(seed: int) -> None:
-    data = prepare(_cubic_walk(seed, amplitude_sd=0.15))
-    diag = diagnose(data)
-    assert diag.candidates[0].effect == "cubic_stiffness"
-    assert diag.candidates[0].significant
-    right = compare(data, ["cubic_stiffness"])[1]
-    wrong = compare(data, ["gait_asymmetry"])[1]
-    assert right.rmse_drop_fraction > right.rmse_drop_se
-    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
-
-
-@pytest.mark.parametrize("seed", [0, 2])
-def test_stiffness_drift_is_significant_or_named_with_its_twin(seed: int) -> None:
-    """A drifting K moves the response's phase, which the step phase follows: the record
-    cannot tell it from a drifting force, and the diagnosis must say so."""
-    diag = diagnose(_record(seed, effects=[StiffnessDrift(dk_n_per_m_s=300.0)]))
-    drift = next(c for c in diag.candidates if c.effect == "stiffness_drift")
-    assert drift.significant
-    assert diag.candidates[0] is drift or "pacing_drift" in drift.indistinguishable_from
-    assert diag.candidates.index(drift) <= 1
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(DETECTION_NEEDED))
+def test_hidden_effect_is_found_and_compare_cuts_the_error(name: str) -> None:
+    found = 0
+    for seed in DETECTION_SEEDS:
+        data = prepare(hidden_effect_walk(name, seed).record)
+        diag = diagnose(data)
+        found += _found(diag, name)
+        right = compare(data, [name])[1]
+        assert right.rmse_drop_fraction > right.rmse_drop_se, (seed, right)
+        mine = next(c for c in diag.candidates if c.effect == name)
+        if mine.score >= 0.5:  # the effect carries half of the baseline's error variance
+            assert right.rmse_drop_fraction >= 0.2
+    assert found >= DETECTION_NEEDED[name]
 
 
 @pytest.mark.parametrize("seed", [0, 3])
-def test_base_motion_is_found(seed: int) -> None:
-    rec = _record(seed, ground=lambda t: 1.0 * np.sin(2 * np.pi * 2.7 * np.asarray(t)))
-    diag = diagnose(rec)
-    assert diag.candidates[0].effect == "base_motion"
-    assert diag.candidates[0].significant
-    rows = compare(prepare(rec), ["base_motion"])
-    assert rows[1].rmse_drop_fraction > rows[1].rmse_drop_se
-    if seed == 0:  # here the effect carries more than half of the baseline's error variance
-        assert diag.candidates[0].score >= 0.5
-        assert rows[1].rmse_drop_fraction >= 0.2
+def test_base_motion_is_untestable_without_ground_motion(seed: int) -> None:
     no_ground = diagnose(_record(seed))
     untestable = [c for c in no_ground.candidates if not c.testable]
     assert [c.effect for c in untestable] == ["base_motion"]
     assert no_ground.candidates[-1].effect == "base_motion"
 
 
-@pytest.mark.parametrize("seed", [0, 2])
-def test_two_hidden_effects_are_both_in_the_top_three(seed: int) -> None:
-    rec = _record(
-        seed, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0), HeelImpact(impact_n=150.0)]
-    )
-    top = [c.effect for c in diagnose(rec).candidates[:3]]
-    assert {"gait_asymmetry", "heel_impact"} <= set(top)
+def test_gait_asymmetry_reason_and_a_wrong_effect() -> None:
+    data = prepare(_record(0, effects=[GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)]))
+    diag = diagnose(data)
+    assert diag.candidates[0].effect == "gait_asymmetry"
+    assert "every second step" in diag.verdict
+    wrong = compare(data, ["heel_impact"])[1]
+    assert wrong.rmse_drop_fraction < wrong.rmse_drop_se
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["cubic_stiffness", "quadratic_damping"])
+def test_state_effect_on_nearly_periodic_walking_is_called_inseparable(name: str) -> None:
+    """u^3 and |u'|u' lie almost wholly in the span of the force shape and K u + C u' when
+    steps vary by 2-6 %: the diagnosis says so, it does not guess (sweep: 10/10)."""
+    for seed in DETECTION_SEEDS:
+        diag = diagnose(hidden_effect_walk(name, seed).record)
+        cand = next(c for c in diag.candidates if c.effect == name)
+        assert not cand.significant
+        assert cand.separable_fraction < 0.05
+        assert "cannot be separated" in cand.evidence
+        assert name in diag.verdict and "cannot be separated" in diag.verdict
+
+
+@pytest.mark.slow
+def test_cubic_stiffness_is_found_when_steps_vary_enough() -> None:
+    """With force amplitudes varying 15 % from step to step the record separates u^3 (sweep:
+    found in 7/10, compare cuts the error in 9/10)."""
+    found = cut = 0
+    for seed in DETECTION_SEEDS:
+        data = prepare(hidden_effect_walk("cubic_stiffness", seed, amplitude_sd=0.15).record)
+        found += _found(diagnose(data), "cubic_stiffness")
+        right = compare(data, ["cubic_stiffness"])[1]
+        cut += right.rmse_drop_fraction > right.rmse_drop_se
+    assert found >= 2
+    assert cut >= 4
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("first", "second"),
+    [
+        ("gait_asymmetry", "heel_impact"),
+        ("pacing_drift", "base_motion"),
+        ("heel_impact", "pacing_drift"),
+    ],
+)
+def test_two_hidden_effects_are_both_in_the_top_three(first: str, second: str) -> None:
+    for seed in range(100, 103):
+        top = [
+            c.effect
+            for c in diagnose(hidden_effect_walk([first, second], seed).record).candidates[:3]
+        ]
+        assert {first, second} <= set(top), (seed, top)
 
 
 def test_current_effects_join_the_baseline() -> None:
@@ -358,6 +373,13 @@ def test_cli_diagnose_and_compare(tmp_path: Path) -> None:
     assert len(rows) == 3
     assert set(rows[0]) >= {"model", "heldout_rmse_n", "fit_percent", "ljung_box_p", "score"}
     assert rows[1]["heldout_rmse_n"] < rows[0]["heldout_rmse_n"]
+    # The raw error (step-to-step variation left in) is larger than the error beyond it.
+    raw = _cli("compare", str(path), "--effects", "heel_impact", "--json", "--raw-error")
+    assert raw.returncode == 0, raw.stderr
+    raw_rows = json.loads(raw.stdout)["rows"]
+    assert raw_rows[0]["heldout_rmse_n"] > rows[0]["heldout_rmse_n"]
+    assert raw_rows[1]["heldout_rmse_n"] < raw_rows[0]["heldout_rmse_n"]
+    assert obj["baseline"]["step_variation"] is True
     for args, word in [
         (("compare", str(path), "--effects", "wobble"), "wobble"),
         (("diagnose", str(path), "--harmonics", "0"), "--harmonics"),

@@ -62,7 +62,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     _check_harmonics(args)
     data = _prepared(args)
     names = parse_effect_names(args.effects)
-    result = diagnose(data, effects=names, harmonics=args.harmonics)
+    result = diagnose(
+        data, effects=names, harmonics=args.harmonics, step_variation=not args.raw_error
+    )
     check = _one_step(args, result, names) if not args.no_one_step else None
     obj = result.to_dict()
     if check is not None:
@@ -132,7 +134,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         raise UsageError("compare: --effects needs at least one effect name, e.g. gait_asymmetry")
     _check_harmonics(args)
     data = _prepared(args)
-    rows = compare(data, names, harmonics=args.harmonics)
+    rows = compare(data, names, harmonics=args.harmonics, step_variation=not args.raw_error)
     obj = {"rows": [r.to_dict() for r in rows]}
     text = "\n".join(
         f"{r.model:<50} RMSE {r.heldout_rmse_n:8.3f} N  fit {r.fit_percent:6.1f} %  "
@@ -153,13 +155,20 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         parents=[out_opts, rec_opts],
         help="rank candidate effects by the held-out GRF error they would remove",
         description="Predict held-out steps of the GRF from a force shape shared across "
-        "steps plus K u + C u' (and the current effects), and rank the catalogued effects by "
+        "steps (each step with its own size and timing of it) plus K u + C u' (and the "
+        "current effects), and rank the catalogued effects by "
         "the held-out error each removes, with a significance decision that respects "
         "autocorrelation (step-blocked cross-validation).",
     )
     p.add_argument("record", help="the record file")
     p.add_argument("--effects", metavar="NAME,...", help="effects already in the model")
     p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
+    p.add_argument(
+        "--raw-error",
+        action="store_true",
+        help="score the raw held-out error instead of the error beyond each step's own size "
+        "and timing of the shared force shape",
+    )
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report")
     p.add_argument(
         "--no-one-step",
@@ -179,4 +188,10 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("record", help="the record file")
     p.add_argument("--effects", required=True, metavar="NAME,...", help="effects to add in turn")
     p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
+    p.add_argument(
+        "--raw-error",
+        action="store_true",
+        help="score the raw held-out error instead of the error beyond each step's own size "
+        "and timing of the shared force shape",
+    )
     p.set_defaults(handler=_cmd_compare)

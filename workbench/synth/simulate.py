@@ -63,7 +63,7 @@ from scipy.integrate import solve_ivp
 from scipy.interpolate import CubicSpline
 
 from workbench.errors import UsageError
-from workbench.models.effects import Effect, EffectContext, Effects, as_effects
+from workbench.models.effects import Effect, EffectContext, Effects, as_effects, effect_from_name
 from workbench.models.force import FourierForce, step_phase_rad
 from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2, Record
@@ -72,11 +72,13 @@ __all__ = [
     "POPULATION_DAMPING_RATIO",
     "POPULATION_NATURAL_FREQUENCY_HZ",
     "Simulation",
+    "hidden_effect_walk",
     "population_damping_ratio",
     "population_natural_frequency_hz",
     "seed_numerical_example",
     "simulate_smd",
     "simulate_walking",
+    "varied_walk",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -1093,3 +1095,164 @@ def seed_numerical_example(
         },
     )
     return sim
+
+
+#: Ranges of :func:`varied_walk`'s generator details (uniform unless a list).
+VARIED_WALK_RANGES: dict[str, Any] = {
+    "amplitude_sd": (0.02, 0.06),
+    "sample_rate_hz": [100.0, 200.0, 500.0, 1000.0],
+    "noise_sd_n": (2.0, 15.0),
+    "pacing_hz": (1.6, 2.3),
+    "mass_kg": (55.0, 95.0),
+    "step_duration_sd": (0.01, 0.03),
+    "phase_sd_rad": (0.02, 0.06),
+}
+
+
+def varied_walk(
+    seed: int,
+    effects: Effect | Effects | Iterable[Effect | str] | Callable[[float], Any] = (),
+    *,
+    duration_s: tuple[float, float] = (20.0, 120.0),
+    ground_amplitude_m_s2: float = 0.0,
+    ground_frequency_hz: float = 2.7,
+    amplitude_sd: float | None = None,
+) -> Simulation:
+    """Simulate a steady walk whose generator details are drawn from the seed.
+
+    Everything a diagnosis must not depend on varies with the seed, inside
+    :data:`VARIED_WALK_RANGES`: duration, sample rate, GRF noise, pacing, mass, and the
+    step-to-step variability of durations, amplitudes and phases. The SMD's natural
+    frequency and damping ratio follow the population laws. The same seed gives the same
+    record.
+
+    Parameters
+    ----------
+    seed : int
+        Seed of the generator details and of the simulation.
+    effects : Effect, Effects, iterable or callable, optional
+        Hidden effects; or a function of the drawn duration [s] that returns them, for
+        drifts whose total change over the record should not grow with its length.
+    duration_s : (float, float), optional
+        Range of the record length [s].
+    ground_amplitude_m_s2 : float, optional
+        Amplitude of a sinusoidal surface acceleration [m/s^2] (0: rigid ground).
+    ground_frequency_hz : float, optional
+        Its frequency [Hz].
+    amplitude_sd : float, optional
+        Step-to-step variability of the force amplitudes instead of the drawn one.
+
+    Returns
+    -------
+    Simulation
+    """
+    rng = np.random.default_rng([seed, 0x5EED])
+    r = VARIED_WALK_RANGES
+
+    def draw(key: str) -> float:
+        lo, hi = r[key]
+        return float(rng.uniform(lo, hi))
+
+    sd_a = draw("amplitude_sd")
+    ground = None
+    if ground_amplitude_m_s2:
+        amp, w = float(ground_amplitude_m_s2), 2.0 * np.pi * float(ground_frequency_hz)
+
+        def ground(t: ArrayLike) -> FloatArray:
+            return np.asarray(amp * np.sin(w * np.asarray(t)), dtype=np.float64)
+
+    duration = float(rng.uniform(*duration_s))
+    hidden = effects(duration) if callable(effects) else effects
+    return simulate_walking(
+        duration_s=duration,
+        sample_rate_hz=float(rng.choice(r["sample_rate_hz"])),
+        noise_sd_n=draw("noise_sd_n"),
+        pacing_hz=draw("pacing_hz"),
+        mass_kg=draw("mass_kg"),
+        step_duration_sd=draw("step_duration_sd"),
+        amplitude_sd=sd_a if amplitude_sd is None else float(amplitude_sd),
+        phase_sd_rad=draw("phase_sd_rad"),
+        start="steady",
+        effects=hidden,
+        ground_acc_m_s2=ground,
+        seed=seed,
+    )
+
+
+#: Three sizes (small, middle, large) of every catalogued effect for detection studies:
+#: realistic, clearly present. Drifts are given as their total change over the record
+#: (``pacing_drift``: the first harmonic's coefficients [N], split 0.8 / -0.6 between cos and
+#: sin; ``stiffness_drift``: K [N/m]) so that a long record does not drift further than a
+#: short one; ``base_motion``: amplitude of a 2.7 Hz surface acceleration [m/s^2].
+HIDDEN_EFFECT_LEVELS: dict[str, tuple[float, float, float]] = {
+    "gait_asymmetry": (30.0, 60.0, 90.0),  # a_half_n (b_half_n is half of it)
+    "cubic_stiffness": (1e6, 2e6, 4e6),  # k3_n_per_m3
+    "quadratic_damping": (500.0, 1000.0, 2000.0),  # c2_ns2_per_m2
+    "heel_impact": (100.0, 150.0, 250.0),  # impact_n, decay 15 ms
+    "pacing_drift": (40.0, 80.0, 120.0),  # total change of the first harmonic [N]
+    "stiffness_drift": (1500.0, 3000.0, 4500.0),  # total change of K [N/m]
+    "base_motion": (0.5, 1.0, 1.5),  # surface acceleration amplitude [m/s^2]
+}
+
+
+def _hidden_effect(name: str, size: float, duration_s: float) -> Effect:
+    if name == "gait_asymmetry":
+        return effect_from_name(name, a_half_n=size, b_half_n=size / 2)
+    if name == "cubic_stiffness":
+        return effect_from_name(name, k3_n_per_m3=size)
+    if name == "quadratic_damping":
+        return effect_from_name(name, c2_ns2_per_m2=size)
+    if name == "heel_impact":
+        return effect_from_name(name, impact_n=size, decay_s=0.015)
+    if name == "pacing_drift":
+        rate = size / duration_s
+        return effect_from_name(name, drift_cos_n_per_s=0.8 * rate, drift_sin_n_per_s=-0.6 * rate)
+    if name == "stiffness_drift":
+        return effect_from_name(name, dk_n_per_m_s=size / duration_s)
+    raise UsageError(f"no detection level for effect {name!r}")
+
+
+def hidden_effect_walk(
+    names: str | Sequence[str],
+    seed: int,
+    level: int | None = None,
+    **kwargs: Any,
+) -> Simulation:
+    """Simulate a :func:`varied_walk` with catalogued effects hidden at set sizes.
+
+    The sizes are those of :data:`HIDDEN_EFFECT_LEVELS` (detection studies).
+
+    Parameters
+    ----------
+    names : str or sequence of str
+        Catalogue names of the hidden effects (``"none"`` or an empty sequence: none).
+    seed : int
+        Seed of the record.
+    level : {0, 1, 2}, optional
+        Size from :data:`HIDDEN_EFFECT_LEVELS`; default ``seed % 3`` (sizes in turn).
+    **kwargs
+        Passed to :func:`varied_walk` (e.g. ``amplitude_sd``, ``duration_s``).
+
+    Returns
+    -------
+    Simulation
+    """
+    wanted = [names] if isinstance(names, str) else list(names)
+    wanted = [n for n in wanted if n != "none"]
+    unknown = [n for n in wanted if n not in HIDDEN_EFFECT_LEVELS]
+    if unknown:
+        raise UsageError(
+            f"no detection level for effect {unknown[0]!r}; choose from "
+            + ", ".join(HIDDEN_EFFECT_LEVELS)
+        )
+    i = seed % 3 if level is None else int(level)
+    ground = HIDDEN_EFFECT_LEVELS["base_motion"][i] if "base_motion" in wanted else 0.0
+
+    def effects(duration_s: float) -> list[Effect]:
+        return [
+            _hidden_effect(n, HIDDEN_EFFECT_LEVELS[n][i], duration_s)
+            for n in wanted
+            if n != "base_motion"
+        ]
+
+    return varied_walk(seed, effects, ground_amplitude_m_s2=ground, **kwargs)
