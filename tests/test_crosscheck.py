@@ -326,3 +326,81 @@ def test_a_short_history_window_uses_the_fitted_prior() -> None:
         assert step.converged, step.flags
     with pytest.raises(UsageError):
         crosscheck(problem, rbpf, history=-1, max_pieces=1)
+
+
+# -- the history grid (bounded cost per step) ------------------------------------------------
+def _exact_moments(target: StepTarget, centre: np.ndarray, sd: np.ndarray) -> tuple:
+    """Posterior mean and sd of (C, K) by quadrature of a target over +-8 sd of a guess.
+
+    The range is cut at the prior box (the target is zero outside it).
+    """
+    (c_lo, c_hi), (k_lo, k_hi) = target.box.damping_ns_per_m, target.box.stiffness_n_per_m
+    cg = np.linspace(max(c_lo, centre[0] - 8 * sd[0]), min(c_hi, centre[0] + 8 * sd[0]), 161)
+    kg = np.linspace(max(k_lo, centre[1] - 8 * sd[1]), min(k_hi, centre[1] + 8 * sd[1]), 161)
+    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
+    logp = np.concatenate(
+        [
+            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
+            for i in range(0, cc.size, 2000)
+        ]
+    )
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    # Negligible mass on the rims that are not faces of the box.
+    rim = (
+        ((cc == cg[0]) & (cg[0] > c_lo))
+        | ((cc == cg[-1]) & (cg[-1] < c_hi))
+        | ((kk == kg[0]) & (kg[0] > k_lo))
+        | ((kk == kg[-1]) & (kg[-1] < k_hi))
+    )
+    assert w[rim].sum() < 1e-4
+    mean = np.array([w @ cc, w @ kk])
+    return mean, np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
+
+
+def test_history_grid_matches_the_full_history_posterior() -> None:
+    """The grid (and its surrogate step) against every earlier step computed per walker.
+
+    On a short record: the interpolated history and hand-in against the exact chain at
+    points inside the posterior, and every step's MCMC moments against the exact
+    full-history posterior by quadrature (means within 0.1 sd, sds within 10 %).
+    """
+    from dataclasses import replace
+
+    from workbench.inference.history_grid import HistoryGrid, box_logit
+
+    problem, _ = _walk(12, harmonics=3, duration_s=4.5)
+    problem = problem.with_noise(replace(problem.noise, state_sd=np.zeros(2)))
+    rbpf = run_rbpf(problem, n_particles=64, seed=0)
+    result = crosscheck(problem, rbpf, seed=4, keep_inference_data=False)
+    assert len(result.steps) == problem.n_pieces >= 5
+    xm, xc = kf.initial_state(problem, 1)
+    models = [StepModel(problem, j, xm[0], xc[0]) for j in range(problem.n_pieces)]
+    for step in result.steps:
+        assert step.converged, step.flags
+        j = step.index
+        # Every earlier step's exact likelihood per row, hand-ins chained from step 0.
+        exact = StepTarget(models[j], None, None, problem.prior, history=models[:j])
+        mean, sd = _exact_moments(exact, step.mcmc_mean, step.mcmc_sd)
+        assert np.all(np.abs(step.mcmc_mean - mean) < 0.1 * sd), (j, step.mcmc_mean, mean, sd)
+        assert np.all(np.abs(step.mcmc_sd / sd - 1) < 0.1), (j, step.mcmc_sd, sd)
+        if j > 0:
+            err = step.surrogate_error
+            assert err is not None and err["acceptable"] and not err["resampled_exact"]
+    # The interpolated history itself, at draws of the last step's posterior.
+    last = result.steps[-1]
+    j = last.index
+    x, _ = box_logit(problem.prior, last.mcmc.samples[:, :2])
+    grid = HistoryGrid(problem.prior, x.mean(axis=0), np.cov(x, rowvar=False), models[:j])
+    pts = last.mcmc.samples[:: max(1, last.mcmc.samples.shape[0] // 200), :2]
+    (g_mean, g_chol), g_ll = grid.evaluate(pts[:, 0], pts[:, 1])
+    ll, hand = np.zeros(len(pts)), None
+    for m in models[:j]:
+        step_ll, hand = m.loglik_and_hand_over(pts[:, 0], pts[:, 1], hand)
+        ll += step_ll
+    assert hand is not None
+    diff = g_ll - ll
+    assert np.max(np.abs(diff - np.median(diff))) < 0.01
+    white = np.linalg.solve(hand[1], (g_mean - hand[0])[:, :, None])
+    assert np.max(np.abs(white)) < 0.01
+    np.testing.assert_allclose(g_chol, hand[1], rtol=1e-3, atol=0)
