@@ -404,3 +404,37 @@ def test_history_grid_matches_the_full_history_posterior() -> None:
     white = np.linalg.solve(hand[1], (g_mean - hand[0])[:, :, None])
     assert np.max(np.abs(white)) < 0.01
     np.testing.assert_allclose(g_chol, hand[1], rtol=1e-3, atol=0)
+
+
+@pytest.mark.slow
+def test_joint_mode_agrees_with_collapsed_and_converges() -> None:
+    """Non-centred joint mode: the 50-tau rule is met and the (C, K) posterior is the same."""
+    problem, truth = _walk(11, harmonics=3, duration_s=5.0)
+    xm, xc = _hand_in(problem, 3, truth)
+    model = StepModel(problem, 3, xm[0], xc[0])
+    previous = StepModel(problem, 2, *(a[0] for a in _hand_in(problem, 2, truth)))
+    prior_mean = truth * np.array([1.1, 0.95])
+    prior_cov = np.diag((truth * np.array([0.25, 0.15])) ** 2)
+    runs = {}
+    for mode in ("collapsed", "joint"):
+        target = StepTarget(
+            model, prior_mean, prior_cov, problem.prior, mode=mode, previous=previous
+        )
+        runs[mode] = run_ensembles(
+            target,
+            lambda rng, t=target: t.initial(rng, 32),
+            n_walkers=32,
+            seed=3,
+            min_steps=200,
+            moves=default_moves(mode),
+            param_names=target.param_names,
+        )
+    joint, collapsed = runs["joint"], runs["collapsed"]
+    assert joint.converged, joint.reasons
+    assert np.all(joint.tau_rule_met)
+    assert joint.param_names[2].startswith("eta_")
+    assert np.all(np.abs(joint.mean[:2] - collapsed.mean[:2]) < 0.1 * collapsed.sd[:2])
+    assert np.all(np.abs(joint.sd[:2] / collapsed.sd[:2] - 1) < 0.1)
+    # In the non-centred coordinates the force part is standard normal.
+    assert np.all(np.abs(joint.mean[2:]) < 0.1)
+    assert np.all(np.abs(joint.sd[2:] - 1) < 0.1)
