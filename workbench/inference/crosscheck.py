@@ -447,9 +447,7 @@ class StepTarget:
         hand_in: tuple[FloatArray, FloatArray] | None,
     ) -> tuple[FloatArray, FloatArray]:
         """Non-centred coordinates to ``beta``; also ``log |det root|`` per row."""
-        _, mean, root = self.model.collapsed_loglik(
-            c, k, s, return_posterior=True, hand_in=hand_in
-        )
+        _, mean, root = self.model.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
         beta = mean + np.einsum("bij,bj->bi", root, eta)
         return beta, np.linalg.slogdet(root)[1]
 
