@@ -438,3 +438,61 @@ def test_joint_mode_agrees_with_collapsed_and_converges() -> None:
     # In the non-centred coordinates the force part is standard normal.
     assert np.all(np.abs(joint.mean[2:]) < 0.1)
     assert np.all(np.abs(joint.sd[2:] - 1) < 0.1)
+
+
+# -- identify grades identifiability from the MCMC posterior -------------------------------
+def test_identification_result_uses_the_mcmc_posterior() -> None:
+    """API: the report's contraction and correlation are the MCMC's after the last step."""
+    from workbench.inference.identify import identify_problem
+    from workbench.inference.settings import IdentifySettings
+
+    problem, _ = _walk(11, harmonics=2, duration_s=3.0)
+    settings = IdentifySettings().replace(harmonics=2, particles=64, force_check=False)
+    rbpf = identify_problem(problem, settings)
+    before = dict(rbpf.identifiability)
+    result = crosscheck(problem, rbpf, seed=1)
+    rbpf.use_crosscheck(result)
+    report = rbpf.identifiability
+    last = result.compared[-1]
+    assert report["source"] == f"MCMC posterior after step {last.index} (sequential prior)"
+    assert report["filter_report"] == before
+    sd = np.sqrt(np.diag(last.mcmc.cov[:2, :2]))
+    np.testing.assert_allclose(
+        [report["contraction_damping"], report["contraction_stiffness"]],
+        sd / problem.prior.sd,
+        rtol=1e-5,
+    )
+    corr = last.mcmc.cov[0, 1] / (sd[0] * sd[1])
+    assert report["ck_correlation"] == pytest.approx(corr, abs=1e-6)
+    assert report["max_force_correlation_damping"] is not None
+    # A cross-check with no converged step leaves the filter's report alone.
+    empty = crosscheck(problem, rbpf, seed=1, max_pieces=1, max_steps=100, min_steps=20)
+    empty.steps[0].converged = False
+    rbpf.identifiability = dict(before)
+    rbpf.use_crosscheck(empty)
+    assert rbpf.identifiability == before
+
+
+@pytest.mark.slow
+def test_identify_command_with_crosscheck(
+    treadmill_segment: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """CLI: ``identify --crosscheck --json`` says the report comes from the MCMC posterior."""
+    code = main(["identify", str(treadmill_segment), "--harmonics", "2", "--crosscheck", "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    report = out["identifiability"]
+    assert report["source"].startswith("MCMC posterior after step ")
+    assert "level" in report["filter_report"]
+    assert out["crosscheck"]["steps_checked"] == out["steps"]
+    assert isinstance(out["crosscheck"]["verdict"], str)
+    assert 0.0 <= report["contraction_damping"] <= 1.5
+
+
+def test_identify_crosscheck_needs_a_particle_filter(
+    treadmill_segment: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(["identify", str(treadmill_segment), "--method", "exact", "--crosscheck", "--json"])
+    assert code == 2
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert "--crosscheck" in err and "--method rbpf or pf" in err

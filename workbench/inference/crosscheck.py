@@ -1490,10 +1490,10 @@ def mcmc_identifiability(
 ) -> dict[str, Any]:
     """Return the identifiability report of the MCMC posterior of the last converged step.
 
-    With the sequential prior the last step's posterior is the whole record's (in
-    assumed-density form), so its sd against the prior box's, the C-K correlation and the
-    largest correlation of C and K with that step's force coefficients (from the kept draws
-    with the coefficients completed) grade the record as
+    With the sequential prior the last step's posterior is the whole record's (the exact
+    filtering posterior, module docstring), so its sd against the prior box's, the C-K
+    correlation and the largest correlation of C and K with that step's force coefficients
+    (from the kept draws with the coefficients completed) grade the record as
     :func:`~workbench.inference.identifiability.identifiability_report` does for the filters.
     Returns an empty dict when no step converged or the prior was the filter's own.
     """
