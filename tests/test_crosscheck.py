@@ -126,6 +126,35 @@ def test_joint_mode_with_fixed_c_k_matches_the_gaussian_posterior() -> None:
     assert np.all(np.abs(res.sd / sd - 1) < 0.1)
 
 
+def _exact_moments(target: StepTarget, centre: np.ndarray, sd: np.ndarray) -> tuple:
+    """Posterior mean and sd of (C, K) by quadrature of a target over +-8 sd of a guess.
+
+    The range is cut at the prior box (the target is zero outside it).
+    """
+    (c_lo, c_hi), (k_lo, k_hi) = target.box.damping_ns_per_m, target.box.stiffness_n_per_m
+    cg = np.linspace(max(c_lo, centre[0] - 8 * sd[0]), min(c_hi, centre[0] + 8 * sd[0]), 161)
+    kg = np.linspace(max(k_lo, centre[1] - 8 * sd[1]), min(k_hi, centre[1] + 8 * sd[1]), 161)
+    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
+    logp = np.concatenate(
+        [
+            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
+            for i in range(0, cc.size, 2000)
+        ]
+    )
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    # Negligible mass on the rims that are not faces of the box.
+    rim = (
+        ((cc == cg[0]) & (cg[0] > c_lo))
+        | ((cc == cg[-1]) & (cg[-1] < c_hi))
+        | ((kk == kg[0]) & (kg[0] > k_lo))
+        | ((kk == kg[-1]) & (kg[-1] < k_hi))
+    )
+    assert w[rim].sum() < 1e-4
+    mean = np.array([w @ cc, w @ kk])
+    return mean, np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
+
+
 def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
     """(C, K) posterior of one step on a fine grid vs the crosscheck's collapsed MCMC."""
     problem, truth = _walk(11, harmonics=4, duration_s=5.0)
@@ -144,23 +173,8 @@ def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
         param_names=target.param_names,
     )
     assert res.converged, res.reasons
-    # Grid over +-6 MCMC sd (the exact moments do not depend on where the MCMC is).
-    cg = np.linspace(res.mean[0] - 6 * res.sd[0], res.mean[0] + 6 * res.sd[0], 161)
-    kg = np.linspace(res.mean[1] - 6 * res.sd[1], res.mean[1] + 6 * res.sd[1], 161)
-    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
-    logp = np.concatenate(
-        [
-            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
-            for i in range(0, cc.size, 2000)
-        ]
-    )
-    w = np.exp(logp - logp.max())
-    w /= w.sum()
-    # The grid must hold the whole posterior: negligible mass on its rim.
-    rim = (cc == cg[0]) | (cc == cg[-1]) | (kk == kg[0]) | (kk == kg[-1])
-    assert w[rim].sum() < 1e-6
-    mean = np.array([w @ cc, w @ kk])
-    sd = np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
+    # Quadrature around the MCMC (the exact moments do not depend on where the MCMC is).
+    mean, sd = _exact_moments(target, res.mean, res.sd)
     assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
     assert np.all(np.abs(res.sd / sd - 1) < 0.1)
 
@@ -329,35 +343,6 @@ def test_a_short_history_window_uses_the_fitted_prior() -> None:
 
 
 # -- the history grid (bounded cost per step) ------------------------------------------------
-def _exact_moments(target: StepTarget, centre: np.ndarray, sd: np.ndarray) -> tuple:
-    """Posterior mean and sd of (C, K) by quadrature of a target over +-8 sd of a guess.
-
-    The range is cut at the prior box (the target is zero outside it).
-    """
-    (c_lo, c_hi), (k_lo, k_hi) = target.box.damping_ns_per_m, target.box.stiffness_n_per_m
-    cg = np.linspace(max(c_lo, centre[0] - 8 * sd[0]), min(c_hi, centre[0] + 8 * sd[0]), 161)
-    kg = np.linspace(max(k_lo, centre[1] - 8 * sd[1]), min(k_hi, centre[1] + 8 * sd[1]), 161)
-    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
-    logp = np.concatenate(
-        [
-            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
-            for i in range(0, cc.size, 2000)
-        ]
-    )
-    w = np.exp(logp - logp.max())
-    w /= w.sum()
-    # Negligible mass on the rims that are not faces of the box.
-    rim = (
-        ((cc == cg[0]) & (cg[0] > c_lo))
-        | ((cc == cg[-1]) & (cg[-1] < c_hi))
-        | ((kk == kg[0]) & (kg[0] > k_lo))
-        | ((kk == kg[-1]) & (kg[-1] < k_hi))
-    )
-    assert w[rim].sum() < 1e-4
-    mean = np.array([w @ cc, w @ kk])
-    return mean, np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
-
-
 def test_history_grid_matches_the_full_history_posterior() -> None:
     """The grid (and its surrogate step) against every earlier step computed per walker.
 
