@@ -1216,18 +1216,11 @@ def recompare(
     for old in result.steps:
         target_names = old.mcmc.param_names
         free = "log_noise_scale" in target_names
-        checks.append(
-            _compare(
-                problem,
-                output,
-                old.index,
-                old.mcmc,
-                free,
-                (old.prior_mean, old.prior_sd),
-                ess,
-                unique,
-            )
+        check = _compare(
+            problem, output, old.index, old.mcmc, free, (old.prior_mean, old.prior_sd), ess, unique
         )
+        check.surrogate_error = old.surrogate_error  # the same MCMC run
+        checks.append(check)
     settings = dict(result.settings)
     settings["filter"] = {
         "method": output.method,
