@@ -21,11 +21,11 @@ The target of step j (the prior the filter carries into the step)
       ``p(C, K | y_0..j)``, the one the rbpf approximates. Computed per walker
       (``history="all"``) that costs j + 1 step models per call, so a record's cost grows
       with the square of its length. The default ``history="grid"`` computes the same
-      history exactly at the nodes of a grid over (C, K) (33 x 33 nodes over +-6 sd of the
+      history exactly at the nodes of a grid over (C, K) (57 x 57 nodes over +-12 sd of the
       latest posterior, in the box's logit coordinates) and interpolates it with bicubic
       splines, the hand-in state too (:class:`~workbench.inference.history_grid.HistoryGrid`):
       one step model on the nodes per step, the grid rebuilt from the record's start when
-      the posterior has contracted below half a sd of the grid or moved near its edge, and
+      the posterior has contracted twofold or moved near its edge, and
       a step whose draws come near the edge sampled again on a wider grid. Every rebuild
       measures the old grid's interpolation error at the new grid's nodes
       (``settings["grid"]``). With the grid, the collapsed mode and a fixed noise scale
@@ -117,6 +117,7 @@ from workbench.inference import kalman as kf
 from workbench.inference.history_grid import (
     GRID_EXTENT,
     GRID_NODES,
+    GRID_SCALE,
     HistoryGrid,
     box_bounds,
     box_expit,
@@ -970,7 +971,7 @@ def _grid_summary(log: list[dict[str, Any]]) -> dict[str, Any]:
 
     return {
         "nodes_per_axis": GRID_NODES,
-        "extent_sd": GRID_EXTENT,
+        "half_width_sd": GRID_EXTENT * GRID_SCALE,
         "rebuilds": len(log),
         "rebuilt_before_steps": [e["before_step"] for e in log],
         "edge_reruns": sum(e["why"] == "edge" for e in log),

@@ -11,16 +11,17 @@ Both quantities are smooth functions of (C, K) that do not depend on the walkers
 :class:`HistoryGrid` computes them once, exactly, at the nodes of a grid and interpolates:
 
 * Coordinates: the prior box's logit coordinates ``x`` (:func:`box_logit`, so every node
-  lies inside the box), whitened by a normal fitted to the latest posterior,
-  ``x = centre + root u``; the nodes are a regular ``N x N`` grid over
-  ``u in [-E, E]^2`` (:data:`GRID_NODES`, :data:`GRID_EXTENT`).
+  lies inside the box), whitened by a normal fitted to the latest posterior and widened,
+  ``x = centre + root u`` with ``root`` :data:`GRID_SCALE` times that normal's Cholesky
+  factor; the nodes are a regular ``N x N`` grid over ``u in [-E, E]^2``
+  (:data:`GRID_NODES`, :data:`GRID_EXTENT`).
 * Tabulated at every node, exactly: the history log-likelihood ``sum_{i<j} log p(y_i | y_<i,
   C, K)`` and the hand-over to step j, mean ``(u, u')`` and the lower Cholesky factor of its
   covariance (its diagonal as logarithms, so that the interpolant stays positive definite).
 * Interpolated between nodes by bicubic splines (:class:`scipy.interpolate.RectBivariateSpline`,
   which reproduces cubics, so the near-quadratic log-likelihood of a near-normal posterior
-  with little error). Outside the grid the target is zero (the grid spans :data:`GRID_EXTENT`
-  sd of the latest posterior, and a step whose draws come near its edge is rerun on a wider
+  with little error). Outside the grid the target is zero (the grid spans 12 sd of the
+  latest posterior at its build, and a step whose draws come near its edge is rerun on a wider
   grid, see :func:`workbench.inference.crosscheck.crosscheck`).
 * Advancing to the next step costs one step model on the ``N^2`` nodes (the nodes' own
   hand-overs chained): the per-step cost is bounded. When the posterior has contracted so
@@ -52,6 +53,7 @@ __all__ = [
     "GRID_EXTENT",
     "GRID_MIN_SD",
     "GRID_NODES",
+    "GRID_SCALE",
     "HistoryGrid",
     "box_bounds",
     "box_expit",
@@ -61,14 +63,19 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 #: Nodes per axis of the grid.
-GRID_NODES = 33
-#: Half-width of the grid in sd of the posterior it was built around.
+GRID_NODES = 57
+#: Half-width of the grid in grid units.
 GRID_EXTENT = 6.0
+#: One grid unit is this many sd of the posterior the grid is built around: the grid spans
+#: +-12 sd of it, so the posterior may move about 7 sd before the grid is rebuilt (on the
+#: real treadmill record it drifts along the record).
+GRID_SCALE = 2.0
 #: Rebuild when this many sd of the latest posterior no longer fit inside the grid.
 GRID_COVER = 5.0
 #: Rebuild when the latest posterior's smallest sd falls below this many grid units (the
-#: node spacing is ``2 E / (N - 1)`` = 0.375 units).
-GRID_MIN_SD = 0.5
+#: node spacing is ``2 E / (N - 1)`` = 0.21 units; at build the posterior's sd is 0.5 units,
+#: so a rebuild comes when it has contracted twofold).
+GRID_MIN_SD = 0.25
 #: Nodes per call of the step model (bounds the memory of its buffer).
 _CHUNK = 512
 #: Nodes within this log-density drop from the peak count as "inside the posterior" when the
@@ -111,7 +118,8 @@ class HistoryGrid:
     box : StiffnessDampingPrior-like
         The problem's prior box.
     centre, cov : array_like, shapes (2,) and (2, 2)
-        Normal (in the box's logit coordinates) that the grid is built around.
+        Normal (in the box's logit coordinates) that the grid is built around; the grid's
+        unit is :data:`GRID_SCALE` sd of it.
     models : sequence of StepModel
         Steps 0 .. j - 1 in order; step 0 starts from its own hand-in, every later one from
         the previous one's hand-over at the node.
@@ -132,7 +140,7 @@ class HistoryGrid:
         self.box = box
         self.centre = np.asarray(centre, dtype=float).reshape(2)
         cov = np.asarray(cov, dtype=float).reshape(2, 2)
-        self.root = np.linalg.cholesky(0.5 * (cov + cov.T))
+        self.root = GRID_SCALE * np.linalg.cholesky(0.5 * (cov + cov.T))
         self.extent = float(extent)
         self.axis = np.linspace(-self.extent, self.extent, int(nodes))
         uu = np.stack(np.meshgrid(self.axis, self.axis, indexing="ij"), axis=-1).reshape(-1, 2)
