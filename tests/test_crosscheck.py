@@ -126,6 +126,35 @@ def test_joint_mode_with_fixed_c_k_matches_the_gaussian_posterior() -> None:
     assert np.all(np.abs(res.sd / sd - 1) < 0.1)
 
 
+def _exact_moments(target: StepTarget, centre: np.ndarray, sd: np.ndarray) -> tuple:
+    """Posterior mean and sd of (C, K) by quadrature of a target over +-8 sd of a guess.
+
+    The range is cut at the prior box (the target is zero outside it).
+    """
+    (c_lo, c_hi), (k_lo, k_hi) = target.box.damping_ns_per_m, target.box.stiffness_n_per_m
+    cg = np.linspace(max(c_lo, centre[0] - 8 * sd[0]), min(c_hi, centre[0] + 8 * sd[0]), 161)
+    kg = np.linspace(max(k_lo, centre[1] - 8 * sd[1]), min(k_hi, centre[1] + 8 * sd[1]), 161)
+    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
+    logp = np.concatenate(
+        [
+            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
+            for i in range(0, cc.size, 2000)
+        ]
+    )
+    w = np.exp(logp - logp.max())
+    w /= w.sum()
+    # Negligible mass on the rims that are not faces of the box.
+    rim = (
+        ((cc == cg[0]) & (cg[0] > c_lo))
+        | ((cc == cg[-1]) & (cg[-1] < c_hi))
+        | ((kk == kg[0]) & (kg[0] > k_lo))
+        | ((kk == kg[-1]) & (kg[-1] < k_hi))
+    )
+    assert w[rim].sum() < 1e-4
+    mean = np.array([w @ cc, w @ kk])
+    return mean, np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
+
+
 def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
     """(C, K) posterior of one step on a fine grid vs the crosscheck's collapsed MCMC."""
     problem, truth = _walk(11, harmonics=4, duration_s=5.0)
@@ -144,23 +173,8 @@ def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
         param_names=target.param_names,
     )
     assert res.converged, res.reasons
-    # Grid over +-6 MCMC sd (the exact moments do not depend on where the MCMC is).
-    cg = np.linspace(res.mean[0] - 6 * res.sd[0], res.mean[0] + 6 * res.sd[0], 161)
-    kg = np.linspace(res.mean[1] - 6 * res.sd[1], res.mean[1] + 6 * res.sd[1], 161)
-    cc, kk = (a.ravel() for a in np.meshgrid(cg, kg, indexing="ij"))
-    logp = np.concatenate(
-        [
-            target(np.column_stack([cc[i : i + 2000], kk[i : i + 2000]]))
-            for i in range(0, cc.size, 2000)
-        ]
-    )
-    w = np.exp(logp - logp.max())
-    w /= w.sum()
-    # The grid must hold the whole posterior: negligible mass on its rim.
-    rim = (cc == cg[0]) | (cc == cg[-1]) | (kk == kg[0]) | (kk == kg[-1])
-    assert w[rim].sum() < 1e-6
-    mean = np.array([w @ cc, w @ kk])
-    sd = np.sqrt(np.array([w @ (cc - mean[0]) ** 2, w @ (kk - mean[1]) ** 2]))
+    # Quadrature around the MCMC (the exact moments do not depend on where the MCMC is).
+    mean, sd = _exact_moments(target, res.mean, res.sd)
     assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
     assert np.all(np.abs(res.sd / sd - 1) < 0.1)
 
@@ -326,3 +340,144 @@ def test_a_short_history_window_uses_the_fitted_prior() -> None:
         assert step.converged, step.flags
     with pytest.raises(UsageError):
         crosscheck(problem, rbpf, history=-1, max_pieces=1)
+
+
+# -- the history grid (bounded cost per step) ------------------------------------------------
+def test_history_grid_matches_the_full_history_posterior() -> None:
+    """The grid (and its surrogate step) against every earlier step computed per walker.
+
+    On a short record: the interpolated history and hand-in against the exact chain at
+    points inside the posterior, and every step's MCMC moments against the exact
+    full-history posterior by quadrature (means within 0.1 sd, sds within 10 %).
+    """
+    from dataclasses import replace
+
+    from workbench.inference.history_grid import HistoryGrid, box_logit
+
+    problem, _ = _walk(12, harmonics=3, duration_s=4.5)
+    problem = problem.with_noise(replace(problem.noise, state_sd=np.zeros(2)))
+    rbpf = run_rbpf(problem, n_particles=64, seed=0)
+    result = crosscheck(problem, rbpf, seed=4, keep_inference_data=False)
+    assert len(result.steps) == problem.n_pieces >= 5
+    xm, xc = kf.initial_state(problem, 1)
+    models = [StepModel(problem, j, xm[0], xc[0]) for j in range(problem.n_pieces)]
+    for step in result.steps:
+        assert step.converged, step.flags
+        j = step.index
+        # Every earlier step's exact likelihood per row, hand-ins chained from step 0.
+        exact = StepTarget(models[j], None, None, problem.prior, history=models[:j])
+        mean, sd = _exact_moments(exact, step.mcmc_mean, step.mcmc_sd)
+        assert np.all(np.abs(step.mcmc_mean - mean) < 0.1 * sd), (j, step.mcmc_mean, mean, sd)
+        assert np.all(np.abs(step.mcmc_sd / sd - 1) < 0.1), (j, step.mcmc_sd, sd)
+        if j > 0:
+            err = step.surrogate_error
+            assert err is not None and err["acceptable"] and not err["resampled_exact"]
+    # The interpolated history itself, at draws of the last step's posterior.
+    last = result.steps[-1]
+    j = last.index
+    x, _ = box_logit(problem.prior, last.mcmc.samples[:, :2])
+    grid = HistoryGrid(problem.prior, x.mean(axis=0), np.cov(x, rowvar=False), models[:j])
+    pts = last.mcmc.samples[:: max(1, last.mcmc.samples.shape[0] // 200), :2]
+    (g_mean, g_chol), g_ll = grid.evaluate(pts[:, 0], pts[:, 1])
+    ll, hand = np.zeros(len(pts)), None
+    for m in models[:j]:
+        step_ll, hand = m.loglik_and_hand_over(pts[:, 0], pts[:, 1], hand)
+        ll += step_ll
+    assert hand is not None
+    diff = g_ll - ll
+    assert np.max(np.abs(diff - np.median(diff))) < 0.01
+    white = np.linalg.solve(hand[1], (g_mean - hand[0])[:, :, None])
+    assert np.max(np.abs(white)) < 0.01
+    np.testing.assert_allclose(g_chol, hand[1], rtol=1e-3, atol=0)
+
+
+@pytest.mark.slow
+def test_joint_mode_agrees_with_collapsed_and_converges() -> None:
+    """Non-centred joint mode: the 50-tau rule is met and the (C, K) posterior is the same."""
+    problem, truth = _walk(11, harmonics=3, duration_s=5.0)
+    xm, xc = _hand_in(problem, 3, truth)
+    model = StepModel(problem, 3, xm[0], xc[0])
+    previous = StepModel(problem, 2, *(a[0] for a in _hand_in(problem, 2, truth)))
+    prior_mean = truth * np.array([1.1, 0.95])
+    prior_cov = np.diag((truth * np.array([0.25, 0.15])) ** 2)
+    runs = {}
+    for mode in ("collapsed", "joint"):
+        target = StepTarget(
+            model, prior_mean, prior_cov, problem.prior, mode=mode, previous=previous
+        )
+        runs[mode] = run_ensembles(
+            target,
+            lambda rng, t=target: t.initial(rng, 32),
+            n_walkers=32,
+            seed=3,
+            min_steps=200,
+            moves=default_moves(mode),
+            param_names=target.param_names,
+        )
+    joint, collapsed = runs["joint"], runs["collapsed"]
+    assert joint.converged, joint.reasons
+    assert np.all(joint.tau_rule_met)
+    assert joint.param_names[2].startswith("eta_")
+    assert np.all(np.abs(joint.mean[:2] - collapsed.mean[:2]) < 0.1 * collapsed.sd[:2])
+    assert np.all(np.abs(joint.sd[:2] / collapsed.sd[:2] - 1) < 0.1)
+    # In the non-centred coordinates the force part is standard normal.
+    assert np.all(np.abs(joint.mean[2:]) < 0.1)
+    assert np.all(np.abs(joint.sd[2:] - 1) < 0.1)
+
+
+# -- identify grades identifiability from the MCMC posterior -------------------------------
+def test_identification_result_uses_the_mcmc_posterior() -> None:
+    """API: the report's contraction and correlation are the MCMC's after the last step."""
+    from workbench.inference.identify import identify_problem
+    from workbench.inference.settings import IdentifySettings
+
+    problem, _ = _walk(11, harmonics=2, duration_s=3.0)
+    settings = IdentifySettings().replace(harmonics=2, particles=64, force_check=False)
+    rbpf = identify_problem(problem, settings)
+    before = dict(rbpf.identifiability)
+    result = crosscheck(problem, rbpf, seed=1)
+    rbpf.use_crosscheck(result)
+    report = rbpf.identifiability
+    last = result.compared[-1]
+    assert report["source"] == f"MCMC posterior after step {last.index} (sequential prior)"
+    assert report["filter_report"] == before
+    sd = np.sqrt(np.diag(last.mcmc.cov[:2, :2]))
+    np.testing.assert_allclose(
+        [report["contraction_damping"], report["contraction_stiffness"]],
+        sd / problem.prior.sd,
+        rtol=1e-5,
+    )
+    corr = last.mcmc.cov[0, 1] / (sd[0] * sd[1])
+    assert report["ck_correlation"] == pytest.approx(corr, abs=1e-6)
+    assert report["max_force_correlation_damping"] is not None
+    # A cross-check with no converged step leaves the filter's report alone.
+    empty = crosscheck(problem, rbpf, seed=1, max_pieces=1, max_steps=100, min_steps=20)
+    empty.steps[0].converged = False
+    rbpf.identifiability = dict(before)
+    rbpf.use_crosscheck(empty)
+    assert rbpf.identifiability == before
+
+
+@pytest.mark.slow
+def test_identify_command_with_crosscheck(
+    treadmill_segment: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """CLI: ``identify --crosscheck --json`` says the report comes from the MCMC posterior."""
+    code = main(["identify", str(treadmill_segment), "--harmonics", "2", "--crosscheck", "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    report = out["identifiability"]
+    assert report["source"].startswith("MCMC posterior after step ")
+    assert "level" in report["filter_report"]
+    assert out["crosscheck"]["steps_checked"] == out["steps"]
+    assert isinstance(out["crosscheck"]["verdict"], str)
+    assert 0.0 <= report["contraction_damping"] <= 1.5
+
+
+def test_identify_crosscheck_needs_a_particle_filter(
+    treadmill_segment: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(["identify", str(treadmill_segment), "--method", "exact", "--crosscheck", "--json"])
+    assert code == 2
+    err = json.loads(capsys.readouterr().out)["error"]
+    assert "--crosscheck" in err and "--method rbpf or pf" in err

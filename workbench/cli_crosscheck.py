@@ -21,9 +21,20 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _history(text: str) -> int | str:
+    if text in ("grid", "all"):
+        return text
+    try:
+        return _positive_int(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not 'grid', 'all' or a whole number of steps"
+        ) from None
+
+
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
     from workbench.cli import _emit, _load, _safe_key
-    from workbench.inference.crosscheck import apply_mcmc_identifiability, crosscheck
+    from workbench.inference.crosscheck import crosscheck
     from workbench.inference.identify import identify
     from workbench.inference.settings import IdentifySettings
     from workbench.records.inspection import inspect_record
@@ -65,7 +76,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         history=args.history,
         progress=not args.json,
     )
-    apply_mcmc_identifiability(ident, problem, result)
+    ident.use_crosscheck(result)
     out: dict[str, Any] = result.to_json()
     out["record"] = record.name
     out["mass_kg"] = problem.mass_kg
@@ -149,10 +160,13 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--history",
-        type=_positive_int,
-        metavar="N",
-        help="sequential prior: keep only the last N earlier steps exact (default all; faster "
-        "on long records, approximate)",
+        type=_history,
+        default="grid",
+        metavar="grid|all|N",
+        help="sequential prior: the earlier steps' exact likelihood tabulated on a grid over "
+        "(C, K) and interpolated (grid, the default: bounded cost per step), computed per "
+        "walker (all: exact, cost growing with the step index), or the last N per walker "
+        "with a normal fit before them (approximate)",
     )
     p.add_argument("--max-steps", type=_positive_int, metavar="N", help="check the first N steps")
     p.add_argument("--ensembles", type=_positive_int, default=4, metavar="N", help="(4)")

@@ -18,14 +18,32 @@ The target of step j (the prior the filter carries into the step)
       the previous step's exact hand-over at the walker's (C, K)
       (:meth:`~workbench.inference.step_model.StepModel.loglik_and_hand_over`) from the
       filters' initial state. The target is then the exact filtering posterior
-      ``p(C, K | y_0..j)``, the one the rbpf approximates. Its cost per call grows with j;
-      ``history=N`` keeps only the last N steps exact and stands for the ones before by a
+      ``p(C, K | y_0..j)``, the one the rbpf approximates. Computed per walker
+      (``history="all"``) that costs j + 1 step models per call, so a record's cost grows
+      with the square of its length. The default ``history="grid"`` computes the same
+      history exactly at the nodes of a grid over (C, K) (57 x 57 nodes over +-12 sd of the
+      latest posterior, in the box's logit coordinates) and interpolates it with bicubic
+      splines, the hand-in state too (:class:`~workbench.inference.history_grid.HistoryGrid`):
+      one step model on the nodes per step, the grid rebuilt from the record's start when
+      the posterior has contracted twofold or moved near its edge, and
+      a step whose draws come near the edge sampled again on a wider grid. Every rebuild
+      measures the old grid's interpolation error at the new grid's nodes
+      (``settings["grid"]``). With the grid, the collapsed mode and a fixed noise scale
+      (the defaults) the step's own likelihood is tabulated on the grid too
+      (``surrogate=True``): emcee then samples the interpolated posterior at no step-model
+      cost per call, and every step is checked against the exact step likelihood at 512 of
+      its draws (self-normalised importance weights ``exp(exact - surrogate)``: the shift of
+      the mean in posterior sd and the ratio of the sds, the step's ``surrogate_error``); a
+      step off by more than :data:`SURROGATE_TOLERANCE` is sampled again with its exact
+      likelihood. ``tests/test_crosscheck.py`` checks the result against the full-history
+      exact posterior. ``history=N`` keeps only the last N steps exact per walker and
+      stands for the ones before by a
       normal fitted to the MCMC draws of step ``j - N - 1`` in the box's logit coordinates
       (:func:`box_logit`), the hand-in of that step fixed at its posterior mean. That
       assumed-density shortcut is only as good as the normal's tails: when a later step
       moves (C, K) many posterior sd away from the anchor step's posterior (the start of
       the real treadmill record does), the normal's light tails hold the walkers back and
-      the result is not the exact posterior. Hence the default ``history=None``.
+      the result is not the exact posterior.
       ``prior="filter"`` uses the filter's own per-step mean and sd (no correlation: the
       filter keeps marginal moments only) as a logit-normal prior, which checks the
       filter's update of one step in isolation.
@@ -47,12 +65,22 @@ Two modes
     their Gaussian conditional at every kept draw (Rao-Blackwell completion), so the
     InferenceData still holds them. Default because it is exact and cheap: the ridge between
     (C, K) and the force coefficients (DESIGN.md 2.4) is integrated out instead of explored,
-    the autocorrelation time is a few steps, and one call costs a few milliseconds per
-    step of history.
-    ``"joint"``: emcee samples all ``2 n + 5`` parameters (``2 n + 6`` with ``log s``). It
-    needs no linear algebra beyond a residual, but walks along the ridge with
-    autocorrelation times two orders longer; the benchmark
-    (``analyses/benchmarks/crosscheck_step.py``) measures it.
+    the autocorrelation time is a few steps, and one call costs about 2 ms for 64 walkers
+    with the exact step likelihood (n = 10, 100 Hz), far less on the grid's surrogate.
+    ``"joint"``: emcee samples all ``2 n + 5`` parameters (``2 n + 6`` with ``log s``) and
+    evaluates the joint density (the residual likelihood and the priors, no integration).
+    In the plain coordinates ``(C, K, beta)`` the walkers crawl along the curved ridge
+    between (C, K) and the force coefficients (tau about 420 steps at n = 10, not
+    converged in 20 000 steps; emcee is affine invariant, so no *linear* change of
+    coordinates helps). The joint mode therefore samples the non-centred coordinates
+    ``(C, K, eta)`` with ``beta = m(C, K) + S(C, K) eta``, ``m`` and ``S S^T`` the mean and
+    covariance of ``beta``'s Gaussian conditional given (C, K) and the step's data
+    (:meth:`~workbench.inference.step_model.StepModel.collapsed_loglik`), and adds the
+    log-Jacobian ``log |det S(C, K)|`` to the joint density. The map is a bijection for
+    every (C, K), so the target is still the joint posterior; in these coordinates ``eta``
+    is standard normal whatever (C, K), the ridge is gone, and differential-evolution moves
+    converge under the 50-tau rule (``parametrisation="plain"`` keeps the old coordinates;
+    ``analyses/benchmarks/crosscheck_step.py`` runs both).
 
 Convergence (:func:`workbench.inference.mcmc.run_ensembles`)
     Several independent ensembles, the 50-tau rule with automatic extension, acceptance
@@ -76,6 +104,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +114,15 @@ from numpy.typing import NDArray
 
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
+from workbench.inference.history_grid import (
+    GRID_EXTENT,
+    GRID_NODES,
+    GRID_SCALE,
+    HistoryGrid,
+    box_bounds,
+    box_expit,
+    box_logit,
+)
 from workbench.inference.mcmc import McmcResult, run_ensembles
 from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.problem import IdentificationProblem
@@ -106,6 +144,8 @@ FloatArray = NDArray[np.float64]
 
 #: Sampling modes, default first.
 MODES = ("collapsed", "joint")
+#: Coordinates of the joint mode's hand-in state and force coefficients, default first.
+PARAMETRISATIONS = ("non-centred", "plain")
 #: Prior constructions, default first.
 PRIORS = ("sequential", "filter")
 #: Parameters compared (DESIGN.md names).
@@ -120,42 +160,25 @@ DEGENERATE_ESS = 10.0
 FROZEN_UNIQUE_VALUES = 5
 #: Prior sd of the log noise scale.
 LOG_NOISE_SCALE_SD = 0.5
-#: Earlier steps whose exact likelihood joins each step's target (sequential prior);
-#: None: all of them (module docstring).
-HISTORY_STEPS: int | None = None
+#: How earlier steps enter each step's target (sequential prior): "grid" (their exact
+#: likelihood and hand-over tabulated on a grid and interpolated, the default), "all" (computed
+#: per walker, cost growing with the step index), or N (the last N per walker, a normal fit
+#: before them); module docstring.
+HISTORY_STEPS: int | str = "grid"
+#: Reruns of a step on a wider grid when its draws come near the grid's edge.
+GRID_RETRIES = 2
+#: Kept draws at which a surrogate step is checked against the exact step likelihood.
+SURROGATE_CHECK_DRAWS = 512
+#: Largest surrogate error accepted: shift of the mean in posterior sd, and of the sd ratio
+#: from 1; a step beyond it is sampled again with its exact likelihood.
+SURROGATE_TOLERANCE = 0.03
 #: Kept draws per ensemble and step in the InferenceData.
 DRAWS_PER_CHAIN = 100
 
 
-def _bounds(box: Any) -> tuple[FloatArray, FloatArray]:
-    lo = np.array([box.damping_ns_per_m[0], box.stiffness_n_per_m[0]], dtype=float)
-    hi = np.array([box.damping_ns_per_m[1], box.stiffness_n_per_m[1]], dtype=float)
-    return lo, hi
-
-
-def box_logit(box: Any, point: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Map (C, K) rows inside the prior box to logit coordinates; also log |Jacobian|.
-
-    ``x = log((theta - lo) / (hi - theta))`` per parameter; a normal in x is a prior that
-    lives in the box and may pile up against a face of it, which a normal in (C, K) cut at
-    the box cannot do without its moments drifting (module docstring).
-    """
-    lo, hi = _bounds(box)
-    a, b = point - lo, hi - point
-    x = np.log(a) - np.log(b)
-    log_jac = np.sum(np.log(hi - lo) - np.log(a) - np.log(b), axis=1)
-    return x, log_jac
-
-
-def box_expit(box: Any, x: FloatArray) -> FloatArray:
-    """Inverse of :func:`box_logit`: logit coordinates to (C, K) rows."""
-    lo, hi = _bounds(box)
-    return lo + (hi - lo) / (1.0 + np.exp(-np.clip(x, -700.0, 700.0)))
-
-
 # -- the proposal ------------------------------------------------------------------------
 class GaussianFitMove(emcee.moves.RedBlueMove):
-    """Independence proposal from a normal fitted to the complementary walkers.
+    """Independence proposal from a t distribution fitted to the complementary walkers.
 
     The red-blue scheme of emcee's ensemble moves: the walkers of one half propose from a
     distribution built from the *other* half only, so detailed balance holds for each half
@@ -168,14 +191,24 @@ class GaussianFitMove(emcee.moves.RedBlueMove):
     mixed with DE moves (:func:`default_moves`) so that a curved or truncated posterior,
     which a normal fits badly, is still explored.
 
+    The proposal is a multivariate Student t (``df`` degrees of freedom) rather than a
+    normal: an independence proposal lighter-tailed than the target leaves a walker that
+    reaches the tail stuck there for many steps, which the autocorrelation time of the bulk
+    does not show (on a skewed step posterior of ``tests/test_crosscheck.py`` the normal
+    proposal over-stated the sd of K by 14 %); with heavier tails than the target the
+    importance ratio stays bounded.
+
     Parameters
     ----------
     inflation : float, default 1.5
         Factor on the fitted covariance (heavier than the target keeps the tails visited).
+    df : float, default 4
+        Degrees of freedom of the t proposal (``inf``: the normal).
     """
 
-    def __init__(self, inflation: float = 1.5, **kwargs: Any) -> None:
+    def __init__(self, inflation: float = 1.5, df: float = 4.0, **kwargs: Any) -> None:
         self.inflation = float(inflation)
+        self.df = float(df)
         super().__init__(**kwargs)
 
     def get_proposal(
@@ -189,22 +222,36 @@ class GaussianFitMove(emcee.moves.RedBlueMove):
         # A tiny ridge keeps the factor of a degenerate ensemble finite.
         cov += np.eye(dim) * 1e-12 * max(float(np.max(np.abs(np.diag(cov)))), 1e-300)
         chol = np.linalg.cholesky(cov)
-        q = mean + random.randn(s.shape[0], dim) @ chol.T
+        step = random.randn(s.shape[0], dim) @ chol.T
+        df = self.df
+        if math.isfinite(df):
+            step *= np.sqrt(df / random.chisquare(df, size=s.shape[0]))[:, None]
+        q = mean + step
 
         def log_q(x: FloatArray) -> FloatArray:
             white = np.linalg.solve(chol, (x - mean).T)
-            return -0.5 * np.sum(white * white, axis=0)
+            r2 = np.sum(white * white, axis=0)
+            if not math.isfinite(df):
+                return -0.5 * r2
+            return -0.5 * (df + dim) * np.log1p(r2 / df)
 
         return q, log_q(s) - log_q(q)
 
 
-def default_moves() -> list[tuple[Any, float]]:
-    """Return the move mixture of the per-step MCMC: 80 % Gaussian-fit, 20 % DE.
+def default_moves(mode: str = "collapsed") -> Any:
+    """Return the moves of the per-step MCMC: 80 % t-fit and 20 % DE (collapsed mode).
+
+    The joint mode samples ``2 n + 5`` dimensions, where a distribution fitted to half an
+    ensemble proposes badly (acceptance about 5 % at n = 10); it gets the runner's
+    differential-evolution moves (``"de"``), which converge in the non-centred coordinates
+    (``analyses/benchmarks/crosscheck_step.py``).
 
     On the step of ``analyses/benchmarks/crosscheck_step.py`` the largest tau falls from
     about 8.5 steps with the runner's DE moves to about 2 with this mixture (the benchmark
     prints both); the DE share is kept for posteriors that a normal fits badly.
     """
+    if mode == "joint":
+        return "de"
     return [(GaussianFitMove(), 0.8), (emcee.moves.DEMove(), 0.2)]
 
 
@@ -237,6 +284,18 @@ class StepTarget:
     history : sequence of StepModel
         Steps between ``previous`` and ``model`` whose exact likelihood at each row's
         (C, K) joins the prior (with hand-overs chained row by row), module docstring.
+    grid : HistoryGrid, optional
+        The history (log-likelihood of every earlier step and the hand-in of ``model``)
+        interpolated from a grid (:mod:`workbench.inference.history_grid`) instead of
+        computed per row; excludes ``previous`` and ``history``. Walkers start from the
+        normal the grid was built around.
+    parametrisation : {"non-centred", "plain"}, optional
+        Coordinates of the joint mode's ``beta`` (module docstring, "Two modes"): the
+        default is ``"non-centred"``, ``"plain"`` with ``fixed_damping_stiffness``.
+    surrogate : bool, default False
+        The grid holds ``model``'s step too: the log density is the box plus the grid's
+        interpolated log-likelihood, no step model per call (collapsed mode, fixed noise
+        scale; module docstring).
     """
 
     def __init__(
@@ -252,6 +311,9 @@ class StepTarget:
         prior_logit: bool = False,
         previous: StepModel | None = None,
         history: Sequence[StepModel] = (),
+        grid: HistoryGrid | None = None,
+        surrogate: bool = False,
+        parametrisation: str | None = None,
     ) -> None:
         if mode not in MODES:
             raise UsageError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
@@ -269,6 +331,12 @@ class StepTarget:
         self.prior_logit = bool(prior_logit)
         self.previous = previous
         self.history = tuple(history)
+        if grid is not None and (previous is not None or self.history):
+            raise UsageError("give either a history grid or the history's step models")
+        self.grid = grid
+        if surrogate and (grid is None or mode != "collapsed" or noise_scale != "fixed"):
+            raise UsageError("a surrogate target needs a grid, collapsed mode and a fixed noise")
+        self.surrogate = bool(surrogate)
         self.prior_mean = None if prior_mean is None else np.asarray(prior_mean, dtype=float)
         self.prior_chol: FloatArray | None = None
         if prior_cov is not None:
@@ -277,8 +345,17 @@ class StepTarget:
         names: list[str] = [] if self.fixed is not None else list(PARAMS)
         if self.free_noise:
             names.append("log_noise_scale")
+        if parametrisation is None:
+            parametrisation = "plain" if fixed_damping_stiffness is not None else "non-centred"
+        if parametrisation not in PARAMETRISATIONS:
+            raise UsageError(
+                f"parametrisation must be one of {', '.join(PARAMETRISATIONS)}, "
+                f"got {parametrisation!r}"
+            )
+        self.non_centred = mode == "joint" and parametrisation == "non-centred"
         if mode == "joint":
-            names += ["u_in_m", "v_in_m_s", *model.problem.coefficient_names]
+            beta_names = ["u_in_m", "v_in_m_s", *model.problem.coefficient_names]
+            names += [f"eta_{n}" for n in beta_names] if self.non_centred else beta_names
         self.param_names = tuple(names)
         self.n_dim = len(names)
         # Column offsets.
@@ -331,29 +408,72 @@ class StepTarget:
         ok = np.isfinite(out)
         if not np.any(ok):
             return out
+        if self.surrogate and self.grid is not None:
+            out[ok] += self.grid.evaluate(c[ok], k[ok])[1]
+            return out
         hand_in, history_ll = self.hand_in_and_history(c[ok], k[ok])
         out[ok] += history_ll
+        if self.grid is not None and not np.all(np.isfinite(history_ll)):
+            # Rows outside the grid: no step model for them.
+            keep = np.isfinite(history_ll)
+            ok[ok] = keep
+            hand_in = (hand_in[0][keep], hand_in[1][keep]) if hand_in is not None else None
+            if not np.any(ok):
+                return out
         if self.mode == "collapsed":
             ll = self.model.collapsed_loglik(c[ok], k[ok], s[ok], hand_in=hand_in)
             out[ok] += np.asarray(ll)
             return out
         m = self.model
+        beta_ok = beta[ok]
+        if self.non_centred:
+            # beta = mean(C, K) + root(C, K) eta from the Gaussian conditional; the joint
+            # density below times |det root| is the density of (C, K, eta).
+            beta_ok, log_det_root = self._from_eta(c[ok], k[ok], s[ok], beta_ok, hand_in)
+            out[ok] += log_det_root
         beta0, chol = m.prior_for(int(ok.sum()), hand_in)
-        eta = np.linalg.solve(chol, (beta[ok] - beta0)[:, :, None])[:, :, 0]
+        eta = np.linalg.solve(chol, (beta_ok - beta0)[:, :, None])[:, :, 0]
         # log N(beta; beta0, L L^T) up to a constant: the hand-in factor depends on (C, K).
         log_det = np.sum(np.log(np.abs(np.diagonal(chol[:, :2, :2], axis1=1, axis2=2))), axis=1)
         out[ok] += -0.5 * np.sum(eta * eta, axis=1) - log_det
-        out[ok] += m.joint_loglik(c[ok], k[ok], beta[ok], s[ok], hand_in=hand_in)
+        out[ok] += m.joint_loglik(c[ok], k[ok], beta_ok, s[ok], hand_in=hand_in)
         return out
+
+    def _from_eta(
+        self,
+        c: FloatArray,
+        k: FloatArray,
+        s: FloatArray,
+        eta: FloatArray,
+        hand_in: tuple[FloatArray, FloatArray] | None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Non-centred coordinates to ``beta``; also ``log |det root|`` per row."""
+        _, mean, root = self.model.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
+        beta = mean + np.einsum("bij,bj->bi", root, eta)
+        return beta, np.linalg.slogdet(root)[1]
+
+    def beta(self, theta: FloatArray) -> FloatArray:
+        """``beta`` of every row (joint mode; converted from the non-centred coordinates)."""
+        c, k, s, beta = self.split(theta)
+        if not self.non_centred:
+            return beta
+        return self._from_eta(c, k, s, beta, self.hand_in(c, k))[0]
 
     def hand_in(self, c: FloatArray, k: FloatArray) -> tuple[FloatArray, FloatArray] | None:
         """Per-row hand-in (mean, Cholesky factor), or None for the model's fixed one."""
+        if self.surrogate and self.grid is not None:
+            return self.grid.hand_in_last(c, k)
         return self.hand_in_and_history(c, k)[0]
 
     def hand_in_and_history(
         self, c: FloatArray, k: FloatArray
     ) -> tuple[tuple[FloatArray, FloatArray] | None, FloatArray]:
-        """Per-row hand-in of ``model`` and the history's log-likelihood at each row."""
+        """Per-row hand-in of ``model`` and the history's log-likelihood at each row.
+
+        With a grid, rows outside it get ``-inf`` (and a finite hand-in).
+        """
+        if self.grid is not None:
+            return self.grid.evaluate(c, k)
         hand_in = None if self.previous is None else self.previous.hand_over(c, k)
         total = np.zeros(c.size)
         for step in self.history:
@@ -379,11 +499,17 @@ class StepTarget:
                 c, k, s, return_posterior=True, hand_in=self.hand_in(c, k)
             )
             # Twice the conditional spread: over-dispersed, but on the ridge.
-            beta = mean + 2.0 * np.einsum("bij,bj->bi", root, rng.standard_normal(mean.shape))
-            cols.append(beta)
+            white = 2.0 * rng.standard_normal(mean.shape)
+            cols.append(white if self.non_centred else mean + np.einsum("bij,bj->bi", root, white))
         return np.hstack(cols)
 
     def _draw_ck(self, rng: np.random.Generator, n: int) -> tuple[FloatArray, FloatArray]:
+        if self.grid is not None:
+            # The normal the grid was built around (the latest posterior), inside the grid.
+            white = np.clip(rng.standard_normal((n, 2)), -0.9 * self.grid.extent, None)
+            white = np.minimum(white, 0.9 * self.grid.extent)
+            draw = box_expit(self.box, self.grid.centre + white @ self.grid.root.T)
+            return draw[:, 0], draw[:, 1]
         if self.prior_mean is None or self.prior_chol is None:
             return self.box.sample(n, rng)
         if self.prior_logit:
@@ -462,6 +588,7 @@ class StepCheck:
     pf_modal_mean: dict[str, float]
     pf_modal_sd: dict[str, float]
     noise_scale_mean: float | None
+    surrogate_error: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Return the step's JSON object (DESIGN.md 4.2 keys first)."""
@@ -490,6 +617,7 @@ class StepCheck:
             "pf_modal_mean": {k: _num(v) for k, v in self.pf_modal_mean.items()},
             "pf_modal_sd": {k: _num(v) for k, v in self.pf_modal_sd.items()},
             "noise_scale_mean": _num(self.noise_scale_mean),
+            "surrogate_error": self.surrogate_error,
             "mcmc": {
                 "n_steps": self.mcmc.n_steps,
                 "tau_max": _num(float(np.nanmax(self.mcmc.tau))),
@@ -717,6 +845,142 @@ def _pf_step_stats(
     return ess, np.asarray(out.unique_values)[last]
 
 
+def _history_window(history: int | str | None) -> int | str | None:
+    """Validate ``history``: "grid", None (every step exact, also "all") or N >= 0."""
+    if history is None or history == "all":
+        return None
+    if history == "grid":
+        return "grid"
+    if isinstance(history, bool) or not isinstance(history, int | np.integer) or history < 0:
+        raise UsageError(f"history must be 'grid', 'all' or a whole number >= 0, got {history!r}")
+    return int(history)
+
+
+def _logit_fit(
+    problem: IdentificationProblem, samples: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Fit a normal to (C, K) draws in the box's logit coordinates: mean and covariance."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x, _ = box_logit(problem.prior, samples[:, :2])
+    x = x[np.all(np.isfinite(x), axis=1)]
+    return x.mean(axis=0), _floor_cov(np.atleast_2d(np.cov(x, rowvar=False)), problem)
+
+
+def _rebuild_grid(
+    problem: IdentificationProblem,
+    fit: tuple[FloatArray, FloatArray],
+    models: Sequence[StepModel],
+    log: list[dict[str, Any]],
+    step: int,
+    why: str,
+    old: HistoryGrid | None = None,
+    *,
+    widen: float = 1.0,
+) -> HistoryGrid:
+    """Build a history grid of steps ``0 .. step - 1`` around ``fit``; log it with its error.
+
+    With the grid it replaces (advanced to the same steps first), the old grid's
+    interpolation error at the new grid's exact nodes is measured and logged.
+    """
+    grid = HistoryGrid(problem.prior, fit[0], fit[1] * widen**2, models[:step])
+    entry: dict[str, Any] = {"before_step": step, "why": why}
+    if old is not None:
+        if old.n_steps == step - 1:
+            old.advance(models[step - 1])
+        if old.n_steps == step:
+            entry["error"] = old.error_against(grid)
+    log.append(entry)
+    return grid
+
+
+def _run_step(
+    target: StepTarget,
+    seed: int,
+    j: int,
+    n_ensembles: int,
+    n_walkers: int | None,
+    min_steps: int,
+    max_steps: int,
+    moves: Any,
+) -> McmcResult:
+    """Run the ensembles of step ``j`` on a target (the step's own seed)."""
+    walkers = n_walkers or max(32, 4 * target.n_dim + (4 * target.n_dim) % 2)
+
+    def initial(rng: np.random.Generator) -> FloatArray:
+        return target.initial(rng, walkers)
+
+    return run_ensembles(
+        target,
+        initial,
+        n_ensembles=n_ensembles,
+        n_walkers=walkers,
+        seed=_step_seed(seed, j),
+        min_steps=min_steps,
+        max_steps=max_steps,
+        param_names=target.param_names,
+        moves=default_moves(target.mode) if moves is None else moves,
+    )
+
+
+def _surrogate_error(exact: StepTarget, surrogate: StepTarget, res: McmcResult) -> dict[str, Any]:
+    """Measure how far a surrogate step's posterior is from the exact one, at its draws.
+
+    At :data:`SURROGATE_CHECK_DRAWS` evenly spaced kept draws the exact log density (the
+    step's own likelihood computed, the history still from the grid) and the surrogate's
+    are compared. Self-normalised importance weights ``exp(exact - surrogate)`` turn the
+    draws into draws of the exact posterior, so the weighted against the plain moments of
+    (C, K) estimate the surrogate's error: the shift of the mean in posterior sd and the
+    ratio of the sds. ``acceptable`` when both are within :data:`SURROGATE_TOLERANCE`.
+    """
+    idx = np.linspace(0, res.samples.shape[0] - 1, SURROGATE_CHECK_DRAWS).round().astype(int)
+    draws = res.samples[np.unique(idx)]
+    diff = exact(draws) - surrogate(draws)
+    finite = np.isfinite(diff)
+    ck = draws[finite, :2]
+    d = diff[finite] - np.median(diff[finite])
+    w = np.exp(d - np.max(d))
+    w /= w.sum()
+    mean, sd = ck.mean(axis=0), ck.std(axis=0)
+    w_mean = w @ ck
+    w_sd = np.sqrt(w @ np.square(ck - w_mean))
+    shift = np.abs(w_mean - mean) / sd
+    ratio = w_sd / sd
+    ok = bool(
+        finite.all()
+        and np.all(shift <= SURROGATE_TOLERANCE)
+        and np.all(np.abs(ratio - 1.0) <= SURROGATE_TOLERANCE)
+    )
+    return {
+        "draws": int(draws.shape[0]),
+        "log_density_spread": float(np.std(d)),
+        "log_density_max": float(np.max(np.abs(d))),
+        "mean_shift_sd": [float(v) for v in shift],
+        "sd_ratio": [float(v) for v in ratio],
+        "acceptable": ok,
+        "resampled_exact": False,
+    }
+
+
+def _grid_summary(log: list[dict[str, Any]]) -> dict[str, Any]:
+    """Summarise the history grids for the JSON: rebuilds and the largest measured error."""
+    errors = [e["error"] for e in log if "error" in e and e["error"]["nodes"] > 0]
+
+    def worst(key: str) -> float | None:
+        vals = [float(e[key]) for e in errors if math.isfinite(e[key])]
+        return _num(max(vals)) if vals else None
+
+    return {
+        "nodes_per_axis": GRID_NODES,
+        "half_width_sd": GRID_EXTENT * GRID_SCALE,
+        "rebuilds": len(log),
+        "rebuilt_before_steps": [e["before_step"] for e in log],
+        "edge_reruns": sum(e["why"] == "edge" for e in log),
+        "errors_measured": len(errors),
+        "max_loglik_error": worst("loglik"),
+        "max_hand_over_error_sd": worst("hand_over_sd"),
+    }
+
+
 def crosscheck(
     problem: IdentificationProblem,
     output: FilterRun,
@@ -731,7 +995,8 @@ def crosscheck(
     min_steps: int = 100,
     max_steps: int = 20_000,
     moves: Any = None,
-    history: int | None = HISTORY_STEPS,
+    history: int | str | None = HISTORY_STEPS,
+    surrogate: bool = True,
     keep_inference_data: bool = True,
     progress: bool = False,
 ) -> CrosscheckResult:
@@ -760,10 +1025,18 @@ def crosscheck(
         length.
     moves : optional
         emcee moves; default :func:`default_moves` (``"de"`` is the runner's own default).
-    history : int or None, default :data:`HISTORY_STEPS`
-        With the sequential prior: how many earlier steps enter the target through their
-        exact likelihood (None: all of them, the exact filtering posterior, at a cost per
-        call that grows with the step index); the normal fit stands for the steps before.
+    history : "grid", "all" (or None) or int, default :data:`HISTORY_STEPS`
+        With the sequential prior, how the earlier steps enter the target: ``"grid"``
+        their exact likelihood and hand-over tabulated on a grid over (C, K) and
+        interpolated (bounded cost per step, the interpolation error measured and reported
+        under ``settings["grid"]``); ``"all"`` computed exactly per walker (cost per call
+        growing with the step index); N: the last N steps per walker and the normal fit of
+        an earlier step's posterior before them.
+    surrogate : bool, default True
+        With the grid history, collapsed mode and a fixed noise scale: tabulate the step's
+        own likelihood on the grid too and sample the interpolated posterior (no step model
+        per call), every step checked against the exact step likelihood at its draws and
+        sampled again exactly when the check fails (module docstring).
     keep_inference_data : bool, default True
         Build the per-record InferenceData (costs the pointwise log-likelihoods).
     progress : bool, default False
@@ -789,6 +1062,9 @@ def crosscheck(
     n_pieces = problem.n_pieces if max_pieces is None else min(int(max_pieces), problem.n_pieces)
     if n_pieces < 1:
         raise UsageError(f"max_pieces must be at least 1, got {max_pieces!r}")
+    window_size = _history_window(history)
+    use_grid = prior == "sequential" and window_size == "grid"
+    use_surrogate = use_grid and mode == "collapsed" and noise_scale == "fixed" and surrogate
     prob = problem.with_noise(replace(problem.noise, state_sd=np.zeros(2)))
     ess, unique = _pf_step_stats(problem, output)
     t0 = time.perf_counter()
@@ -797,22 +1073,24 @@ def crosscheck(
     completions: list[dict[str, Any]] = []
     models: list[StepModel] = []
     fits: list[tuple[FloatArray, FloatArray]] = []  # logit-normal fit of each step's posterior
-    if history is not None and (isinstance(history, bool) or int(history) < 0):
-        raise UsageError(f"history must be a whole number >= 0 or None, got {history!r}")
+    grid: HistoryGrid | None = None
+    grid_log: list[dict[str, Any]] = []
     for j in tqdm(range(n_pieces), desc="crosscheck", unit="step", disable=not progress):
         model = StepModel(prob, j, x_mean[0], x_cov[0])
-        if prior == "sequential":
-            window = j if history is None else min(int(history), j)
-        else:
-            window = 0
+        window = 0
+        if prior == "sequential" and not use_grid:
+            window = j if window_size is None else min(int(window_size), j)
         anchor = j - window - 1  # the step whose posterior fit is the prior, if any
+        prior_mean: FloatArray | None = None
+        prior_cov: FloatArray | None = None
         if prior == "sequential":
-            prior_mean, prior_cov = fits[anchor] if anchor >= 0 else (None, None)
+            if anchor >= 0 and not use_grid:
+                prior_mean, prior_cov = fits[anchor]
         elif j > 0:
             prior_mean, prior_cov = _filter_prior(prob, output, j - 1)
-        else:
-            prior_mean, prior_cov = None, None
-        target = StepTarget(
+
+        make_target = partial(
+            StepTarget,
             model,
             prior_mean,
             prior_cov,
@@ -820,40 +1098,68 @@ def crosscheck(
             mode=mode,
             noise_scale=noise_scale,
             prior_logit=True,
-            previous=models[anchor] if anchor >= 0 else None,
-            history=models[anchor + 1 : j],
+            previous=models[anchor] if anchor >= 0 and not use_grid else None,
+            history=models[anchor + 1 : j] if not use_grid else (),
         )
-        walkers = n_walkers or max(32, 4 * target.n_dim + (4 * target.n_dim) % 2)
-
-        def initial(
-            rng: np.random.Generator, t: StepTarget = target, w: int = walkers
-        ) -> FloatArray:
-            return t.initial(rng, w)
-
-        res = run_ensembles(
-            target,
-            initial,
+        sample = partial(
+            _run_step,
+            seed=seed,
+            j=j,
             n_ensembles=n_ensembles,
-            n_walkers=walkers,
-            seed=_step_seed(seed, j),
+            n_walkers=n_walkers,
             min_steps=min_steps,
             max_steps=max_steps,
-            param_names=target.param_names,
-            moves=default_moves() if moves is None else moves,
+            moves=moves,
         )
-        check = _compare(
-            prob, output, j, res, target.free_noise, _prior_moments(target), ess, unique
-        )
+
+        error: dict[str, Any] | None = None
+        if grid is None:
+            target = make_target()
+            res = sample(target)
+            moments = _prior_moments(target)
+        else:
+            for attempt in range(GRID_RETRIES + 1):
+                history_grid = grid.copy()  # steps 0 .. j - 1
+                moments = history_grid.moments()
+                if use_surrogate:
+                    grid.advance(model)  # steps 0 .. j: the step's own likelihood tabulated
+                target = make_target(grid=grid, surrogate=use_surrogate)
+                res = sample(target)
+                fit = _logit_fit(prob, res.samples)
+                if attempt == GRID_RETRIES or grid.inside(*fit):
+                    break
+                # Draws near the grid's edge: the grid may cut the posterior off. Rebuild it
+                # wider around the draws and run the step again.
+                grid = _rebuild_grid(prob, fit, models, grid_log, j, "edge", widen=2.0)
+            if use_surrogate:
+                exact = make_target(grid=history_grid)
+                error = _surrogate_error(exact, target, res)
+                if not error["acceptable"]:
+                    # The interpolated step is not close enough: sample the exact step.
+                    target, grid = exact, history_grid.copy()
+                    res = sample(target)
+                    error["resampled_exact"] = True
+                    grid.advance(model)
+        check = _compare(prob, output, j, res, target.free_noise, moments, ess, unique)
+        check.surrogate_error = error
         checks.append(check)
         if keep_inference_data:
             completions.append(_completion(model, target, res, _step_seed(seed + 1, j)))
-        # The posterior fit that later steps' priors use, and the next plug-in hand-in.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x, _ = box_logit(prob.prior, res.samples[:, :2])
-        x = x[np.all(np.isfinite(x), axis=1)]
-        fits.append((x.mean(axis=0), _floor_cov(np.atleast_2d(np.cov(x, rowvar=False)), prob)))
+        fit = _logit_fit(prob, res.samples)
+        fits.append(fit)
         models.append(model)
         if j + 1 < n_pieces:
+            if use_grid:
+                # The next step's history: this step added to the grid (done above for the
+                # surrogate), or the grid rebuilt when the posterior has contracted or moved
+                # (history_grid module).
+                if grid is None:
+                    grid = _rebuild_grid(prob, fit, models, grid_log, j + 1, "first")
+                elif not grid.covers(*fit):
+                    why = "shrunk or moved"
+                    grid = _rebuild_grid(prob, fit, models, grid_log, j + 1, why, grid)
+                elif not use_surrogate:
+                    grid.advance(model)
             hand = kf.piece_filter(prob, j, res.mean[:1], res.mean[1:2], x_mean, x_cov)
             x_mean, x_cov = hand.x_mean_next, hand.x_cov_next
     seconds = time.perf_counter() - t0
@@ -863,10 +1169,16 @@ def crosscheck(
         "n_walkers": checks[0].mcmc.n_walkers,
         "min_steps": int(min_steps),
         "max_steps": int(max_steps),
-        "moves": "gaussian-fit 0.8 + DE 0.2" if moves is None else str(moves),
+        "moves": (
+            ("t-fit 0.8 + DE 0.2" if mode == "collapsed" else "DE 0.8 + DE snooker 0.2")
+            if moves is None
+            else str(moves)
+        ),
         "tau_factor": 50.0,
         "pieces_checked": n_pieces,
         "pieces_in_record": problem.n_pieces,
+        "history": window_size if prior == "sequential" else None,
+        "grid": _grid_summary(grid_log) if use_grid else None,
         "filter": {
             "method": output.method,
             "n_particles": output.n_particles,
@@ -905,18 +1217,11 @@ def recompare(
     for old in result.steps:
         target_names = old.mcmc.param_names
         free = "log_noise_scale" in target_names
-        checks.append(
-            _compare(
-                problem,
-                output,
-                old.index,
-                old.mcmc,
-                free,
-                (old.prior_mean, old.prior_sd),
-                ess,
-                unique,
-            )
+        check = _compare(
+            problem, output, old.index, old.mcmc, free, (old.prior_mean, old.prior_sd), ess, unique
         )
+        check.surrogate_error = old.surrogate_error  # the same MCMC run
+        checks.append(check)
     settings = dict(result.settings)
     settings["filter"] = {
         "method": output.method,
@@ -933,7 +1238,7 @@ def _filter_prior(
     if output.piece_mean is None or output.piece_sd is None:  # pragma: no cover - checked
         raise UsageError("the filter run has no per-step values")
     mean = np.asarray(output.piece_mean[j], dtype=float)
-    lo, hi = _bounds(problem.prior)
+    lo, hi = box_bounds(problem.prior)
     mean = np.clip(mean, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
     slope = (hi - lo) / ((mean - lo) * (hi - mean))
     centre = box_logit(problem.prior, mean[None])[0][0]
@@ -950,6 +1255,8 @@ def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:
 
 def _prior_moments(target: StepTarget) -> tuple[FloatArray, FloatArray]:
     """(C, K) mean and sd of a step's prior (the box's, or from 4000 fixed-seed draws)."""
+    if target.grid is not None:
+        return target.grid.moments()
     if target.prior_mean is None:
         return target.box.mean, target.box.sd
     c, k = target._draw_ck(np.random.default_rng(0), 4000)
@@ -1063,6 +1370,8 @@ def _completion(
     flat = draws.reshape(-1, d)
     c, k, s, beta = target.split(flat)
     hand_in = target.hand_in(c, k)
+    if target.mode == "joint":
+        beta = target.beta(flat)
     if target.mode == "collapsed":
         rng = np.random.default_rng(seed)
         _, mean, root = model.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
@@ -1175,10 +1484,10 @@ def mcmc_identifiability(
 ) -> dict[str, Any]:
     """Return the identifiability report of the MCMC posterior of the last converged step.
 
-    With the sequential prior the last step's posterior is the whole record's (in
-    assumed-density form), so its sd against the prior box's, the C-K correlation and the
-    largest correlation of C and K with that step's force coefficients (from the kept draws
-    with the coefficients completed) grade the record as
+    With the sequential prior the last step's posterior is the whole record's (the exact
+    filtering posterior, module docstring), so its sd against the prior box's, the C-K
+    correlation and the largest correlation of C and K with that step's force coefficients
+    (from the kept draws with the coefficients completed) grade the record as
     :func:`~workbench.inference.identifiability.identifiability_report` does for the filters.
     Returns an empty dict when no step converged or the prior was the filter's own.
     """

@@ -337,6 +337,20 @@ class IdentificationResult:
             out.append(sentence)
         return out
 
+    def use_crosscheck(self, crosscheck: Any) -> None:
+        """Grade identifiability from the MCMC posterior of a cross-check of this result.
+
+        ``crosscheck`` is the :class:`~workbench.inference.crosscheck.CrosscheckResult` of
+        this result's filter on :attr:`problem`. Where one of its steps converged, the
+        ``identifiability`` report is replaced by the one of the MCMC posterior after the
+        last such step (contraction, width and correlations from the MCMC draws; its
+        ``source`` says so) and the filter's own report is kept under ``filter_report``;
+        otherwise nothing changes.
+        """
+        from workbench.inference.crosscheck import apply_mcmc_identifiability
+
+        apply_mcmc_identifiability(self, self.problem, crosscheck)
+
     # ------------------------------------------------------------------ output
     def to_json(self) -> dict[str, Any]:
         """Return the JSON object of ``workbench identify --json`` (DESIGN.md 4.2)."""
