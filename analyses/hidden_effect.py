@@ -245,7 +245,7 @@ def baseline_stiffness(n: int) -> None:
         print(f"{seed:>4} {k:>8.0f} {k_fit:>8.0f} {k_fit / k:>6.2f} {c:>7.0f} {c_fit:>7.0f}")
 
 
-def real(out: Path | None) -> None:
+def real(out: Path | None, step_variation: bool = True) -> None:
     """Diagnose the embedded real records and print the ranking and scoreboard."""
     for key in ("treadmill", "insole"):
         meta = EMBEDDED[key]
@@ -257,7 +257,7 @@ def real(out: Path | None) -> None:
             # The insole calibration is 33 % high (DESIGN.md 2.2): rescale to M g first.
             rec = rescale_to_mass(rec, segment_steps(preprocess(rec)))
         data = prepare(rec)
-        diag = diagnose(data)
+        diag = diagnose(data, step_variation=step_variation)
         print(f"== {key}: {meta.description}")
         b = diag.baseline
         rate = slow_pacing_change(data)
@@ -273,7 +273,7 @@ def real(out: Path | None) -> None:
         print(f"   verdict: {diag.verdict}")
         sig = [c.effect for c in diag.candidates if c.significant]
         if sig:
-            for r in compare(data, sig):
+            for r in compare(data, sig, step_variation=step_variation):
                 print(f"   {r.model:<55} RMSE {r.heldout_rmse_n:6.1f} N fit {r.fit_percent:5.1f} %")
         if out is not None:
             from workbench.reporting.criticism import write_criticism_report
@@ -291,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--raw-error",
         action="store_true",
-        help="sweep: score the raw error (step_variation=False) instead",
+        help="sweep and --real: score the raw error (step_variation=False) instead",
     )
     ap.add_argument(
         "--baseline-stiffness",
@@ -308,7 +308,7 @@ def main(argv: list[str] | None = None) -> int:
         only = args.only.split(",") if args.only else None
         sweep(args.sweep, step_variation=not args.raw_error, only=only)
     elif args.real:
-        real(args.out)
+        real(args.out, step_variation=not args.raw_error)
     else:
         story(args.seed, args.out)
     return 0

@@ -150,9 +150,18 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     from workbench.cli import _record_options
 
     rec_opts = _record_options()
+    # What diagnose and compare share: the baseline's shape and how its error is scored.
+    level = argparse.ArgumentParser(add_help=False)
+    level.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
+    level.add_argument(
+        "--raw-error",
+        action="store_true",
+        help="score the raw held-out error instead of the error beyond each step's own size "
+        "and timing of the shared force shape",
+    )
     p = sub.add_parser(
         "diagnose",
-        parents=[out_opts, rec_opts],
+        parents=[out_opts, rec_opts, level],
         help="rank candidate effects by the held-out GRF error they would remove",
         description="Predict held-out steps of the GRF from a force shape shared across "
         "steps (each step with its own size and timing of it) plus K u + C u' (and the "
@@ -162,13 +171,6 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("record", help="the record file")
     p.add_argument("--effects", metavar="NAME,...", help="effects already in the model")
-    p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
-    p.add_argument(
-        "--raw-error",
-        action="store_true",
-        help="score the raw held-out error instead of the error beyond each step's own size "
-        "and timing of the shared force shape",
-    )
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report")
     p.add_argument(
         "--no-one-step",
@@ -180,18 +182,11 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser(
         "compare",
-        parents=[out_opts, rec_opts],
+        parents=[out_opts, rec_opts, level],
         help="scoreboard: held-out error of the baseline and with each effect added",
         description="Held-out RMSE, fit %, Ljung-Box p and predictive score of the baseline "
         "and of the baseline with the given effects added one after another.",
     )
     p.add_argument("record", help="the record file")
     p.add_argument("--effects", required=True, metavar="NAME,...", help="effects to add in turn")
-    p.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
-    p.add_argument(
-        "--raw-error",
-        action="store_true",
-        help="score the raw held-out error instead of the error beyond each step's own size "
-        "and timing of the shared force shape",
-    )
     p.set_defaults(handler=_cmd_compare)

@@ -736,10 +736,17 @@ class StepVariation:
     data : CriticismData
     harmonics : int, optional
         Harmonics of the shared shape.
+    baseline : ndarray, optional
+        :func:`baseline_columns` of ``data`` with those harmonics, when already built.
     """
 
-    def __init__(self, data: CriticismData, harmonics: int = DEFAULT_HARMONICS) -> None:
-        x = baseline_columns(data, harmonics)
+    def __init__(
+        self,
+        data: CriticismData,
+        harmonics: int = DEFAULT_HARMONICS,
+        baseline: FloatArray | None = None,
+    ) -> None:
+        x = baseline_columns(data, harmonics) if baseline is None else baseline
         coef, *_ = np.linalg.lstsq(x, data.target_n, rcond=None)
         n = (x.shape[1] - 3) // 2
         shape = x[:, 1 : 1 + 2 * n] @ coef[1 : 1 + 2 * n]
@@ -781,7 +788,9 @@ class _CV:
         x = np.column_stack(mats)
         y = np.asarray(data.target_n, dtype=np.float64)
         if step_variation is not None:
-            x, y = step_variation(x), step_variation(y)
+            # One pass over the steps for the columns and the target together.
+            mapped = step_variation(np.column_stack([x, y]))
+            x, y = mapped[:, :-1], mapped[:, -1]
         # RMS, not sd: after the step-variation map the constant column varies a little,
         # and dividing it by that small sd would make the normal equations ill-conditioned.
         scale = np.sqrt(np.mean(x**2, axis=0))
@@ -1042,7 +1051,7 @@ def _build_cv(
             untestable.append(name)
         else:
             blocks[name] = np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
-    jitter = StepVariation(data, harmonics) if step_variation else None
+    jitter = StepVariation(data, harmonics, blocks["baseline"]) if step_variation else None
     return _CV(data, blocks, folds, jitter), untestable
 
 
