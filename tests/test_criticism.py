@@ -13,6 +13,7 @@ import pytest
 from scipy import stats
 
 from workbench.diagnostics.criticism import (
+    _RIDGE,
     CATALOGUE,
     SLOW_STEPS,
     StepVariation,
@@ -134,9 +135,17 @@ def test_fold_errors_equal_a_direct_refit() -> None:
     idx = cv.columns(["gait_asymmetry"])
     for f in (0, cv.n_folds - 1):
         test = cv.fold_of == f
-        beta, *_ = np.linalg.lstsq(cv.x[~test][:, idx], cv.y[~test], rcond=None)
-        direct = np.sum((cv.y[test] - cv.x[test][:, idx] @ beta) ** 2)
-        assert sse[f] == pytest.approx(direct, rel=1e-6)
+        x_train, x_test = cv.x[~test][:, idx], cv.x[test][:, idx]
+        g = x_train.T @ x_train
+        ridge = _RIDGE * np.trace(g) / g.shape[0]
+        beta = np.linalg.solve(g + ridge * np.eye(g.shape[0]), x_train.T @ cv.y[~test])
+        direct = np.sum((cv.y[test] - x_test @ beta) ** 2)
+        assert sse[f] == pytest.approx(direct, rel=1e-9)
+        # The ridge is numerical safety only: plain least squares agrees closely (the
+        # response-modulation columns are nearly collinear with the force harmonics).
+        beta, *_ = np.linalg.lstsq(x_train, cv.y[~test], rcond=None)
+        plain = np.sum((cv.y[test] - x_test @ beta) ** 2)
+        assert sse[f] == pytest.approx(plain, rel=1e-5)
     # Whole blocks of three steps are held out together.
     for f in range(cv.n_folds):
         steps = np.unique(data.step[cv.fold_of == f])
@@ -230,31 +239,42 @@ def test_gait_asymmetry_reason_and_a_wrong_effect() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("amplitude_sd", [None, 0.15])
 @pytest.mark.parametrize("name", ["cubic_stiffness", "quadratic_damping"])
-def test_state_effect_on_nearly_periodic_walking_is_called_inseparable(name: str) -> None:
-    """u^3 and |u'|u' lie almost wholly in the span of the force shape and K u + C u' when
-    steps vary by 2-6 %: the diagnosis says so, it does not guess (sweep: 10/10)."""
+def test_state_effect_on_nearly_periodic_walking_is_called_inseparable(
+    name: str, amplitude_sd: float | None
+) -> None:
+    """u^3 and |u'|u' lie almost wholly in the span of the force shape, K u + C u' and the
+    response modulation when steps vary by 2-6 % (and still at 15 %). The diagnosis never
+    names another effect instead: it finds the hidden one or says that the record cannot
+    separate it (sweep: called inseparable in 10/10, and 10/10 and 9/10 at 15 %)."""
+    inseparable = 0
     for seed in DETECTION_SEEDS:
-        diag = diagnose(hidden_effect_walk(name, seed).record)
+        diag = diagnose(hidden_effect_walk(name, seed, amplitude_sd=amplitude_sd).record)
         cand = next(c for c in diag.candidates if c.effect == name)
-        assert not cand.significant
+        assert not any(c.significant for c in diag.candidates if c.effect != name), seed
+        if cand.significant:
+            assert diag.candidates[0] is cand
+            continue
+        inseparable += 1
         assert cand.separable_fraction < 0.05
         assert "cannot be separated" in cand.evidence
         assert name in diag.verdict and "cannot be separated" in diag.verdict
+    assert inseparable >= 4
 
 
 @pytest.mark.slow
-def test_cubic_stiffness_is_found_when_steps_vary_enough() -> None:
-    """With force amplitudes varying 15 % from step to step the record separates u^3 (sweep:
-    found in 7/10, compare cuts the error in 9/10)."""
-    found = cut = 0
-    for seed in DETECTION_SEEDS:
-        data = prepare(hidden_effect_walk("cubic_stiffness", seed, amplitude_sd=0.15).record)
-        found += _found(diagnose(data), "cubic_stiffness")
-        right = compare(data, ["cubic_stiffness"])[1]
-        cut += right.rmse_drop_fraction > right.rmse_drop_se
-    assert found >= 2
-    assert cut >= 4
+def test_no_false_alarm_when_step_amplitudes_vary_15_percent() -> None:
+    """Large step-to-step variation of the force drives a response that a linear model with
+    one K misfits harmonic by harmonic; to first order in the variation u^3 and |u'|u' can
+    only absorb that misfit, so without the response-modulation nuisance block u^3 was
+    called significant on 5 of 10 such records without any effect (sweep seeds 0-9,
+    `--no-modulation`)."""
+    alarms = 0
+    for seed in range(100, 110):
+        diag = diagnose(hidden_effect_walk("none", seed, amplitude_sd=0.15).record)
+        alarms += any(c.significant for c in diag.candidates)
+    assert alarms <= 1
 
 
 @pytest.mark.slow
