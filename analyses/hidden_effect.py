@@ -86,7 +86,7 @@ def _odd_even_contrast(data: Any, residual: np.ndarray, bins: int = 20) -> float
     return float(np.sqrt(np.mean(np.square(half))))
 
 
-def story(seed: int, out: Path | None) -> None:
+def story(seed: int, out: Path | None, response_modulation: bool = True) -> None:
     """Print the loop on one record with a hidden asymmetry; write a report under ``out``."""
     hidden = GaitAsymmetry(a_half_n=60.0, b_half_n=30.0)
     rec = varied_walk(seed, [hidden], duration_s=(20.0, 40.0)).record
@@ -94,7 +94,7 @@ def story(seed: int, out: Path | None) -> None:
     print("(Hidden from the analysis: left and right steps differ.)\n")
 
     data = prepare(rec)
-    diag = diagnose(data)
+    diag = diagnose(data, response_modulation=response_modulation)
     base = diag.baseline
     print(
         "1. Compare: each block of 3 steps predicted from the other steps (beyond each step's\n"
@@ -136,8 +136,8 @@ def story(seed: int, out: Path | None) -> None:
     top = diag.candidates[0].effect
     print("\n4. Extend:", SMDModel(mass_kg=float(rec.mass_kg or 70.0)) + GaitAsymmetry())
     print("\n5. Re-score: the scoreboard (and a wrong effect for contrast)")
-    rows = compare(data, [top])
-    wrong = compare(data, ["cubic_stiffness"])[1]
+    rows = compare(data, [top], response_modulation=response_modulation)
+    wrong = compare(data, ["cubic_stiffness"], response_modulation=response_modulation)[1]
     for r in [*rows, wrong]:
         drop = (
             ""
@@ -390,7 +390,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--no-modulation",
         action="store_true",
-        help="sweep and --real: leave out the response-modulation block "
+        help="story, sweep and --real: leave out the response-modulation block "
         "(response_modulation=False)",
     )
     ap.add_argument(
@@ -420,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
             args.out, step_variation=not args.raw_error, response_modulation=not args.no_modulation
         )
     else:
-        story(args.seed, args.out)
+        story(args.seed, args.out, response_modulation=not args.no_modulation)
     return 0
 
 
