@@ -178,23 +178,30 @@ def sweep(
         f"{'hidden effect':<32} {'first+sig':>9} {'found':>6} {'cut':>6} {'wrong':>7} {'after':>7}"
     )
     print(head + "  notes")
-    rows: list[tuple[str, str, float | None]] = [("none (alarms)", "none", None)]
-    rows += [(name, name, None) for name in CATALOGUE]
+    rows: list[tuple[str, str, dict[str, float]]] = [("none (alarms)", "none", {})]
+    rows += [(name, name, {}) for name in CATALOGUE]
     # State-acting effects show only through step-to-step variation, and large variation
     # is where a linear model's misfit of the response raised false alarms: the same with
-    # the force amplitudes varying 15 % from step to step instead of 2-6 %.
+    # the force amplitudes varying 15 % from step to step instead of 2-6 %, and records
+    # without an effect whose step durations or phases vary far more than drawn.
+    amplitudes = {"amplitude_sd": 0.15}
     rows += [
-        (f"{n} (steps 15 %)", n, 0.15) for n in ("none", "cubic_stiffness", "quadratic_damping")
+        (f"{n} (steps 15 %)", n, amplitudes)
+        for n in ("none", "cubic_stiffness", "quadratic_damping")
+    ]
+    rows += [
+        ("none (durations 5 %)", "none", {"step_duration_sd": 0.05}),
+        ("none (phases 0.15 rad)", "none", {"phase_sd_rad": 0.15}),
     ]
     if only:
         rows = [r for r in rows if r[1] in only]
-    for label, name, sd_a in rows:
+    for label, name, variation in rows:
         first = found = cut = wrong = wrong_after = pairs = inseparable = big = big_cut = 0
         max_t = -np.inf
         instead: dict[str, int] = {}
         wrong_names: dict[str, int] = {}
         for seed in range(n):
-            rec = hidden_effect_walk(name, seed, amplitude_sd=sd_a).record
+            rec = hidden_effect_walk(name, seed, **variation).record
             data = prepare(rec)
             diag = diagnose(data, **opts)
             cands = {c.effect: c for c in diag.candidates}

@@ -41,11 +41,12 @@ a misfit that follows ``u`` and ``u'`` with a gain that changes over the step. T
 in the variation, ``u^3 = U^3 + 3 U^2 du + ...`` (``U`` the periodic response, ``du`` the
 step's deviation) is exactly such a gain, ``3 U^2(phi)``, and so is ``|u'| u'``. Without
 further columns ``u^3`` was called significant on 5 of 10 simulated records *without any
-effect* whose force amplitudes varied 15 % from step to step (2-6 %: 0 of 10;
-``analyses/hidden_effect.py --sweep 10 --no-modulation``). The baseline therefore also
+effect* whose force amplitudes varied 15 % from step to step (2-6 %: 0 of 10), and on 4 of
+10 whose step durations varied 5 % (``analyses/hidden_effect.py --sweep 10
+--no-modulation``). The baseline therefore also
 carries ``u`` and ``u'`` times the step-phase harmonics of orders
 :data:`RESPONSE_MODULATION_ORDERS` (a stiffness and damping that vary with the gait phase),
-and candidates are judged beyond them (with them: 0 of 10 at 15 %). A nonlinear spring or
+and candidates are judged beyond them (with them: 0 of 10 in each case). A nonlinear spring or
 damper then shows only through its second-order part (``3 U du^2 + du^3``), which needs
 large changes of amplitude (gait initiation, a change of intensity); on steady walking the
 diagnosis says it cannot be separated (``separable_fraction``).

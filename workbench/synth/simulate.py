@@ -1109,6 +1109,11 @@ VARIED_WALK_RANGES: dict[str, Any] = {
 }
 
 
+def _drawn_or(drawn: float, given: float | None) -> float:
+    # The draw is made either way, so an override leaves every other detail as it was.
+    return drawn if given is None else float(given)
+
+
 def varied_walk(
     seed: int,
     effects: Effect | Effects | Iterable[Effect | str] | Callable[[float], Any] = (),
@@ -1117,6 +1122,8 @@ def varied_walk(
     ground_amplitude_m_s2: float = 0.0,
     ground_frequency_hz: float = 2.7,
     amplitude_sd: float | None = None,
+    step_duration_sd: float | None = None,
+    phase_sd_rad: float | None = None,
 ) -> Simulation:
     """Simulate a steady walk whose generator details are drawn from the seed.
 
@@ -1141,6 +1148,9 @@ def varied_walk(
         Its frequency [Hz].
     amplitude_sd : float, optional
         Step-to-step variability of the force amplitudes instead of the drawn one.
+    step_duration_sd, phase_sd_rad : float, optional
+        Step-to-step variability of the step durations (a fraction) and of the harmonics'
+        phases [rad] instead of the drawn ones.
 
     Returns
     -------
@@ -1169,9 +1179,9 @@ def varied_walk(
         noise_sd_n=draw("noise_sd_n"),
         pacing_hz=draw("pacing_hz"),
         mass_kg=draw("mass_kg"),
-        step_duration_sd=draw("step_duration_sd"),
-        amplitude_sd=sd_a if amplitude_sd is None else float(amplitude_sd),
-        phase_sd_rad=draw("phase_sd_rad"),
+        step_duration_sd=_drawn_or(draw("step_duration_sd"), step_duration_sd),
+        amplitude_sd=_drawn_or(sd_a, amplitude_sd),
+        phase_sd_rad=_drawn_or(draw("phase_sd_rad"), phase_sd_rad),
         start="steady",
         effects=hidden,
         ground_acc_m_s2=ground,
