@@ -259,6 +259,12 @@ def sweep(
         )
 
 
+def _called(cands: dict[str, Any], name: str) -> bool:
+    """Significant, or named indistinguishable from a significant candidate."""
+    c = cands[name]
+    return bool(c.significant or any(cands[o].significant for o in c.indistinguishable_from))
+
+
 def pairs(n: int) -> None:
     """Print, for every pair of catalogued effects hidden together, how often both are found.
 
@@ -278,14 +284,7 @@ def pairs(n: int) -> None:
                 cands = {c.effect: c for c in diag.candidates}
                 top = [c.effect for c in diag.candidates[:3]]
                 top3 += first in top and second in top
-
-                def called(name: str, cands: dict[str, Any] = cands) -> bool:
-                    c = cands[name]
-                    return bool(
-                        c.significant or any(cands[o].significant for o in c.indistinguishable_from)
-                    )
-
-                sig += called(first) and called(second)
+                sig += _called(cands, first) and _called(cands, second)
             total += n
             both_top += top3
             both_sig += sig

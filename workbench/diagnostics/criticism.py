@@ -43,13 +43,13 @@ step's deviation) is exactly such a gain, ``3 U^2(phi)``, and so is ``|u'| u'``.
 further columns ``u^3`` was called significant on 5 of 10 simulated records *without any
 effect* whose force amplitudes varied 15 % from step to step (2-6 %: 0 of 10), and on 4 of
 10 whose step durations varied 5 % (``analyses/hidden_effect.py --sweep 10
---no-modulation``). The baseline therefore also
-carries ``u`` and ``u'`` times the step-phase harmonics of orders
-:data:`RESPONSE_MODULATION_ORDERS` (a stiffness and damping that vary with the gait phase),
-and candidates are judged beyond them (with them: 0 of 10 in each case). A nonlinear spring or
-damper then shows only through its second-order part (``3 U du^2 + du^3``), which needs
-large changes of amplitude (gait initiation, a change of intensity); on steady walking the
-diagnosis says it cannot be separated (``separable_fraction``).
+--no-modulation``). The baseline therefore also carries ``u`` and ``u'`` times the
+step-phase harmonics of orders :data:`RESPONSE_MODULATION_ORDERS` (a stiffness and damping
+that vary with the gait phase), and candidates are judged beyond them (with them: 0 of 10
+in each case). A nonlinear spring or damper then shows only through its second-order part
+(``3 U du^2 + du^3``), which needs large changes of amplitude (gait initiation, a change of
+intensity); on steady walking the diagnosis says it cannot be separated
+(``separable_fraction``).
 
 Scoring and significance
 ------------------------
@@ -532,8 +532,9 @@ def baseline_columns(data: CriticismData, harmonics: int = DEFAULT_HARMONICS) ->
 
 #: Orders of the step-phase harmonics that modulate ``u`` and ``u'`` in the baseline's
 #: nuisance block (module docstring, "Response modulation"). Orders 1 and 2 hold the
-#: first-order part of ``u^3`` and ``|u'| u'`` (``U^2`` and ``|U'|`` have their power at
-#: orders 0 and 2, the stride lines aside). ``response_modulation=False`` in
+#: first-order part of ``u^3`` and ``|u'| u'``: with a response led by its first harmonic,
+#: ``U^2`` and ``|U'|`` have most of their power at orders 0 and 2, and the product of the
+#: first and second harmonics puts some at order 1. ``response_modulation=False`` in
 #: :func:`diagnose` and :func:`compare` leaves the block out.
 RESPONSE_MODULATION_ORDERS: tuple[int, ...] = (1, 2)
 _MODULATION = "response_modulation"
