@@ -227,10 +227,12 @@ def test_demo_writes_report(tmp_path, capsys):
     insole = res["records"][1]
     assert insole["static_balance"] == pytest.approx(1.33, abs=0.03)
     assert insole["warnings"]
-    # The rest of the chain: criticism on a real stretch, sensitivity, and the population
-    # batch ending in the Table-2-style report.
+    # The rest of the chain: criticism on the whole treadmill trial (its speed changes are
+    # found, added and re-scored), sensitivity, and the population batch ending in the
+    # Table-2-style report.
     assert "Model criticism" in md and "Sensitivity" in md
-    assert any(name.startswith("demo_criticism") for name in figures)
+    assert "Add pacing_drift" in md
+    assert "demo_criticism_scoreboard.png" in figures
     pop = res["population"]
     assert pop["failed"] == 0
     assert pop["records_used"] + pop["records_excluded"] == pop["records"] > 20
