@@ -178,13 +178,13 @@ def sweep(
         f"{'hidden effect':<32} {'first+sig':>9} {'found':>6} {'cut':>6} {'wrong':>7} {'after':>7}"
     )
     print(head + "  notes")
-    rows: list[tuple[str, str, dict[str, float]]] = [("none (alarms)", "none", {})]
+    rows: list[tuple[str, str, dict[str, Any]]] = [("none (alarms)", "none", {})]
     rows += [(name, name, {}) for name in CATALOGUE]
     # State-acting effects show only through step-to-step variation, and large variation
     # is where a linear model's misfit of the response raised false alarms: the same with
     # the force amplitudes varying 15 % from step to step instead of 2-6 %, and records
     # without an effect whose step durations or phases vary far more than drawn.
-    amplitudes = {"amplitude_sd": 0.15}
+    amplitudes: dict[str, Any] = {"amplitude_sd": 0.15}
     rows += [
         (f"{n} (steps 15 %)", n, amplitudes)
         for n in ("none", "cubic_stiffness", "quadratic_damping")
