@@ -7,7 +7,7 @@ The chain, on the embedded real records (treadmill and insole) and the small syn
 2. model criticism: the compare-locate-explain-extend-re-score loop on the whole treadmill
    record (``workbench diagnose`` / ``compare``): its speed changes are found as a pacing
    drift and a small left/right difference beyond it, both added, and the held-out error
-   falls (a second or so: criticism fits one regression, not a filter);
+   falls (criticism fits regressions, not a filter, so the whole trial is cheap);
 3. sensitivity: a small study of how the filter's settings move the identified parameters on
    a simulated record with known truth;
 4. population: a subset of the synthetic study plus steady stretches of the two real
