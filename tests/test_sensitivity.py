@@ -146,7 +146,8 @@ def test_cli_json_contract_and_worker_independence(tmp_path, capsys):
     table = (out / "sensitivity.csv").read_text().splitlines()
     assert len(table) == 1 + 2 * 2 + 2  # header, 2 levels x 2 replicates, 2 summaries
     assert (out / "index.html").exists() and (out / "report.md").exists()
-    assert list(out.glob("sensitivity_tornado_*.png"))
+    assert list(out.glob("figures/sensitivity_tornado_*.png"))
+    assert not list(out.glob("*.png"))  # figures live in figures/, as in every report
     # The same study in this process (one worker) gives the same numbers.
     from workbench.records.io import load_record
 
@@ -216,7 +217,7 @@ def test_factorial_grid_heat_map_and_seeds_shared_with_one_at_a_time(study, tmp_
     tidy = grid.tidy()
     assert set(tidy["setting"]) == {"factorial"} and len(tidy) == 4 * 2
     sec = sensitivity_section(grid, tmp_path)
-    assert (tmp_path / "sensitivity_heatmap_0_obs_noise_ddu_state_noise.png").exists()
+    assert (tmp_path / "figures" / "sensitivity_heatmap_0_obs_noise_ddu_state_noise.png").exists()
     assert "Sensitivity" in sec.title
 
 

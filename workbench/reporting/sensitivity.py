@@ -139,14 +139,15 @@ def sensitivity_section(
     out_dir: str | Path,
     outputs: tuple[str, ...] = ("natural_frequency_hz", "damping_ratio", "blf1"),
 ) -> Section:
-    """Report section: statements, the summary table and the figures (saved in ``out_dir``).
+    """Report section: statements, the summary table and the figures (in ``out_dir/figures``).
 
     Parameters
     ----------
     study : SensitivityStudy
         A finished study.
     out_dir : str or Path
-        Folder of the report; figures are written there.
+        Folder of the report; figures are written to its ``figures`` folder, like every
+        other section's.
     outputs : tuple of str
         Outputs to draw tornado charts (and heat maps) for.
 
@@ -201,14 +202,14 @@ def sensitivity_section(
         )
     for rec_i, record in enumerate(study.records):
         for o in outputs:
-            name = f"sensitivity_tornado_{rec_i}_{o}.png"
+            name = f"figures/sensitivity_tornado_{rec_i}_{o}.png"
             save_figure(tornado_figure(study, o, record), out / name)
             sec.figure(name, f"{record}: effect of each setting on {_LABELS[o]} "
                        "(blue) beside its Monte Carlo half-width (grey)")  # fmt: skip
         if study.design == "factorial":
             for f1, f2 in itertools.combinations(study.factors, 2):
                 o = outputs[0]
-                name = f"sensitivity_heatmap_{rec_i}_{f1}_{f2}.png"
+                name = f"figures/sensitivity_heatmap_{rec_i}_{f1}_{f2}.png"
                 save_figure(heatmap_figure(study, f1, f2, o, record), out / name)
                 sec.figure(name, f"{record}: mean {_LABELS[o]} over {f1} and {f2}")
     return sec
