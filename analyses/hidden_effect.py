@@ -340,6 +340,10 @@ def baseline_stiffness(n: int) -> None:
 
 def real(out: Path | None, step_variation: bool = True, response_modulation: bool = True) -> None:
     """Diagnose the embedded real records and print the ranking and scoreboard."""
+    opts: dict[str, Any] = {
+        "step_variation": step_variation,
+        "response_modulation": response_modulation,
+    }
     for key in ("treadmill", "insole"):
         meta = EMBEDDED[key]
         rec = load_record(embedded_path(key), mass_kg=meta.mass_kg)
@@ -350,10 +354,6 @@ def real(out: Path | None, step_variation: bool = True, response_modulation: boo
             # The insole calibration is 33 % high (DESIGN.md 2.2): rescale to M g first.
             rec = rescale_to_mass(rec, segment_steps(preprocess(rec)))
         data = prepare(rec)
-        opts: dict[str, Any] = {
-            "step_variation": step_variation,
-            "response_modulation": response_modulation,
-        }
         diag = diagnose(data, **opts)
         print(f"== {key}: {meta.description}")
         b = diag.baseline

@@ -537,7 +537,6 @@ def baseline_columns(data: CriticismData, harmonics: int = DEFAULT_HARMONICS) ->
 #: first and second harmonics puts some at order 1. ``response_modulation=False`` in
 #: :func:`diagnose` and :func:`compare` leaves the block out.
 RESPONSE_MODULATION_ORDERS: tuple[int, ...] = (1, 2)
-_MODULATION = "response_modulation"
 
 
 def _modulation_columns(data: CriticismData) -> FloatArray:
@@ -862,8 +861,7 @@ class _CV:
         self.xty_all = self.xty.sum(axis=0)
 
     def columns(self, groups: Sequence[str]) -> NDArray[np.intp]:
-        fixed = ("baseline", _MODULATION) if _MODULATION in self.slices else ("baseline",)
-        return np.concatenate([self.slices[g] for g in (*fixed, *groups)])
+        return np.concatenate([self.slices[g] for g in ("baseline", *groups)])
 
     def _solve(self, g: FloatArray, b: FloatArray) -> FloatArray:
         ridge = _RIDGE * np.trace(g) / g.shape[0]
@@ -1081,9 +1079,13 @@ def _build_cv(
     step_variation: bool = True,
     response_modulation: bool = True,
 ) -> tuple[_CV, list[str]]:
-    blocks: dict[str, FloatArray] = {"baseline": baseline_columns(data, harmonics)}
+    base = baseline_columns(data, harmonics)
+    # The step-variation map needs the plain baseline (its shared shape); the modulation
+    # columns are nuisance columns of the baseline block itself.
+    jitter = StepVariation(data, harmonics, base) if step_variation else None
     if response_modulation and RESPONSE_MODULATION_ORDERS:
-        blocks[_MODULATION] = _modulation_columns(data)
+        base = np.column_stack([base, _modulation_columns(data)])
+    blocks: dict[str, FloatArray] = {"baseline": base}
     untestable = []
     for name in names:
         cols = feature_group(name).columns(data)
@@ -1091,7 +1093,6 @@ def _build_cv(
             untestable.append(name)
         else:
             blocks[name] = np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
-    jitter = StepVariation(data, harmonics, blocks["baseline"]) if step_variation else None
     return _CV(data, blocks, folds, jitter), untestable
 
 
