@@ -20,7 +20,7 @@ defaults except where said:
     The same simulator without variability (a periodic force from rest or in steady state),
     identified as one piece on the absolute-time basis at the true pacing, observing u''
     only, high-pass off: the model class the data come from. Here the bands themselves are
-    under test: steady records carry no information on (C, K) (DESIGN.md 2.4) and must be
+    under test: steady records carry no information on (C, K) (docs/science.md 4) and must be
     flagged, records from rest must cover the truth.
 
 A record counts as *fine* when, for both C and K, the truth is inside the band or the report

@@ -12,7 +12,7 @@ Usage::
 The story (default)
     A pedestrian is simulated walking on the spot with realistic step-to-step variability
     (durations, amplitudes and phases of the force vary from step to step) and a hidden
-    left/right asymmetry. We pretend not to know it and follow the loop of DESIGN.md 2.5:
+    left/right asymmetry. We pretend not to know it and follow the loop of docs/science.md 5:
 
     1. *Compare*: predict every block of three steps from a model fitted to the other
        steps (a force shape shared by all steps plus ``K u + C u'``, each step allowed its
@@ -351,7 +351,7 @@ def real(out: Path | None, step_variation: bool = True, response_modulation: boo
             from workbench.records.preprocess import preprocess
             from workbench.records.steps import rescale_to_mass, segment_steps
 
-            # The insole calibration is 33 % high (DESIGN.md 2.2): rescale to M g first.
+            # The insole calibration is 33 % high (docs/science.md 2): rescale to M g first.
             rec = rescale_to_mass(rec, segment_steps(preprocess(rec)))
         data = prepare(rec)
         diag = diagnose(data, **opts)

@@ -1,4 +1,4 @@
-"""The analytic HSI checks of DESIGN.md 6, computed by the workbench's own simulator.
+"""The analytic HSI checks of docs/science.md 7, computed by the workbench's own simulator.
 
 Usage::
 

@@ -5,7 +5,7 @@ Usage::
     python analyses/hsi_footbridge.py [--pacing 1.7,1.85,2.0,2.15] [--density 0.05,0.2,0.5]
         [--crossings 4] [--duration 90] [--dt 0.01] [--seed 0] [--workers 1] [--out DIR]
 
-The bridge is the DESIGN.md 6 span (50 m, 500 kg/m, 2 Hz, 0.5 %, 2 m wide). For each
+The bridge is the docs/science.md 7 span (50 m, 500 kg/m, 2 Hz, 0.5 %, 2 m wide). For each
 crowd density (pedestrians per m^2 on the deck, Poisson arrivals at ``density * width *
 1.3 m/s``) and each mean pacing, ``--crossings`` crowd streams of ``--duration`` seconds are
 drawn from the seed's population laws with the pacing distribution moved to that mean (sd

@@ -32,7 +32,7 @@ workbench's defaults otherwise: rbpf, auto noise, step-phase basis, n = 10, moda
 force-model check). Reported per segment: natural frequency and damping ratio with 95 %
 intervals, BLF1-3 with 95 % bands (mean over steps ± 1.96 standard errors), the
 identifiability sentence, and the seed's population laws at the segment's pacing for
-comparison (DESIGN.md section 6).
+comparison (docs/science.md 7).
 
 Writes to ``--out`` (default ``analyses/out/individual/``, git-ignored): ``individual.json``
 (everything printed plus each segment's ``workbench identify`` JSON), ``pacing_segments.png``
@@ -76,7 +76,7 @@ from workbench.reporting.studies import (
 )
 
 DEFAULT_OUT = Path("analyses/out/individual")
-#: DESIGN.md section 6: the seed's population laws and its individual (58 kg, 1.75 Hz).
+#: docs/science.md 7: the seed's population laws and its individual (58 kg, 1.75 Hz).
 SEED_LAW = {"natural_frequency_hz": (0.3049, 1.3670), "damping_ratio": (-0.2116, 0.8737)}
 SEED_INDIVIDUAL = {
     "pacing_hz": 1.75,

@@ -1,4 +1,4 @@
-"""Human-structure interaction: analytic checks (DESIGN.md 6), integrator, crowds, CLI."""
+"""Human-structure interaction: analytic checks (docs/science.md 7), integrator, crowds, CLI."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def beam() -> ModalStructure:
-    """DESIGN.md 6: 50 m, 500 kg/m (modal mass 12 500 kg), 2 Hz, 0.5 %."""
+    """docs/science.md 7: 50 m, 500 kg/m (modal mass 12 500 kg), 2 Hz, 0.5 %."""
     return simply_supported_beam(50.0, 500.0, 2.0, 0.005)
 
 

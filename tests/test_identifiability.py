@@ -160,7 +160,7 @@ def test_force_correlation_rejects_bad_shapes() -> None:
         force_correlation([1.0], [2.0], [0.0], np.zeros((1, 1, 3)), np.zeros((1, 1, 3)))
 
 
-# -- the seed example's identifiability fact (DESIGN.md 2.4) ------------------------------------
+# -- the seed example's identifiability fact (docs/science.md 4) --------------------------------
 def _window(com, t0_s: float, t1_s: float):
     sl = (com.time_s >= t0_s - 1e-9) & (com.time_s < t1_s - 1e-9)
     return dataclasses.replace(
@@ -177,7 +177,7 @@ def _window(com, t0_s: float, t1_s: float):
 def test_seed_example_transient_identifies_and_steady_state_does_not() -> None:
     """0-10 s (start-up transient) against 2-12 s (transient gone), same length and noise.
 
-    DESIGN.md 2.4: least squares on 0-20 s recovers C and K; after the transient
+    docs/science.md 4: least squares on 0-20 s recovers C and K; after the transient
     ``K u + C u'`` lies in the span of the 0.5 Hz Fourier basis and they cannot be told
     apart from the force. The exact posterior must not call the second window well
     identified.

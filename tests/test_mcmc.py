@@ -368,6 +368,6 @@ def test_collapsed_step_posterior_matches_exact_grid(walking_steps_problem) -> N
     )
     assert_healthy(result)
     assert_matches(result, mean, sd)
-    # One step says little about (C, K) (DESIGN.md 2.4): the posterior is only slightly
+    # One step says little about (C, K) (docs/science.md 4): the posterior is only slightly
     # narrower than the prior, but it is the exact target either way.
     assert np.all(sd < prior_sd)

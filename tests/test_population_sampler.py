@@ -32,7 +32,7 @@ def test_columns_and_exact_relations(table):
         table.damping_ns_per_m, 2 * zeta * np.sqrt(table.stiffness_n_per_m * m), rtol=1e-12
     )
     np.testing.assert_allclose(table.speed_m_s, table.pacing_hz * table.step_length_m)
-    # Round trip from K, C back to f_n and zeta (DESIGN.md 2.1 conversions).
+    # Round trip from K, C back to f_n and zeta (docs/science.md 1 conversions).
     k, c = table.stiffness_n_per_m, table.damping_ns_per_m
     np.testing.assert_allclose(np.sqrt(k / m) / (2 * np.pi), fn, rtol=1e-12)
     np.testing.assert_allclose(c / (2 * np.sqrt(k * m)), zeta, rtol=1e-12)

@@ -1,4 +1,4 @@
-"""Preprocessing: COM acceleration, high-pass filter, trapezoidal integration (DESIGN.md 2.2)."""
+"""Preprocessing: COM acceleration, high-pass filter, integration (docs/science.md 2)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Footfall steps, pacing frequency and static balance (DESIGN.md 2.2, steps 4-6)."""
+"""Footfall steps, pacing frequency and static balance (docs/science.md 2, steps 4-6)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The ``workbench`` command.
 
-One entry point with subcommands (DESIGN.md 4.2). Every subcommand accepts ``--json`` to print
+One entry point with subcommands (docs/contracts.md). Every subcommand accepts ``--json`` to print
 one JSON object on stdout instead of human text, and writes files only under ``--out``.
 Problems the user can fix are reported as one sentence on stderr with exit status 2; an
 unexpected internal failure prints one sentence too (exit 3) and shows the traceback only when

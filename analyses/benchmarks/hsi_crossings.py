@@ -4,7 +4,7 @@ Usage: ``python analyses/benchmarks/hsi_crossings.py [--crossings 1000] [--worke
 [--reference 5] [--dt 0.005] [--cores 1] [--json]`` (main environment).
 
 The Monte Carlo: single walkers drawn by the population sampler (seed laws), each crossing
-the DESIGN.md 6 footbridge (50 m, 500 kg/m, 2 Hz, 0.5 %) from the deck at rest, simulated
+the docs/science.md 7 footbridge (50 m, 500 kg/m, 2 Hz, 0.5 %) from the deck at rest, simulated
 twice -- coupled SMDs (interaction) and the moving-force model -- by
 :func:`workbench.hsi.montecarlo.run_monte_carlo` (Newmark average acceleration, crossings
 vectorised in chunks of 50), plus the occupied structure's eigen-analysis at the peak.

@@ -10,7 +10,7 @@ harmonics) plus the spring and damper acting on the COM response::
     GRF - M g = a0 + sum_i (a_i cos(i phi) + b_i sin(i phi)) - K u - C u'
 
 which is linear in ``(a, b, K, C)``; ``u`` and ``u'`` come from the preprocessed record
-(DESIGN.md 2.2), with their steady lines at odd multiples of ``f_p / 2`` removed (see
+(docs/science.md 2), with their steady lines at odd multiples of ``f_p / 2`` removed (see
 :func:`_without_stride_lines`). The step phase is that of the pacing component of the COM
 acceleration (:func:`_fundamental_phase`). A candidate effect adds a *feature group* (the
 columns its term is made of, e.g. ``u^3`` for cubic stiffness).
@@ -143,7 +143,7 @@ SEPARABLE_MIN = 0.05
 #: Ridge added to the normal equations of standardised features (numerical safety only).
 _RIDGE = 1e-8
 
-#: The catalogue of DESIGN.md 2.5, in its order.
+#: The catalogue of docs/science.md 5, in its order.
 CATALOGUE = (
     "gait_asymmetry",
     "cubic_stiffness",
@@ -220,7 +220,7 @@ def prepare(
     pacing_hz: float | None = None,
     steps: Steps | None = None,
 ) -> CriticismData:
-    """Preprocess a record and keep its whole steps (DESIGN.md 2.2).
+    """Preprocess a record and keep its whole steps (docs/science.md 2).
 
     Parameters
     ----------
@@ -950,7 +950,7 @@ class _CV:
 # -- results --------------------------------------------------------------------------------
 @dataclass
 class Candidate:
-    """One candidate effect's result (the JSON contract of DESIGN.md 4.2, plus details)."""
+    """One candidate effect's result (the JSON contract of docs/contracts.md, plus details)."""
 
     effect: str
     score: float
@@ -1470,7 +1470,7 @@ def residual_spectrum(data: CriticismData, residual: FloatArray) -> tuple[FloatA
 
 
 def state_features(data: CriticismData) -> dict[str, FloatArray]:
-    """Return the state quantities the error is plotted against (DESIGN.md 2.5)."""
+    """Return the state quantities the error is plotted against (docs/science.md 5)."""
     out = {
         "u [m]": data.disp_m,
         "u' [m/s]": data.vel_m_s,

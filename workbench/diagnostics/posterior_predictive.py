@@ -19,7 +19,7 @@ measured record looks like one of them:
 
 Why not simulate the force from the steps' posterior coefficients and integrate the
 response: on simulated walking records of 10-20 s the identified (C, K) are often far from
-the truth (C and K are weakly identified, DESIGN.md 2.4) and the per-step coefficients absorb
+the truth (C and K are weakly identified, docs/science.md 4) and the per-step coefficients absorb
 the misfit coherently with the measured motion; Gaussian draws of them put 2-30 times the
 measured sub-harmonic power into every replicate (seeds 1 and 2 of the tests' generator), so
 no statistic could ever look extreme. Rearranging whole steps keeps each step's coherence.
@@ -30,7 +30,7 @@ Statistics compared with the measured record (:data:`STATISTICS`), on the implie
     Mean power density within ``+- 0.08 f_p`` of ``f_p / 2``, ``3 f_p / 2``, ``5 f_p / 2``
     over that within ``+- 0.08 f_p`` of the odd multiples of ``f_p / 4`` (half-way to the
     harmonics): a line-to-floor ratio. Left and right steps that differ put lines at the odd
-    multiples of ``f_p / 2`` (DESIGN.md 2.5, gait asymmetry); random step-to-step variation
+    multiples of ``f_p / 2`` (docs/science.md 5, gait asymmetry); random step-to-step variation
     spreads power evenly between the harmonics and leaves the ratio near 1.
 ``odd_even_contrast_n``
     RMS over 25 step-phase bins of the difference between the mean force profile of odd and

@@ -31,7 +31,7 @@ def moving_harmonic_force(
 ) -> HsiHistory:
     """Simulate a harmonic force ``F0 cos(2 pi f t)`` crossing the span at constant speed.
 
-    Integrated by the same Newmark scheme as the pedestrian models (DESIGN.md 6: 311.9 N at
+    Integrated by the same Newmark scheme as the pedestrian models (docs/science.md 7: 311.9 N at
     2 Hz and 1.25 m/s on the 50 m beam peaks at 1.734 m/s^2 at midspan).
     """
     if not (np.isfinite(amplitude_n) and amplitude_n >= 0):

@@ -199,7 +199,7 @@ def design_pedestrian(
     blf: tuple[float, float, float] | None = None,
     phase_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> pd.DataFrame:
-    """One pedestrian as a table; by default the DESIGN.md 6 walker at 2 Hz.
+    """One pedestrian as a table; by default the docs/science.md 7 walker at 2 Hz.
 
     The load factor defaults to the moving-force check's ``0.41 (f_p - 0.95)`` on the first
     harmonic only. ``natural_frequency_hz`` and ``damping_ratio`` given override the

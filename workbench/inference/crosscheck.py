@@ -1,6 +1,6 @@
 """Every footstep cross-checked: an emcee posterior per step against a particle filter.
 
-A particle cloud can look converged while being mostly prior or degenerate (DESIGN.md 2.4).
+A particle cloud can look converged while being mostly prior or degenerate (docs/science.md 4).
 For every footfall step ``j`` this module samples, with emcee, the posterior that a correct
 filter holds at the step's end, and compares the filter's per-step mean and sd of (C, K)
 with it.
@@ -64,7 +64,7 @@ Two modes
     (C, K) (and ``log s`` when free); the force coefficients are then drawn exactly from
     their Gaussian conditional at every kept draw (Rao-Blackwell completion), so the
     InferenceData still holds them. Default because it is exact and cheap: the ridge between
-    (C, K) and the force coefficients (DESIGN.md 2.4) is integrated out instead of explored,
+    (C, K) and the force coefficients (docs/science.md 4) is integrated out instead of explored,
     the autocorrelation time is a few steps, and one call costs about 2 ms for 64 walkers
     with the exact step likelihood (n = 10, 100 Hz), far less on the grid's surrogate.
     ``"joint"``: emcee samples all ``2 n + 5`` parameters (``2 n + 6`` with ``log s``) and
@@ -148,7 +148,7 @@ MODES = ("collapsed", "joint")
 PARAMETRISATIONS = ("non-centred", "plain")
 #: Prior constructions, default first.
 PRIORS = ("sequential", "filter")
-#: Parameters compared (DESIGN.md names).
+#: Parameters compared (docs/contracts.md names).
 PARAMS = ("damping_ns_per_m", "stiffness_n_per_m")
 #: A step agrees when |z| is below this for C and for K.
 Z_TOLERANCE = 2.0
@@ -591,7 +591,7 @@ class StepCheck:
     surrogate_error: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """Return the step's JSON object (DESIGN.md 4.2 keys first)."""
+        """Return the step's JSON object (docs/contracts.md keys first)."""
 
         def per(values: FloatArray) -> dict[str, float | None]:
             return {p: _num(v) for p, v in zip(PARAMS, values, strict=True)}
@@ -744,7 +744,7 @@ class CrosscheckResult:
         }
 
     def to_json(self) -> dict[str, Any]:
-        """Return the ``workbench crosscheck`` JSON object (DESIGN.md 4.2)."""
+        """Return the ``workbench crosscheck`` JSON object (docs/contracts.md)."""
         return {
             "method": self.method,
             "mode": self.mode,

@@ -1,6 +1,6 @@
 """Is (C, K) set by the record or by the force model? A Hausman-type check.
 
-DESIGN.md 2.4: damping C and stiffness K are identified only by what the per-piece Fourier
+docs/science.md 4: damping C and stiffness K are identified only by what the per-piece Fourier
 force cannot absorb, so any force the basis misses lands on (C, K) instead. The posterior
 width does not show this: it measures the noise, not the misfit, and a misfitting model is
 often *more* confident. Measured on the simulated walks of ``tests/test_exact.py`` (step

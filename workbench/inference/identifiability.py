@@ -1,6 +1,6 @@
 """How well a record identifies damping C and stiffness K: contraction, correlations, words.
 
-DESIGN.md 2.4: over steady periodic walking ``K u + C u'`` lies in the span of the Fourier
+docs/science.md 4: over steady periodic walking ``K u + C u'`` lies in the span of the Fourier
 basis, so (C, K) trade off against the force coefficients and the posterior of (C, K) stays
 close to the prior. The product must say so instead of printing a number that is really the
 prior. This module turns posterior summaries into that statement.

@@ -49,7 +49,7 @@ after a resampling, the weighted mean otherwise. Its product over samples is unb
 Jitter (off by default; not in the seed). The seed's filter moves theta only through
 resampling, so a bootstrap filter fixes the force coefficients to the few prior draws that
 survive the first samples (21 static dimensions for n = 10 cannot be explored by blind prior
-draws) and C, K then wander to compensate -- the failure DESIGN.md 2.4 warns about. With
+draws) and C, K then wander to compensate -- the failure docs/science.md 4 warns about. With
 ``jitter`` the static part of the state (C, K and theta; theta only with
 ``fixed_parameters``) gets a Liu-West kernel move after every resampling:
 

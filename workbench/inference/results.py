@@ -29,7 +29,7 @@ __all__ = ["IdentificationResult", "weighted_quantile"]
 
 FloatArray = NDArray[np.float64]
 
-#: Keys of the scalar estimates, in report order (DESIGN.md 4.2 names).
+#: Keys of the scalar estimates, in report order (docs/contracts.md names).
 SCALAR_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", "damping_ratio")
 
 #: A filter whose median ESS fraction falls below this is reported as degenerate: its
@@ -353,7 +353,7 @@ class IdentificationResult:
 
     # ------------------------------------------------------------------ output
     def to_json(self) -> dict[str, Any]:
-        """Return the JSON object of ``workbench identify --json`` (DESIGN.md 4.2)."""
+        """Return the JSON object of ``workbench identify --json`` (docs/contracts.md)."""
         est, sd, ci = self.estimates, self.posterior_sd, self.interval()
         out: dict[str, Any] = {
             "mass_kg": self.mass_kg,

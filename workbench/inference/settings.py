@@ -1,7 +1,7 @@
 """Settings of an identification run: defaults, a TOML file, and command-line flags.
 
 Precedence: command-line flags over the TOML file (``--config FILE``) over the defaults
-below. The defaults are the seed study's settings (DESIGN.md 2.3) except where the workbench
+below. The defaults are the seed study's settings (docs/science.md 3) except where the workbench
 documents a better choice:
 
 - ``method = "rbpf"``: the Rao-Blackwellised filter is exact for this model and needs far

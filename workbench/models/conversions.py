@@ -1,7 +1,7 @@
 """Conversions between physical and modal SMD parameters and biomechanical load factors.
 
 All functions accept scalars or arrays (broadcast together, as numpy does) and return a
-``float`` for scalar input and an ``ndarray`` otherwise. The formulas are DESIGN.md 2.1:
+``float`` for scalar input and an ``ndarray`` otherwise. The formulas are docs/science.md 1:
 
 * ``f_n = sqrt(K / M) / (2 pi)``
 * ``zeta = C / (2 sqrt(K M))``

@@ -67,7 +67,7 @@ A nonlinear one overrides ``force`` and declares ``linear = False``::
             k, gap = self.split_theta(theta)
             return k * np.maximum(-u - gap, 0.0)
 
-The catalogue of DESIGN.md 2.5 is written this way: ``gait_asymmetry`` (half-harmonic force
+The catalogue of docs/science.md 5 is written this way: ``gait_asymmetry`` (half-harmonic force
 terms from ``context.step_phase_rad(t)``), ``cubic_stiffness`` (``u^3``),
 ``quadratic_damping`` (``|v| v``), ``stiffness_drift`` (``t u``, ``t v``), ``heel_impact``
 (a pulse after each ``context.step_start_s``; nonlinear, ``force`` overridden),

@@ -9,7 +9,7 @@ every function that builds the basis:
 
 * absolute time (the seed): ``phi = 2 pi f_p (t - time_origin_s)`` with a scalar origin
   (default 0);
-* time from each piece's start (step pieces, DESIGN.md 2.3): the same formula with
+* time from each piece's start (step pieces, docs/science.md 3): the same formula with
   ``time_origin_s`` an array giving, per sample, the start time of the piece it belongs to
   (see :func:`piece_time_origin_s`). Coefficients are then comparable across steps;
 * step phase: pass ``phase_rad`` directly, e.g. :func:`step_phase_rad`, which advances by

@@ -1,7 +1,7 @@
 """The spring-mass-damper (SMD) pedestrian model as a plain description.
 
 ``M u'' + C u' + K u + sum_e effect_e(u, u', t) = F_bio(t)`` with u the COM displacement
-(positive up, from static equilibrium) and ``GRF = M g + M u''`` (DESIGN.md 2.1).
+(positive up, from static equilibrium) and ``GRF = M g + M u''`` (docs/science.md 1).
 
 An :class:`SMDModel` only describes the system: parameters may be unset (to be identified)
 and nothing here fits or filters. Algorithms take a model, as in the ``particles`` library.

@@ -314,7 +314,7 @@ def run_batch(
     Parameters
     ----------
     manifest : path-like
-        Batch manifest (DESIGN.md 4.1): ``path`` column, optional ``mass_kg``,
+        Batch manifest (docs/contracts.md): ``path`` column, optional ``mass_kg``,
         ``pacing_hz``, ``subject``.
     out_dir : path-like
         Output folder.

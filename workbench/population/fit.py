@@ -51,7 +51,7 @@ class PopulationFit:
     Attributes
     ----------
     summary : dict
-        The ``workbench population --json`` object (DESIGN.md 4.2 keys and more).
+        The ``workbench population --json`` object (docs/contracts.md keys and more).
     bands : pandas.DataFrame
         Per law and pacing on a grid: mean, confidence and prediction bands.
     used : pandas.DataFrame

@@ -15,7 +15,7 @@ Seed defaults and the assumptions behind them (each one is written down in
 :data:`DEFAULT_ASSUMPTIONS` too, so reports can print them):
 
 - f_n = 0.3049 f_p + 1.3670 and zeta = -0.2116 f_p + 0.8737: the seed's population laws
-  (DESIGN.md 6).
+  (docs/science.md 7).
 - BLF1 = 0.41 (f_p - 0.95): the seed says BLF1 is linear in f_p but does not print the
   coefficients; this is Young's (2001) design law for the first walking harmonic, used as an
   assumption.
@@ -241,7 +241,7 @@ class PopulationLaws:
 
     @classmethod
     def from_json(cls, obj: Mapping[str, Any], *, source: str = "fitted laws") -> PopulationLaws:
-        """Read the object that ``workbench population --json`` prints (DESIGN.md 4.2).
+        """Read the object that ``workbench population --json`` prints (docs/contracts.md).
 
         Parameters
         ----------

@@ -1,6 +1,6 @@
 """Stochastic pedestrians drawn from population laws (the table the HSI simulator uses).
 
-One row per pedestrian, columns (units in the names, DESIGN.md 4):
+One row per pedestrian, columns (units in the names, docs/contracts.md):
 ``mass_kg, pacing_hz, step_length_m, speed_m_s, natural_frequency_hz, damping_ratio,
 stiffness_n_per_m, damping_ns_per_m, blf1, blf2, blf3, phase1_rad, phase2_rad, phase3_rad``.
 

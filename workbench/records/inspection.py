@@ -32,7 +32,7 @@ PACING_MISMATCH_TOLERANCE = 0.05
 #: Standard deviation of the GRF over whole steps, as a fraction of body weight, below which a
 #: record holds no walking (walking varies by about 10-40 %; a standing person by 1 %).
 MIN_WALKING_VARIATION = 0.04
-#: Pacing frequencies that can be walking [Hz] (DESIGN.md 6: 1.5-2.25 Hz in the seed study;
+#: Pacing frequencies that can be walking [Hz] (docs/science.md 7: 1.5-2.25 Hz in the seed study;
 #: slow shuffling and fast walking widen it).
 WALKING_PACING_HZ = (0.8, 3.5)
 #: Without the high-pass, a static balance further than this from 1 makes the integrals drift.
@@ -75,7 +75,7 @@ class Inspection:
         return self.static_balance * self.record.require_mass() * G_M_S2
 
     def to_json(self) -> dict[str, Any]:
-        """Return the JSON object of ``workbench inspect --json`` (DESIGN.md 4.2) and details."""
+        """Return the ``workbench inspect --json`` object (docs/contracts.md) and details."""
         rec = self.record
         inst = np.asarray(self.pacing.instantaneous_hz, dtype=float)
         return {

@@ -1,6 +1,6 @@
 """Reading and writing GRF records: CSV + JSON sidecar, OpenSim .mot, PhysioNet insole, C3D.
 
-Formats (DESIGN.md 4.1)
+Formats (docs/contracts.md)
 -----------------------
 ``csv``
     A header line, then one row per sample. Columns ``time`` [s] and ``grf`` [N] (total

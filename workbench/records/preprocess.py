@@ -1,8 +1,8 @@
 """Preprocessing: from a GRF record to the COM acceleration, velocity and displacement.
 
-This is DESIGN.md section 2.2, steps 1-3 (the seed study's section 5.2):
+This is docs/science.md 2, steps 1-3 (the seed study's section 5.2):
 
-1. COM acceleration from the measured force, ``u'' = (GRF - M g) / M`` (DESIGN.md 2.1).
+1. COM acceleration from the measured force, ``u'' = (GRF - M g) / M`` (docs/science.md 1).
 2. A zero-phase Butterworth high-pass at 0.15 Hz removes the static offset and slow drift.
    (A wrong mass or a sensor gain error shows as an offset, which the filter removes, but
    it also scales u, u' and u''; only ``--rescale-to-mass`` corrects a gain error.)
@@ -70,7 +70,7 @@ _TREND_PASSES = 2
 def com_acceleration(record: Record) -> FloatArray:
     """Vertical acceleration of the body centre of mass from the measured GRF.
 
-    ``u'' = (GRF - M g) / M`` with g = 9.81 m/s^2 (DESIGN.md 2.1), u positive upwards.
+    ``u'' = (GRF - M g) / M`` with g = 9.81 m/s^2 (docs/science.md 1), u positive upwards.
 
     Parameters
     ----------
@@ -342,7 +342,7 @@ def highpass(
 class COMResponse:
     """Vertical centre-of-mass response of a walking person, derived from a GRF record.
 
-    The three responses are the observation vector of the identification (DESIGN.md 2.3).
+    The three responses are the observation vector of the identification (docs/science.md 3).
 
     Parameters
     ----------
@@ -430,7 +430,7 @@ def preprocess(
     highpass_hz: float = DEFAULT_HIGHPASS_HZ,
     order: int = DEFAULT_FILTER_ORDER,
 ) -> COMResponse:
-    """COM acceleration, velocity and displacement of a record (DESIGN.md 2.2, steps 1-3).
+    """COM acceleration, velocity and displacement of a record (docs/science.md 2, steps 1-3).
 
     With ``highpass_hz > 0`` (default 0.15 Hz, the seed's):
 

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-#: Standard gravity used throughout the workbench [m/s^2] (DESIGN.md 2.1).
+#: Standard gravity used throughout the workbench [m/s^2] (docs/science.md 1).
 G_M_S2 = 9.81
 
 FloatArray = NDArray[np.float64]

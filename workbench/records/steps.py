@@ -1,6 +1,6 @@
 """Footfall steps, pacing frequency and static balance of a walking record.
 
-DESIGN.md section 2.2, steps 4-6 (the seed study's section 5.2): the COM acceleration is cut
+docs/science.md 2, steps 4-6 (the seed study's section 5.2): the COM acceleration is cut
 into single footfall steps "peak to peak" (in walking, the total vertical GRF has one
 dominant peak per step, just after each heel strike), the pacing (step) frequency is
 estimated from the spectrum and from the footfall times, and the mean force over whole

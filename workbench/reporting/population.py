@@ -4,7 +4,7 @@
 embedded as data URIs), the same report as Markdown (figures as PNG files beside it), and
 every table as CSV:
 
-- ``table2.csv``: the seed's Table 2 literature rows (DESIGN.md 6) beside "this study", the
+- ``table2.csv``: the seed's Table 2 literature rows (docs/science.md 7) beside "this study", the
   fitted laws with their natural-frequency and damping-ratio ranges at f_p 1.5-2.5 Hz;
 - ``laws.csv``: slope and intercept with 95 % intervals, residual sd, R^2, normality tests;
 - ``lognormal.csv``: BLF2 and BLF3 lognormal parameters with intervals, goodness of fit, AIC
@@ -40,7 +40,7 @@ from workbench.reporting.figures import save_figure
 
 __all__ = ["SEED_TABLE2", "population_report", "run_population_demo", "table2_rows"]
 
-#: The seed's Table 2 (DESIGN.md 6): reference, posture, natural frequency, damping ratio.
+#: The seed's Table 2 (docs/science.md 7): reference, posture, natural frequency, damping ratio.
 SEED_TABLE2: tuple[tuple[str, str, str, str], ...] = (
     ("Wei 1998", "sitting", "5.0", "0.45"),
     ("Falati 1999", "sitting", "10.43", "0.45-0.55"),
