@@ -128,9 +128,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                     continue
                 if insp is None:
                     insp, truth, extra = simulate(i, which)
-                settings = IdentifySettings(method=method, obs_noise=args.obs_noise, **extra)
+                settings = IdentifySettings.from_flat(
+                    method=method, obs_noise=args.obs_noise, **extra
+                )
                 t0 = time.perf_counter()
-                result = identify(insp, settings)
+                result = identify(insp, settings=settings)
                 row = {
                     "record": i,
                     "method": method,

@@ -117,7 +117,7 @@ def find_segments(
     labels = [f"treadmill-{i}" for i in range(1, len(plateaus) + 1)]
     for label, plateau in zip(labels, plateaus, strict=True):
         half_step = 0.5 / plateau.pacing_hz
-        cut = record.slice_time(plateau.start_s - half_step, plateau.stop_s + half_step)
+        cut = record.slice(plateau.start_s - half_step, plateau.stop_s + half_step)
         segments.append(Segment(label, "treadmill", cut, plateau))
     info["treadmill"] = {"inspection": insp, "plateaus": plateaus, "labels": labels}
     insole = EMBEDDED["insole"]
@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = parser.parse_args(argv)
     if args.max_duration is not None and args.max_duration <= 0:
         parser.error("--max-duration must be a positive number of seconds")
-    settings = IdentifySettings(
+    settings = IdentifySettings.from_flat(
         method=args.method,
         particles=args.particles,
         obs_noise=args.obs_noise,
@@ -289,12 +289,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         record = seg.record
         if args.max_duration is not None:
             t0_s = float(record.time_s[0])
-            record = record.slice_time(t0_s, t0_s + args.max_duration)
+            record = record.slice(t0_s, t0_s + args.max_duration)
         rescale = seg.key == "insole" and not args.no_rescale
         print(f"[{seg.label}] identifying {record} ...", file=sys.stderr, flush=True)
         started = time.perf_counter()
-        insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=rescale)
-        result = identify(insp, settings)
+        insp = inspect_record(
+            record, highpass_hz=settings.preprocessing.highpass_hz, rescale=rescale
+        )
+        result = identify(insp, settings=settings)
         seconds = time.perf_counter() - started
         row = summarise(seg, result, seconds)
         row["rescaled"] = rescale
@@ -330,8 +332,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     atomic_write_json(json_path, summary)
 
     print(
-        f"method {settings.method}, {settings.n_particles or 'no'} particles, noise "
-        f"{settings.obs_noise}, force check {'on' if settings.force_check else 'off'}"
+        f"method {settings.method.name}, {settings.n_particles or 'no'} particles, noise "
+        f"{settings.noise.obs_noise}, force check {'on' if settings.force_check else 'off'}"
     )
     _print_table(rows)
     print()

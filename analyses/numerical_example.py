@@ -135,7 +135,7 @@ def _blf(coef: np.ndarray, mass_kg: float) -> np.ndarray:
 
 def _settings(method: str, args: argparse.Namespace) -> IdentifySettings:
     particles = {"pf": args.pf_particles, "rbpf": args.rbpf_particles}.get(method)
-    return IdentifySettings(
+    return IdentifySettings.from_flat(
         method=method,
         particles=particles,
         obs_noise=args.obs_noise,
@@ -162,11 +162,11 @@ def _checkpoint_run(
     common: dict[str, Any] = {
         "n_particles": settings.n_particles,
         "seed": settings.seed,
-        "resampling": settings.resampling,
-        "ess_threshold": settings.ess_threshold,
+        "resampling": settings.flat()["resampling"],
+        "ess_threshold": settings.flat()["ess_threshold"],
     }
     if method == "pf":
-        out = run_pf(problem, force_proposal=settings.force_proposal, **common)
+        out = run_pf(problem, force_proposal=settings.flat()["force_proposal"], **common)
     else:
         out = run_rbpf(problem, **common)
     return out.mean[-1], out.sd[-1], out.piece_coefficients_mean[-1]

@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     out = Path(args.out)
     plan = study_plan(design, seed=args.seed)
     manifest = write_study(plan, out / "study", design)
-    settings = IdentifySettings(
+    settings = IdentifySettings.from_flat(
         **STUDY_SETTINGS,
         particles=args.particles,
         force_check=not args.no_force_check,
@@ -116,11 +116,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     )
     results = pd.read_csv(batch_dir / "results.csv")
     fit = fit_population(results, source=str(batch_dir))
-    cov = coverage(fit.summary, laws)
+    cov = coverage(fit.to_json(), laws)
     # The same fit to the generating values themselves separates the study's sampling
     # variation (present even with a perfect identification) from identification error.
     truth = plan.assign(path="records/" + plan.record + ".csv")
-    truth_cov = coverage(fit_population(truth, source="truth").summary, laws)
+    truth_cov = coverage(fit_population(truth, source="truth").to_json(), laws)
     merged = results.merge(truth, on="path", suffixes=("", "_true"))
     errors = {
         c: {
@@ -153,8 +153,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "records": len(plan),
         "identified": len(results),
         "failed": summary.failed,
-        "records_used": fit.summary["records_used"],
-        "records_excluded": fit.summary["records_excluded"],
+        "records_used": fit.population_json["records_used"],
+        "records_excluded": fit.population_json["records_excluded"],
         "coverage": cov,
         "identification_error": errors,
         "record_band_coverage": band_coverage,

@@ -175,9 +175,9 @@ def _run(
 
 def real_records(seconds: float) -> list[tuple[str, Any]]:
     """Return the two embedded real records, cut to ``seconds`` (insole rescaled to M g)."""
-    insole = load_record(embedded_path("insole"), mass_kg=83.0).slice_time(10.0, 10.0 + seconds)
+    insole = load_record(embedded_path("insole"), mass_kg=83.0).slice(10.0, 10.0 + seconds)
     insole = inspect_record(insole, rescale=True).record
-    tread = load_record(embedded_path("treadmill")).slice_time(75.0, 75.0 + seconds)
+    tread = load_record(embedded_path("treadmill")).slice(75.0, 75.0 + seconds)
     return [("insole", insole), ("treadmill", tread)]
 
 
@@ -220,11 +220,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         base = demo_settings().replace(method="pf", particles=1000)
         found["pf"] = _run("pf", [demo_record()], base, PF_LEVELS, args)
     if args.part in ("study", "all"):
-        base = IdentifySettings(**STUDY_SETTINGS, particles=64)
+        base = IdentifySettings.from_flat(**STUDY_SETTINGS, particles=64)
         records = study_records(args.study_people, args.seed)
         found["study"] = _run("study", records, base, STUDY_LEVELS, args)
     if args.part in ("real", "all"):
-        base = IdentifySettings(particles=128)
+        base = IdentifySettings.from_flat(particles=128)
         found["real"] = _run("real", real_records(args.real_seconds), base, REAL_LEVELS, args)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "summary.json").write_text(json.dumps(found, indent=2) + "\n", encoding="utf-8")

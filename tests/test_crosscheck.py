@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -428,6 +429,7 @@ def test_joint_mode_agrees_with_collapsed_and_converges() -> None:
 # -- identify grades identifiability from the MCMC posterior -------------------------------
 def test_identification_result_uses_the_mcmc_posterior() -> None:
     """API: the report's contraction and correlation are the MCMC's after the last step."""
+    from workbench.inference.crosscheck import with_mcmc_identifiability
     from workbench.inference.identify import identify_problem
     from workbench.inference.settings import IdentifySettings
 
@@ -436,8 +438,7 @@ def test_identification_result_uses_the_mcmc_posterior() -> None:
     rbpf = identify_problem(problem, settings)
     before = dict(rbpf.identifiability)
     result = crosscheck(problem, rbpf, seed=1)
-    rbpf.use_crosscheck(result)
-    report = rbpf.identifiability
+    report = with_mcmc_identifiability(rbpf, result).identifiability
     last = result.compared[-1]
     assert report["source"] == f"MCMC posterior after step {last.index} (sequential prior)"
     assert report["filter_report"] == before
@@ -452,10 +453,9 @@ def test_identification_result_uses_the_mcmc_posterior() -> None:
     assert report["max_force_correlation_damping"] is not None
     # A cross-check with no converged step leaves the filter's report alone.
     empty = crosscheck(problem, rbpf, seed=1, max_pieces=1, max_steps=100, min_steps=20)
-    empty.steps[0].converged = False
-    rbpf.identifiability = dict(before)
-    rbpf.use_crosscheck(empty)
-    assert rbpf.identifiability == before
+    empty = dataclasses.replace(empty, steps=[dataclasses.replace(empty.steps[0], converged=False)])
+    assert rbpf.identifiability == before  # the result itself never changes
+    assert with_mcmc_identifiability(rbpf, empty).identifiability == before
 
 
 @pytest.mark.slow

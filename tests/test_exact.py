@@ -388,7 +388,7 @@ def test_simulate_then_identify_in_the_model_class(tmp_path) -> None:
     study = _coverage_study()
     for i in range(3):
         insp, truth, extra = study.simulate(i, "consistent")
-        result = identify(insp, IdentifySettings(method="exact", **extra))
+        result = identify(insp, settings=IdentifySettings.from_flat(method="exact", **extra))
         row = study.assess(result, truth)
         assert row["fine"], row
         if i % 2 == 0:

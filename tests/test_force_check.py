@@ -110,8 +110,10 @@ def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
     from workbench.inference.settings import IdentifySettings
 
     sim, _, _ = _walk(0, variability=True)
-    settings = IdentifySettings(particles=32, obs_noise=0.1, harmonics=3, force_check=False)
-    result = identify(sim.record.slice_time(0.0, 8.0), settings)
+    settings = IdentifySettings.from_flat(
+        particles=32, obs_noise=0.1, harmonics=3, force_check=False
+    )
+    result = identify(sim.record.slice(0.0, 8.0), settings=settings)
     problem = result.problem
     assert "force_model_check" not in result.identifiability
     fake = fc.ForceModelCheck(
@@ -126,8 +128,7 @@ def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
         sentence="C depends on the force model",
     )
     monkeypatch.setattr(fc, "force_model_check", lambda _problem: fake)
-    apply_force_model_check(result, problem)
-    ident = result.identifiability
+    ident = apply_force_model_check(result, problem).identifiability
     assert ident["level"] == "not identified"
     assert not ident["identified_damping"] and not ident["identified_stiffness"]
     assert "estimated jointly" in ident["sentence"]

@@ -89,7 +89,10 @@ def test_netcdf_round_trip(short_record, tmp_path):
     import xarray as xr
 
     path, _ = short_record
-    res = identify(load_record(path), IdentifySettings(particles=32, obs_noise=0.1, harmonics=3))
+    res = identify(
+        load_record(path),
+        settings=IdentifySettings.from_flat(particles=32, obs_noise=0.1, harmonics=3),
+    )
     nc = res.to_netcdf(tmp_path / "r.nc")
     with xr.open_dataset(nc, engine="scipy") as ds:
         assert ds["piece_coefficients_mean"].shape == (res.problem.n_pieces, 7)
@@ -101,7 +104,9 @@ def test_config_file_and_flag_precedence(tmp_path):
     cfg = tmp_path / "s.toml"
     cfg.write_text('method = "exact"\nharmonics = 6\nobs_noise = "seed"\nseed = 3\n')
     s = IdentifySettings.from_toml(cfg, harmonics=8, method=None)
-    assert (s.method, s.harmonics, s.obs_noise, s.seed) == ("exact", 8, "seed", 3)
+    assert (s.method.name, s.model.harmonics, s.noise.obs_noise, s.seed) == ("exact", 8, "seed", 3)
+    # The flat form (the --config file keys) round-trips.
+    assert IdentifySettings.from_flat(**s.to_json()) == s
 
 
 @pytest.mark.parametrize(
@@ -129,21 +134,21 @@ def test_prior_bound_posterior_is_not_called_identified(short_record):
     from workbench.inference.problem import StiffnessDampingPrior
 
     path, truth = short_record
-    settings = IdentifySettings(particles=64, obs_noise=0.02, harmonics=4, method="rbpf")
+    settings = IdentifySettings.from_flat(particles=64, obs_noise=0.02, harmonics=4, method="rbpf")
     rec = load_record(path)
-    from workbench.inference.identify import identify_problem, problem_from_inspection
+    from workbench.inference.identify import compile_problem, identify_problem
     from workbench.inference.noise import apply_noise_setting
     from workbench.records.inspection import inspect_record
 
-    problem = problem_from_inspection(inspect_record(rec), settings)
+    problem = compile_problem(inspect_record(rec), settings)
     # A box that excludes the true stiffness (far above it): the posterior piles at its floor.
     k = truth["stiffness_n_per_m"]
     problem = problem.with_prior(StiffnessDampingPrior((100.0, 3000.0), (3 * k, 4 * k)))
     problem, _ = apply_noise_setting(problem, 0.02)
     res = identify_problem(problem, settings)
-    from workbench.inference.identify import _downgrade_untrustworthy
+    from workbench.inference.identify import downgrade_untrustworthy
 
-    _downgrade_untrustworthy(res)
+    res = downgrade_untrustworthy(res)
     assert "stiffness_n_per_m" in res.parameters_at_prior_bound
     assert res.identifiability["level"] == "not identified"
     assert not res.to_json()["diagnostics"]["trustworthy"]
@@ -164,7 +169,7 @@ def test_real_insole_record_identifies(capsys):
 @pytest.mark.slow
 def test_real_treadmill_steady_segment_identifies(tmp_path, capsys):
     """One steady-speed stretch of the treadmill trial (about 2.2 Hz, 75-100 s)."""
-    rec = load_record(embedded_path("treadmill")).slice_time(75.0, 100.0)
+    rec = load_record(embedded_path("treadmill")).slice(75.0, 100.0)
     path = tmp_path / "treadmill_fast.csv"
     save_record(rec.replace(metadata={}), path)
     code = main(["identify", str(path), "--json"])

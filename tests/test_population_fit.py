@@ -29,7 +29,7 @@ def _table(n, seed, **overrides):
 def test_fit_recovers_sampled_laws():
     fit = fit_population(_table(3000, seed=2))
     laws = PopulationLaws()
-    s = fit.summary
+    s = fit.population_json
     for key in ("natural_frequency_hz", "damping_ratio", "blf1"):
         law, true = s["laws"][key], getattr(laws, key)
         assert law["slope_ci"][0] < true.slope < law["slope_ci"][1]
@@ -57,7 +57,7 @@ def test_normality_tests_reject_skewed_residuals():
     rng = np.random.default_rng(5)
     table = _table(600, seed=3)
     table["natural_frequency_hz"] = 0.3 * table.pacing_hz + 1.4 + rng.exponential(0.1, 600)
-    law = fit_population(table).summary["laws"]["natural_frequency_hz"]
+    law = fit_population(table).population_json["laws"]["natural_frequency_hz"]
     assert law["residuals"]["shapiro_p"] < 0.01
     assert law["residuals"]["anderson_darling_p"] < 0.01
     assert not law["residuals"]["normal_at_5pct"]
@@ -69,7 +69,7 @@ def test_gev_preferred_when_data_are_gev():
     table = _table(2000, seed=4)
     table["blf2"] = stats.genextreme.rvs(0.3, loc=0.06, scale=0.01, size=2000, random_state=1)
     table = table[table.blf2 > 0]
-    assert fit_population(table).summary["lognormal"]["blf2"]["preferred_by_aic"] == "gev"
+    assert fit_population(table).population_json["lognormal"]["blf2"]["preferred_by_aic"] == "gev"
 
 
 def test_not_identified_and_nan_records_are_excluded():
@@ -78,13 +78,13 @@ def test_not_identified_and_nan_records_are_excluded():
     table.loc[:4, "natural_frequency_hz"] = 9.0  # a prior corner: must not enter the fit
     table.loc[5, "blf2"] = np.nan
     fit = fit_population(table)
-    assert fit.summary["records_used"] == 34
-    assert fit.summary["records_excluded"] == 6
+    assert fit.population_json["records_used"] == 34
+    assert fit.population_json["records_excluded"] == 6
     assert sorted(fit.excluded.path) == [f"r{i:04d}.csv" for i in range(6)]
     assert "not identified" in fit.excluded.reason.iloc[0]
-    assert fit.summary["laws"]["natural_frequency_hz"]["residual_sd"] < 0.3
+    assert fit.population_json["laws"]["natural_frequency_hz"]["residual_sd"] < 0.3
     kept = fit_population(table, keep_not_identified=True)
-    assert kept.summary["records_used"] == 39
+    assert kept.population_json["records_used"] == 39
     with pytest.raises(UsageError, match="fewer than"):
         fit_population(table.iloc[:8])
     with pytest.raises(UsageError, match="blf3"):
@@ -119,11 +119,11 @@ def test_synthetic_study_recovers_generating_laws(tmp_path):
     manifest = write_study(plan, tmp_path / "study", design)
     from workbench.inference.settings import IdentifySettings
 
-    settings = IdentifySettings(**STUDY_SETTINGS, particles=16, force_check=False, seed=1)
+    settings = IdentifySettings.from_flat(**STUDY_SETTINGS, particles=16, force_check=False, seed=1)
     summary = run_batch(manifest, tmp_path / "batch", settings=settings, workers=2)
     assert summary.failed == 0
     results = pd.read_csv(summary.results_csv)
-    fit = fit_population(results).summary
+    fit = fit_population(results).to_json()
     assert fit["records_excluded"] == 0
     laws = PopulationLaws()
     for key in ("natural_frequency_hz", "damping_ratio", "blf1"):

@@ -66,7 +66,9 @@ def test_attach_to_diagnosis_adds_the_baseline_keys():
     walk = _walk(15.0)
     result = identify(
         walk.record,
-        IdentifySettings(particles=16, harmonics=4, obs_noise="seed", force_check=False),
+        settings=IdentifySettings.from_flat(
+            particles=16, harmonics=4, obs_noise="seed", force_check=False
+        ),
     )
     one = one_step_from_result(result)
     assert one.damping_ns_per_m == pytest.approx(result.estimates["damping_ns_per_m"])
@@ -92,7 +94,9 @@ def _asymmetry_check(asymmetric: bool):
     )
     result = identify(
         sim.record,
-        IdentifySettings(particles=16, harmonics=6, obs_noise="seed", force_check=False),
+        settings=IdentifySettings.from_flat(
+            particles=16, harmonics=6, obs_noise="seed", force_check=False
+        ),
     )
     return posterior_predictive(result, replicates=49, seed=0)
 

@@ -307,7 +307,7 @@ def test_round_trip_identical_arrays_and_metadata(tmp_path: Path) -> None:
 
 def test_round_trip_of_loaded_record_drops_loader_keys(tmp_path: Path) -> None:
     rec = load_record(embedded_path("insole"))
-    rec = rec.slice_time(0.0, 10.0)
+    rec = rec.slice(0.0, 10.0)
     csv_path, json_path = save_record(rec, tmp_path / "insole.csv")
     side = json.loads(json_path.read_text())
     assert side["mass_kg"] == 83.0

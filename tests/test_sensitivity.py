@@ -100,7 +100,7 @@ def test_design_points_and_seeds():
     _, full = build_design("factorial", levels)
     assert len(full) == 2 * 3 and len({p.key for p in full}) == 6
     settings, over = full[-1].configure(base)
-    assert settings.harmonics == 8 and over.obs_scale == (1.0, 1.0, 4.0)
+    assert settings.model.harmonics == 8 and over.obs_scale == (1.0, 1.0, 4.0)
     # A run's seed depends on the record, the point and the replicate only.
     s = point_seed(0, "rec", "harmonics=2", 1)
     assert s == point_seed(0, "rec", "harmonics=2", 1)

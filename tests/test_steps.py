@@ -424,6 +424,6 @@ def test_static_balance_warning_thresholds() -> None:
 def test_static_balance_needs_matching_steps() -> None:
     record, _ = gait_record(1.8, 10.0)
     steps = segment_steps(preprocess(record))
-    shorter = record.slice_time(0.0, 3.0)
+    shorter = record.slice(0.0, 3.0)
     with pytest.raises(UsageError, match="do not fit"):
         static_balance(shorter, steps)

@@ -425,7 +425,7 @@ def test_sliced_record_does_not_use_stale_line_numbers(tmp_path: Path) -> None:
     path = write(tmp_path / "r.csv", {"time": t, "grf": data["grf"]})
     rec = load_record(path, mass_kg=MASS, validate=False)
     with pytest.raises(InputError) as err:
-        validate_record(rec.slice_time(1.0, 4.0))
+        validate_record(rec.slice(1.0, 4.0))
     check_message(str(err.value), path, "sample 201, column 'time'", "duplicate")
 
 

@@ -3,10 +3,100 @@
 Identify a walking pedestrian's SMD model (stiffness, damping and biomechanical force) from
 vertical ground reaction force (GRF) records, criticise it against measurements, fit population
 laws and simulate pedestrians on structures.
+
+The notebook session::
+
+    import workbench as wb
+    rec = wb.datasets.load("treadmill")
+    model = wb.SMDModel(harmonics=6) + wb.effects.GaitAsymmetry()
+    res = wb.identify(rec.slice(10, 40), model, method="rbpf", seed=1)
+    print(res.summary()); res.params; res.conf_int(); res.plot_diagnostics()
+    d = wb.diagnose(rec.slice(10, 70), model); print(d.summary())
+
+One pedestrian model (:class:`SMDModel`, effects composed with ``+``) is what the simulator,
+every identification method, the criticism and the human-structure interaction consume;
+methods are objects with their own options (:class:`RBPF`, :class:`PF`, :class:`Exact`).
+The names below are loaded on first use, so that the command line starts quickly.
 """
 
-from workbench.errors import InputError, WorkbenchError
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from workbench.errors import InputError, UsageError, WorkbenchError
 from workbench.records.record import G_M_S2, Record
 
-__all__ = ["G_M_S2", "InputError", "Record", "WorkbenchError"]
+if TYPE_CHECKING:
+    from workbench import datasets
+    from workbench.diagnostics.criticism import compare, diagnose
+    from workbench.inference.crosscheck import crosscheck
+    from workbench.inference.identify import identify
+    from workbench.inference.methods import PF, RBPF, Exact
+    from workbench.inference.results import IdentificationResult
+    from workbench.inference.settings import IdentifySettings, NoiseSettings, Preprocessing
+    from workbench.models import effects
+    from workbench.models.smd import SMDModel
+    from workbench.records.io import load_record
+    from workbench.synth.simulate import simulate_walking
+
+__all__ = [
+    "G_M_S2",
+    "PF",
+    "RBPF",
+    "Exact",
+    "IdentificationResult",
+    "IdentifySettings",
+    "InputError",
+    "NoiseSettings",
+    "Preprocessing",
+    "Record",
+    "SMDModel",
+    "UsageError",
+    "WorkbenchError",
+    "compare",
+    "crosscheck",
+    "datasets",
+    "diagnose",
+    "effects",
+    "identify",
+    "load_record",
+    "simulate_walking",
+]
 __version__ = "0.1.0"
+
+#: Where each lazily loaded name lives: ``name -> (module, attribute or None for a module)``.
+_LAZY: dict[str, tuple[str, str | None]] = {
+    "datasets": ("workbench.datasets", None),
+    "effects": ("workbench.models.effects", None),
+    "SMDModel": ("workbench.models.smd", "SMDModel"),
+    "load_record": ("workbench.records.io", "load_record"),
+    "identify": ("workbench.inference.identify", "identify"),
+    "IdentificationResult": ("workbench.inference.results", "IdentificationResult"),
+    "IdentifySettings": ("workbench.inference.settings", "IdentifySettings"),
+    "NoiseSettings": ("workbench.inference.settings", "NoiseSettings"),
+    "Preprocessing": ("workbench.inference.settings", "Preprocessing"),
+    "RBPF": ("workbench.inference.methods", "RBPF"),
+    "PF": ("workbench.inference.methods", "PF"),
+    "Exact": ("workbench.inference.methods", "Exact"),
+    "crosscheck": ("workbench.inference.crosscheck", "crosscheck"),
+    "diagnose": ("workbench.diagnostics.criticism", "diagnose"),
+    "compare": ("workbench.diagnostics.criticism", "compare"),
+    "simulate_walking": ("workbench.synth.simulate", "simulate_walking"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, attribute = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'workbench' has no attribute {name!r}") from None
+    value = importlib.import_module(module)
+    if attribute is not None:
+        value = getattr(value, attribute)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -208,10 +208,10 @@ def _real_stretches(records: dict[str, tuple[Record, Inspection]]) -> dict[str, 
         stop = min(plateau.stop_s + half_step, start + REAL_STRETCH_S)
     else:  # no steady stretch: the record's start
         start, stop = float(record.time_s[0]), float(record.time_s[0]) + REAL_STRETCH_S
-    out["treadmill"] = record.slice_time(start, stop)
+    out["treadmill"] = record.slice(start, stop)
     record, _ = records["insole"]
     t0 = float(record.time_s[0])
-    out["insole"] = record.slice_time(t0, t0 + REAL_STRETCH_S)
+    out["insole"] = record.slice(t0, t0 + REAL_STRETCH_S)
     return out
 
 

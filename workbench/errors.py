@@ -11,8 +11,12 @@ from __future__ import annotations
 from os import PathLike
 
 
-class WorkbenchError(Exception):
-    """A problem the user can fix; ``str(err)`` is the one sentence to show them."""
+class WorkbenchError(ValueError):
+    """A problem the user can fix; ``str(err)`` is the one sentence to show them.
+
+    It is a :class:`ValueError` (a bad value reached the workbench), so code that guards a
+    call with ``except ValueError`` catches it as it would numpy's or pandas' own.
+    """
 
     exit_code: int = 2
 

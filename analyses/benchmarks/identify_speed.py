@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402  (after the thread-pool settings above)
 from workbench.inference.exact import exact_posterior  # noqa: E402
 from workbench.inference.noise import apply_noise_setting  # noqa: E402
 from workbench.inference.pf import run_pf  # noqa: E402
-from workbench.inference.problem import SEED_STATE_FRACTION, build_problem  # noqa: E402
+from workbench.inference.problem import build_problem  # noqa: E402
 from workbench.inference.rbpf import run_rbpf  # noqa: E402
 from workbench.inference.settings import IdentifySettings  # noqa: E402
 from workbench.records.inspection import inspect_record  # noqa: E402
@@ -55,10 +55,7 @@ from workbench.synth.simulate import simulate_walking  # noqa: E402
 
 def _default_state_fraction() -> float:
     """Return the settings' process-noise fraction for the Kalman-based methods."""
-    value = IdentifySettings().state_noise_fraction
-    if value is None:  # unset: each method has its own default
-        value = getattr(IdentifySettings(method="rbpf"), "state_fraction", SEED_STATE_FRACTION)
-    return float(value)
+    return float(IdentifySettings.from_flat(method="rbpf").state_fraction)
 
 
 def _timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, float, float]:

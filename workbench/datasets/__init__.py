@@ -1,69 +1,51 @@
 """Embedded default data: two real walking records and a small synthetic set.
 
+``load(name)`` returns one as a :class:`~workbench.records.record.Record`, with its body
+mass::
+
+    import workbench as wb
+    rec = wb.datasets.load("treadmill")        # real: instrumented treadmill, 143 s
+    rec = wb.datasets.load("seed_individual")  # synthetic, with a JSON sidecar of its truth
+
 See ``README.md`` in this folder for provenance and licences; keep that attribution in any
-copy. Body masses of the real records are not in their files and are given here.
+copy.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from importlib import resources
-from pathlib import Path
+from workbench.datasets.catalogue import (
+    EMBEDDED,
+    EmbeddedRecord,
+    embedded_path,
+    names,
+    synthetic_paths,
+)
+from workbench.errors import UsageError
+from workbench.records.io import load_record
+from workbench.records.record import Record
 
-__all__ = ["EMBEDDED", "EmbeddedRecord", "embedded_path", "synthetic_paths"]
-
-
-@dataclass(frozen=True)
-class EmbeddedRecord:
-    """One embedded real record and what the workbench needs to know to read it."""
-
-    key: str
-    filename: str
-    mass_kg: float
-    description: str
-    attribution: str
+__all__ = ["EMBEDDED", "EmbeddedRecord", "embedded_path", "load", "names", "synthetic_paths"]
 
 
-EMBEDDED: dict[str, EmbeddedRecord] = {
-    "treadmill": EmbeddedRecord(
-        key="treadmill",
-        filename="real/treadmill_01_01_grf.mot",
-        mass_kg=77.3,
-        description="Instrumented split-belt treadmill, 143 s, speed changes (OpenSim .mot)",
-        attribution=(
-            "Camargo et al. (2021) J Biomech 119:110320, CC BY 4.0; re-processed by "
-            "AddBiomechanics, nimblephysics (BSD-2-Clause)"
-        ),
-    ),
-    "insole": EmbeddedRecord(
-        key="insole",
-        filename="real/GaCo01_01.txt",
-        mass_kg=83.0,
-        description="Force-sensing insoles, overground, 121 s, calibration 33 % high (PhysioNet)",
-        attribution=(
-            "PhysioNet gaitpdb v1.0.0, Hausdorff et al.; Yogev et al. (2005); "
-            "Goldberger et al. (2000); ODC-By 1.0"
-        ),
-    ),
-}
+def load(name: str, **options: object) -> Record:
+    """Load an embedded record by name.
 
+    Parameters
+    ----------
+    name : str
+        ``"treadmill"`` or ``"insole"`` (real records) or the name of a synthetic record
+        (``"seed_individual"``, ...); :func:`names` lists them.
+    **options
+        Passed to :func:`~workbench.records.io.load_record` (``mass_kg=...``,
+        ``allow_negative_force=...``).
 
-def _root() -> Path:
-    return Path(str(resources.files("workbench.datasets")))
-
-
-def embedded_path(key: str) -> Path:
-    """Path of an embedded real record by key (``"treadmill"`` or ``"insole"``)."""
-    try:
-        return _root() / EMBEDDED[key].filename
-    except KeyError:
-        from workbench.errors import UsageError
-
-        raise UsageError(
-            f"unknown embedded record {key!r}; choose one of {', '.join(EMBEDDED)}"
-        ) from None
-
-
-def synthetic_paths() -> list[Path]:
-    """CSV files of the embedded synthetic set, sorted by name."""
-    return sorted((_root() / "synthetic").glob("*.csv"))
+    Returns
+    -------
+    Record
+    """
+    if name in EMBEDDED:
+        return load_record(embedded_path(name), **options)  # type: ignore[arg-type]
+    for path in synthetic_paths():
+        if path.stem == name:
+            return load_record(path, **options)  # type: ignore[arg-type]
+    raise UsageError(f"no embedded record is called {name!r}; choose one of {', '.join(names())}")

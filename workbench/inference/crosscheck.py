@@ -535,7 +535,7 @@ class StepTarget:
 
 
 # -- results ------------------------------------------------------------------------------
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class StepCheck:
     """The cross-check of one step.
 
@@ -638,7 +638,7 @@ def _num(x: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class CrosscheckResult:
     """What :func:`crosscheck` returns.
 
@@ -742,6 +742,31 @@ class CrosscheckResult:
                 "acceptance": [0.1, 0.9],
             },
         }
+
+    def summary(self) -> str:
+        """Return a text table: per compared step the filter's and the MCMC's (C, K), z."""
+        lines = [
+            f"Cross-check of {self.method} against per-step MCMC ({self.mode}, {self.prior} "
+            f"prior), {len(self.steps)} steps",
+            "",
+            f"{'step':>5}{'filter C':>11}{'MCMC C':>11}{'z C':>7}{'filter K':>11}{'MCMC K':>11}"
+            f"{'z K':>7}  flags",
+        ]
+        for s in self.steps:
+            z = s.z if s.converged else np.array([np.nan, np.nan])
+            lines.append(
+                f"{s.index:>5}{s.pf_mean[0]:>11.1f}{s.mcmc_mean[0]:>11.1f}{z[0]:>7.2f}"
+                f"{s.pf_mean[1]:>11.0f}{s.mcmc_mean[1]:>11.0f}{z[1]:>7.2f}  "
+                + ("; ".join(s.flags) if s.flags else "")
+            )
+        diag = self.diagnostics()
+        lines += [
+            "",
+            self.verdict(),
+            f"MCMC: R-hat max {diag['rhat_max']}, bulk ESS min {diag['ess_bulk_min']}, "
+            f"{diag['converged_steps']} of {len(self.steps)} steps converged",
+        ]
+        return "\n".join(lines)
 
     def to_json(self) -> dict[str, Any]:
         """Return the ``workbench crosscheck`` JSON object (docs/contracts.md)."""
@@ -1140,8 +1165,10 @@ def crosscheck(
                     res = sample(target)
                     error["resampled_exact"] = True
                     grid.advance(model)
-        check = _compare(prob, output, j, res, target.free_noise, moments, ess, unique)
-        check.surrogate_error = error
+        check = replace(
+            _compare(prob, output, j, res, target.free_noise, moments, ess, unique),
+            surrogate_error=error,
+        )
         checks.append(check)
         if keep_inference_data:
             completions.append(_completion(model, target, res, _step_seed(seed + 1, j)))
@@ -1195,7 +1222,7 @@ def crosscheck(
         settings=settings,
     )
     if keep_inference_data:
-        result.inference_data = build_inference_data(prob, result, completions)
+        result = replace(result, inference_data=build_inference_data(prob, result, completions))
     return result
 
 
@@ -1220,7 +1247,7 @@ def recompare(
         check = _compare(
             problem, output, old.index, old.mcmc, free, (old.prior_mean, old.prior_sd), ess, unique
         )
-        check.surrogate_error = old.surrogate_error  # the same MCMC run
+        check = replace(check, surrogate_error=old.surrogate_error)  # the same MCMC run
         checks.append(check)
     settings = dict(result.settings)
     settings["filter"] = {
@@ -1519,16 +1546,30 @@ def mcmc_identifiability(
     return report
 
 
-def apply_mcmc_identifiability(
-    ident: Any, problem: IdentificationProblem, result: CrosscheckResult
-) -> None:
-    """Replace an identification result's identifiability report by the MCMC's, where run.
+def with_mcmc_identifiability(
+    ident: IdentificationResult, result: CrosscheckResult
+) -> IdentificationResult:
+    """Return the identification result graded by its cross-check's MCMC posterior.
 
-    The filter's own report is kept under ``"filter_report"``; nothing changes when the
-    MCMC gives no report (no converged step).
+    Where one of the cross-check's steps converged, the identifiability report is that of
+    the MCMC posterior after the last such step (contraction, width and correlations from
+    the MCMC draws; its ``source`` says so) and the filter's own report is kept under
+    ``"filter_report"``; otherwise the result comes back unchanged.
+
+    Parameters
+    ----------
+    ident : IdentificationResult
+        The filter's result on a problem.
+    result : CrosscheckResult
+        The cross-check of that filter on the same problem.
+
+    Returns
+    -------
+    IdentificationResult
+        A new result (results are immutable).
     """
-    report = mcmc_identifiability(problem, result)
+    report = mcmc_identifiability(ident.problem, result)
     if not report:
-        return
+        return ident
     report["filter_report"] = dict(ident.identifiability)
-    ident.identifiability = report
+    return ident.replace(identifiability=report)

@@ -93,8 +93,10 @@ from numpy.typing import NDArray
 
 from workbench.errors import UsageError
 from workbench.inference.identifiability import (
+    ForceCorrelation,
     IdentifiabilityReport,
-    identifiability_from_posterior,
+    force_correlation,
+    identifiability_report,
 )
 from workbench.inference.problem import IdentificationProblem, NoiseModel, StiffnessDampingPrior
 from workbench.records.record import G_M_S2
@@ -108,6 +110,8 @@ __all__ = [
     "ModeSearch",
     "exact_posterior",
     "find_mode",
+    "force_correlation_from_posterior",
+    "identifiability_from_posterior",
     "kalman_loglik",
 ]
 
@@ -1149,6 +1153,75 @@ def _force_posterior(
         node_weights=w,
         node_theta_mean=node_mean,
         node_theta_var=node_var,
+    )
+
+
+def force_correlation_from_posterior(posterior: ExactPosterior) -> ForceCorrelation | None:
+    """Return the force correlation over the nodes of an exact (grid) posterior.
+
+    :func:`~workbench.inference.identifiability.force_correlation` at the grid's nodes.
+
+    Uses the nodes whose conditional force posteriors the exact method kept (the nodes that
+    hold all but a negligible part of the posterior mass, with their renormalised weights):
+    the quadrature limit of drawing (C, K) from the grid posterior, without its noise.
+
+    Parameters
+    ----------
+    posterior : ExactPosterior
+        Result of :func:`~workbench.inference.exact.exact_posterior`.
+
+    Returns
+    -------
+    ForceCorrelation or None
+        None when the posterior carries no force-coefficient moments (a custom
+        log-likelihood without them).
+    """
+    force = posterior.force
+    if force is None:
+        return None
+    return force_correlation(
+        force.node_damping,
+        force.node_stiffness,
+        force.node_weights,
+        force.node_theta_mean,
+        force.node_theta_var,
+        force.coefficient_names,
+    )
+
+
+def identifiability_from_posterior(
+    posterior: ExactPosterior, **thresholds: float
+) -> IdentifiabilityReport:
+    """Return the identifiability report of an exact posterior (its sd, prior, correlations).
+
+    Parameters
+    ----------
+    posterior : ExactPosterior
+        Result of :func:`~workbench.inference.exact.exact_posterior`.
+    **thresholds : float
+        ``well_identified``, ``mostly_prior``, ``high_correlation`` (see
+        :func:`identifiability_report`).
+
+    Returns
+    -------
+    IdentifiabilityReport
+    """
+    fc = force_correlation_from_posterior(posterior)
+    force = (fc.max_damping, fc.max_stiffness) if fc is not None else (np.nan, np.nan)
+    # On a face of the box only if the MAP is there *and* the grid's mass piles up against
+    # it (a flat likelihood can leave the optimiser anywhere, including a corner).
+    edge = (
+        tuple(bool(b) for b in posterior.laplace.at_bound)
+        if posterior.grid_kind != "prior box"
+        else (False, False)
+    )
+    return identifiability_report(
+        posterior.sd,
+        posterior.prior.sd,
+        posterior.correlation,
+        force,
+        on_prior_edge=(edge[0], edge[1]),
+        **thresholds,
     )
 
 

@@ -43,15 +43,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-
-if TYPE_CHECKING:  # the exact posterior imports this module; avoid the cycle at run time
-    from workbench.inference.exact import ExactPosterior
 
 __all__ = [
     "HIGH_CORRELATION",
@@ -60,8 +57,6 @@ __all__ = [
     "ForceCorrelation",
     "IdentifiabilityReport",
     "force_correlation",
-    "force_correlation_from_posterior",
-    "identifiability_from_posterior",
     "identifiability_report",
 ]
 
@@ -410,70 +405,3 @@ def force_correlation(
     max_c, arg_c = _safe_max(jc, names)
     max_k, arg_k = _safe_max(jk, names)
     return ForceCorrelation(jc, jk, bc, bk, max_c, max_k, arg_c, arg_k)
-
-
-def force_correlation_from_posterior(posterior: ExactPosterior) -> ForceCorrelation | None:
-    """:func:`force_correlation` over the nodes of an exact (grid) posterior.
-
-    Uses the nodes whose conditional force posteriors the exact method kept (the nodes that
-    hold all but a negligible part of the posterior mass, with their renormalised weights):
-    the quadrature limit of drawing (C, K) from the grid posterior, without its noise.
-
-    Parameters
-    ----------
-    posterior : ExactPosterior
-        Result of :func:`~workbench.inference.exact.exact_posterior`.
-
-    Returns
-    -------
-    ForceCorrelation or None
-        None when the posterior carries no force-coefficient moments (a custom
-        log-likelihood without them).
-    """
-    force = posterior.force
-    if force is None:
-        return None
-    return force_correlation(
-        force.node_damping,
-        force.node_stiffness,
-        force.node_weights,
-        force.node_theta_mean,
-        force.node_theta_var,
-        force.coefficient_names,
-    )
-
-
-def identifiability_from_posterior(
-    posterior: ExactPosterior, **thresholds: float
-) -> IdentifiabilityReport:
-    """:func:`identifiability_report` of an exact posterior (its sd, prior, correlations).
-
-    Parameters
-    ----------
-    posterior : ExactPosterior
-        Result of :func:`~workbench.inference.exact.exact_posterior`.
-    **thresholds : float
-        ``well_identified``, ``mostly_prior``, ``high_correlation`` (see
-        :func:`identifiability_report`).
-
-    Returns
-    -------
-    IdentifiabilityReport
-    """
-    fc = force_correlation_from_posterior(posterior)
-    force = (fc.max_damping, fc.max_stiffness) if fc is not None else (np.nan, np.nan)
-    # On a face of the box only if the MAP is there *and* the grid's mass piles up against
-    # it (a flat likelihood can leave the optimiser anywhere, including a corner).
-    edge = (
-        tuple(bool(b) for b in posterior.laplace.at_bound)
-        if posterior.grid_kind != "prior box"
-        else (False, False)
-    )
-    return identifiability_report(
-        posterior.sd,
-        posterior.prior.sd,
-        posterior.correlation,
-        force,
-        on_prior_edge=(edge[0], edge[1]),
-        **thresholds,
-    )

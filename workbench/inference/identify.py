@@ -1,20 +1,27 @@
-"""Identify a record: preprocess, build the problem, set the noise, run a method, wrap results.
+"""Identify a record: preprocess, compile the model into the problem, run a method, grade.
 
-This is the one function the command line, the demo, the studies and batch work call. The
-steps, with the decisions they take:
+This is the one function the Python API, the command line, the demo, the studies and batch
+work call::
+
+    res = identify(record, SMDModel(harmonics=6) + GaitAsymmetry(), method=RBPF(), seed=1)
+
+The steps, with the decisions they take:
 
 1. inspect the record (validation, preprocessing, steps, pacing, static balance);
-2. build the :class:`~workbench.inference.problem.IdentificationProblem` with the settings'
-   basis, pieces and prior (``"modal"`` scales with body mass; ``"seed"`` is the seed's box);
+2. compile the pedestrian model (:class:`~workbench.models.smd.SMDModel`) into the
+   :class:`~workbench.inference.problem.IdentificationProblem` every method shares: the
+   model's force basis, pieces and pacing, and the prior (``"modal"`` scales with body mass;
+   ``"seed"`` is the seed's box);
 3. set the observation noise (``auto``: maximum marginal likelihood, the default; ``seed``:
    10 % of the RMS of u, u', u''; or a fraction);
-4. run ``rbpf`` (default), ``pf`` (seed-faithful) or ``exact``;
-   with ``settings.effects``, the effects' columns join the force basis as coefficients shared
-   by the whole record (:mod:`workbench.inference.effect_terms`), and the result's
+4. with effects in the model, their columns join the force basis as coefficients shared by
+   the whole record (:mod:`workbench.inference.effect_terms`), and the result's
    ``extra["effects"]`` (``--json`` ``effects``) reports their posterior;
-5. assess identifiability from the posterior: contraction against the prior, C-K correlation
-   and the joint correlation of C and K with the force coefficients (for the filters this
-   uses the Kalman conditional posterior of the coefficients at a subsample of particles).
+5. run the method (:mod:`workbench.inference.methods`: ``RBPF`` by default, ``PF``
+   seed-faithful, ``Exact``);
+6. assess identifiability from the posterior: contraction against the prior, C-K correlation
+   and the joint correlation of C and K with the force coefficients, then the force-model
+   check and the prior-edge and collapse checks, each of which can only downgrade it.
 """
 
 from __future__ import annotations
@@ -25,24 +32,21 @@ from typing import Any
 
 import numpy as np
 
-from workbench.inference.identifiability import force_correlation, identifiability_report
-from workbench.inference.kalman import record_loglik
+from workbench.errors import UsageError
+from workbench.inference.methods import Method
 from workbench.inference.noise import apply_noise_setting
-from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.problem import (
     IdentificationProblem,
     StiffnessDampingPrior,
     build_problem,
 )
 from workbench.inference.results import IdentificationResult
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.settings import IdentifySettings, NoiseSettings, Preprocessing
+from workbench.models.smd import SMDModel
 from workbench.records.inspection import Inspection, inspect_record
 from workbench.records.record import Record
 
-__all__ = ["identify", "identify_problem", "problem_from_inspection"]
-
-#: Particles (a weighted subsample) used to estimate the C/K-force correlation of a filter.
-CORRELATION_DRAWS = 128
+__all__ = ["compile_problem", "identify", "identify_problem"]
 
 
 @dataclass(frozen=True)
@@ -60,68 +64,53 @@ class _NoiseInfo:
         return {"obs_fraction": self.fraction, "source": self.source, "label": label, **self.detail}
 
 
-def problem_from_inspection(insp: Inspection, settings: IdentifySettings) -> IdentificationProblem:
-    """Build the identification problem of an inspected record (noise not yet set)."""
+def compile_problem(insp: Inspection, settings: IdentifySettings) -> IdentificationProblem:
+    """Compile the settings' model on an inspected record into the shared problem.
+
+    The observation noise is not yet set (:func:`identify` sets it).
+
+    Parameters
+    ----------
+    insp : Inspection
+        The inspected record (body mass, COM response, steps, pacing).
+    settings : IdentifySettings
+        Model (force basis, pieces, pacing), noise and priors, method.
+
+    Returns
+    -------
+    IdentificationProblem
+    """
     mass = insp.record.require_mass()
-    prior = StiffnessDampingPrior.seed() if settings.prior == "seed" else None
-    pacing = settings.pacing_hz
-    if pacing is None and settings.pieces == "whole":
-        pacing = insp.pacing.pacing_hz
-    problem = build_problem(
-        insp.com,
-        insp.steps if settings.pieces == "steps" else None,
-        harmonics=settings.harmonics,
-        pacing_hz=pacing,
-        time_basis=settings.time_basis,  # type: ignore[arg-type]
-        pieces=settings.pieces,  # type: ignore[arg-type]
-        state_fraction=settings.state_fraction,
-        observe=settings.observe,
-        prior=prior or StiffnessDampingPrior.from_modal(mass),
+    model = settings.model
+    prior = (
+        StiffnessDampingPrior.seed()
+        if settings.noise.prior == "seed"
+        else StiffnessDampingPrior.from_modal(mass)
     )
-    return problem
+    pacing = model.pacing_hz
+    if pacing is None and model.pieces == "whole":
+        pacing = insp.pacing.pacing_hz
+    return build_problem(
+        insp.com,
+        insp.steps if model.pieces == "steps" else None,
+        harmonics=model.harmonics,
+        pacing_hz=pacing,
+        time_basis=model.time_basis,  # type: ignore[arg-type]
+        pieces=model.pieces,  # type: ignore[arg-type]
+        state_fraction=settings.state_fraction,
+        observe=settings.noise.observe,
+        prior=prior,
+    )
 
 
 def _set_noise(
     problem: IdentificationProblem, settings: IdentifySettings
 ) -> tuple[IdentificationProblem, _NoiseInfo]:
-    problem, estimate = apply_noise_setting(problem, settings.obs_noise)
+    problem, estimate = apply_noise_setting(problem, settings.noise.obs_noise)
     detail: dict[str, Any] = {}
     if estimate is not None:
         detail = {"method": estimate.method, "at_bound": estimate.at_bound}
     return problem, _NoiseInfo(problem.noise.obs_fraction, problem.noise.source, detail)
-
-
-def _filter_identifiability(
-    problem: IdentificationProblem, out: ParticleFilterOutput, seed: int
-) -> dict[str, Any]:
-    w = np.exp(out.log_weights - np.max(out.log_weights))
-    w /= w.sum()
-    draws = out.particles
-    # Weighted moments without a degrees-of-freedom correction: np.cov's would divide by
-    # zero when all the weight sits on one particle (a collapsed cloud has zero spread).
-    dev = draws - w @ draws
-    cov = (dev * w[:, None]).T @ dev
-    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    corr = float(cov[0, 1] / (sd[0] * sd[1])) if np.all(sd > 0) else float("nan")
-    rng = np.random.default_rng(seed)
-    idx = rng.choice(draws.shape[0], size=min(CORRELATION_DRAWS, draws.shape[0]), p=w)
-    force_max = (float("nan"), float("nan"))
-    if np.all(sd > 0):
-        res = record_loglik(problem, draws[idx, 0], draws[idx, 1], return_pieces=True)
-        if res.theta_cov is None or res.theta_mean is None:  # pragma: no cover - contract
-            raise RuntimeError("record_loglik(return_pieces=True) returned no coefficients")
-        var = np.diagonal(res.theta_cov, axis1=-2, axis2=-1)
-        fc = force_correlation(
-            draws[idx, 0],
-            draws[idx, 1],
-            np.ones(idx.size),
-            res.theta_mean,
-            var,
-            problem.coefficient_names,
-        )
-        force_max = (fc.max_damping, fc.max_stiffness)
-    report = identifiability_report(sd, problem.prior.sd, corr, force_max)
-    return report.to_json()
 
 
 def identify_problem(
@@ -131,85 +120,57 @@ def identify_problem(
     noise_info: dict[str, Any] | None = None,
     progress: bool = False,
 ) -> IdentificationResult:
-    """Run one method on a problem whose noise is already set and wrap the result."""
+    """Run the settings' method on a problem whose noise is already set.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        The compiled problem.
+    settings : IdentifySettings
+        Method and seed (the rest was used to compile the problem).
+    noise_info : dict, optional
+        How the noise was chosen (reported in the result).
+    progress : bool, default False
+        Show a progress bar (filters).
+
+    Returns
+    -------
+    IdentificationResult
+    """
     common: dict[str, Any] = {
-        "problem": problem,
         "noise": noise_info
         or {"obs_fraction": problem.noise.obs_fraction, "source": problem.noise.source},
         "settings": settings.to_json(),
+        "model": settings.model.replace(mass_kg=problem.mass_kg),
     }
-    if settings.method == "exact":
-        from workbench.inference.exact import exact_posterior
+    return settings.method.run(problem, seed=settings.seed, progress=progress, common=common)
 
-        post = exact_posterior(problem)
-        rng = np.random.default_rng(settings.seed)
-        draws = post.sample(4000, rng)
-        force = post.force
-        if force is None:  # pragma: no cover - only with an injected likelihood
-            raise RuntimeError("the exact posterior returned no force coefficients")
-        report = post.identifiability
-        return IdentificationResult(
-            method="exact",
-            draws=draws,
-            weights=np.full(draws.shape[0], 1.0 / draws.shape[0]),
-            piece_coefficients_mean=force.mean,
-            piece_coefficients_sd=force.sd,
-            loglik=float(post.log_evidence),
-            identifiability=report.to_json() if report is not None else {},
-            extra={"exact": post.to_json() if hasattr(post, "to_json") else {}},
-            **common,
-        )
-    if settings.method == "rbpf":
-        from workbench.inference.rbpf import run_rbpf
 
-        out = run_rbpf(
-            problem,
-            n_particles=settings.n_particles,
-            seed=settings.seed,
-            resampling=settings.resampling,
-            ess_threshold=settings.ess_threshold,
-            progress=progress,
+def _with_mass(record: Record | Inspection, model: SMDModel | None) -> Record | Inspection:
+    """Give the record the model's body mass when only the model states it."""
+    if model is None or model.mass_kg is None:
+        return record
+    rec = record.record if isinstance(record, Inspection) else record
+    if rec.mass_kg is None and isinstance(record, Record):
+        return record.replace(mass_kg=model.mass_kg)
+    if rec.mass_kg is not None and not np.isclose(rec.mass_kg, model.mass_kg, rtol=1e-9):
+        raise UsageError(
+            f"{rec.name}: the record's body mass is {rec.mass_kg:g} kg but the model's is "
+            f"{model.mass_kg:g} kg; give the mass once (on the record or on the model)"
         )
-    else:
-        from workbench.inference.pf import run_pf
-
-        out = run_pf(
-            problem,
-            n_particles=settings.n_particles,
-            seed=settings.seed,
-            resampling=settings.resampling,
-            ess_threshold=settings.ess_threshold,
-            force_proposal=settings.force_proposal,
-            progress=progress,
-        )
-    w = np.exp(out.log_weights - np.max(out.log_weights))
-    return IdentificationResult(
-        method=out.method,
-        draws=np.asarray(out.particles),
-        weights=w / w.sum(),
-        piece_coefficients_mean=out.piece_coefficients_mean,
-        piece_coefficients_sd=out.piece_coefficients_sd,
-        loglik=float(out.loglik),
-        identifiability=_filter_identifiability(problem, out, settings.seed),
-        piece_mean=out.piece_mean,
-        piece_sd=out.piece_sd,
-        trace_time_s=out.trace_time_s,
-        trace_mean=out.mean,
-        trace_sd=out.sd,
-        ess=out.ess,
-        distinct_ancestors=out.distinct_ancestors,
-        unique_values=out.unique_values,
-        n_particles=out.n_particles,
-        extra={"filter_settings": out.settings},
-        **common,
-    )
+    return record
 
 
 def identify(
     record: Record | Inspection,
-    settings: IdentifySettings | None = None,
+    model: SMDModel | None = None,
+    method: Method | str | None = None,
     *,
-    rescale: bool = False,
+    seed: int | None = None,
+    settings: IdentifySettings | None = None,
+    noise: NoiseSettings | None = None,
+    preprocessing: Preprocessing | None = None,
+    force_check: bool | None = None,
     progress: bool = False,
     adjust_problem: Callable[[IdentificationProblem], IdentificationProblem] | None = None,
     adjust_noise: Callable[[IdentificationProblem], IdentificationProblem] | None = None,
@@ -220,11 +181,22 @@ def identify(
     ----------
     record : Record or Inspection
         A loaded record (with body mass), or its inspection if already done.
+    model : SMDModel, optional
+        The pedestrian model to identify: force harmonics, time basis, pieces, pacing and
+        effects (``SMDModel(harmonics=6) + GaitAsymmetry()``); default ``SMDModel()``.
+    method : Method or str, optional
+        ``RBPF(...)`` (default), ``PF(...)``, ``Exact(...)`` or one of their names.
+    seed : int, optional
+        Seed of every random draw (default 0).
     settings : IdentifySettings, optional
-        Method, particles, harmonics, noise, prior, seed... (defaults: see
-        :mod:`workbench.inference.settings`).
-    rescale : bool, default False
-        Apply ``--rescale-to-mass`` during inspection.
+        All parts at once (what the command line and batch work build from flags); the
+        arguments above replace its parts.
+    noise : NoiseSettings, optional
+        Observation and process noise, prior box, observed channels.
+    preprocessing : Preprocessing, optional
+        High-pass filter and mass rescale.
+    force_check : bool, optional
+        Run the force-model check (default True).
     progress : bool, default False
         Show a progress bar for the filters.
     adjust_problem : callable, optional
@@ -236,13 +208,38 @@ def identify(
     Returns
     -------
     IdentificationResult
+
+    Examples
+    --------
+    >>> import workbench as wb
+    >>> rec = wb.datasets.load("seed_individual")
+    >>> res = wb.identify(rec.slice(0, 8), wb.SMDModel(harmonics=4), method=wb.RBPF(64))
+    >>> sorted(res.params.index)[:2]
+    ['blf1', 'blf2']
     """
-    settings = settings or IdentifySettings()
+    if model is not None and not isinstance(model, SMDModel):
+        raise UsageError(
+            f"identify: 'model' must be an SMDModel, got {type(model).__name__}; pass "
+            "settings=... by keyword for an IdentifySettings"
+        )
+    settings = (settings or IdentifySettings()).replace(
+        model=model,
+        method=method,
+        seed=seed,
+        noise=noise,
+        preprocessing=preprocessing,
+        force_check=force_check,
+    )
+    record = _with_mass(record, model)
     if isinstance(record, Inspection):
         insp = record
     else:
-        insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=rescale)
-    problem = problem_from_inspection(insp, settings)
+        insp = inspect_record(
+            record,
+            highpass_hz=settings.preprocessing.highpass_hz,
+            rescale=settings.preprocessing.rescale_to_mass,
+        )
+    problem = compile_problem(insp, settings)
     if adjust_problem is not None:
         problem = adjust_problem(problem)
     problem, info = _set_noise(problem, settings)
@@ -250,28 +247,29 @@ def identify(
         problem = adjust_noise(problem)
     base = problem
     terms = None
-    if settings.effects:
+    effects = settings.model.effects
+    if effects:
         from workbench.inference.effect_terms import effect_terms, with_effects
 
         terms = effect_terms(
             problem,
-            list(settings.effects),
+            effects,
             ground_acc_m_s2=_ground_on(insp, problem),
-            highpass_hz=settings.highpass_hz,
+            highpass_hz=settings.preprocessing.highpass_hz,
         )
         problem, pilot = with_effects(problem, terms)
     result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
-    result.extra["inspection_warnings"] = list(insp.warnings)
+    extra = {**result.extra, "inspection_warnings": list(insp.warnings)}
     if terms is not None:
         from workbench.inference.effect_terms import effect_posterior
 
         post = effect_posterior(base, terms, result.draws, result.weights, seed=settings.seed)
         post["pilot"] = pilot
-        result.extra["effects"] = post
+        extra["effects"] = post
+    result = result.replace(extra=extra)
     if settings.force_check:
-        apply_force_model_check(result, problem)
-    _downgrade_untrustworthy(result)
-    return result
+        result = apply_force_model_check(result, problem)
+    return downgrade_untrustworthy(result)
 
 
 def _ground_on(insp: Inspection, problem: IdentificationProblem) -> Any:
@@ -282,8 +280,12 @@ def _ground_on(insp: Inspection, problem: IdentificationProblem) -> Any:
     return np.interp(problem.time_s, rec.time_s, rec.ground_acc_m_s2)
 
 
-def apply_force_model_check(result: IdentificationResult, problem: IdentificationProblem) -> None:
+def apply_force_model_check(
+    result: IdentificationResult, problem: IdentificationProblem
+) -> IdentificationResult:
     """Run :func:`~workbench.inference.force_check.force_model_check` and grade by it.
+
+    Returns a new result (results are immutable).
 
     The check's JSON goes to ``identifiability["force_model_check"]``; when C or K moves
     beyond the threshold both become "not identified" with the check's sentence, whatever
@@ -304,11 +306,13 @@ def apply_force_model_check(result: IdentificationResult, problem: Identificatio
         report["sentence"] = f"Not identified: {check.sentence}{jointly}."
         report["identified_damping"] = False
         report["identified_stiffness"] = False
-    result.identifiability = report
+    return result.replace(identifiability=report)
 
 
-def _downgrade_untrustworthy(result: IdentificationResult) -> None:
+def downgrade_untrustworthy(result: IdentificationResult) -> IdentificationResult:
     """Mark a posterior piled at the prior's edge, or a collapsed cloud, as not identified.
+
+    Returns a new result (or the same one when nothing is wrong).
 
     Contraction alone would call such a posterior "well identified"; say what it is instead.
     """
@@ -320,7 +324,7 @@ def _downgrade_untrustworthy(result: IdentificationResult) -> None:
         result.method == "pf" and result.final_ancestors is not None and result.final_ancestors <= 5
     )
     if not bound and not collapsed:
-        return
+        return result
     report = dict(result.identifiability)
     why = (
         f"{' and '.join(bound)} sit at the edge of the prior box"
@@ -337,4 +341,4 @@ def _downgrade_untrustworthy(result: IdentificationResult) -> None:
     )
     report["identified_damping"] = False
     report["identified_stiffness"] = False
-    result.identifiability = report
+    return result.replace(identifiability=report)

@@ -12,10 +12,11 @@ Plotting lives in :mod:`workbench.reporting`; this module only computes.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -23,7 +24,12 @@ from numpy.typing import NDArray
 
 from workbench.fileutil import atomic_path
 from workbench.inference.problem import IdentificationProblem
+from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2
+
+if TYPE_CHECKING:
+    import arviz
+    from matplotlib.figure import Figure
 
 __all__ = ["IdentificationResult", "weighted_quantile"]
 
@@ -59,9 +65,15 @@ def _moments(values: FloatArray, weights: FloatArray) -> tuple[float, float]:
     return mean, float(np.sqrt(max(var, 0.0)))
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class IdentificationResult:
     """Estimates, uncertainty and diagnostics of one identification.
+
+    Results are immutable: :meth:`replace` returns a derived copy. The statsmodels-like
+    views are :attr:`params` and :attr:`bse` (pandas Series), :meth:`conf_int` (a
+    DataFrame), :meth:`summary`, :meth:`to_json`, :meth:`to_inference_data` (arviz) and
+    :meth:`plot_diagnostics`; :attr:`fitted_model` is the pedestrian model with the
+    estimates filled in.
 
     Attributes
     ----------
@@ -91,6 +103,8 @@ class IdentificationResult:
         The run's settings.
     extra : dict
         Method-specific results (e.g. the exact grid, Laplace check).
+    model : SMDModel or None
+        The pedestrian model that was identified (mass, force description, effects).
     """
 
     method: str
@@ -113,6 +127,11 @@ class IdentificationResult:
     unique_values: NDArray[np.int64] | None = None
     n_particles: int = 0
     extra: dict[str, Any] = field(default_factory=dict)
+    model: SMDModel | None = None
+
+    def replace(self, **changes: Any) -> IdentificationResult:
+        """Return a copy with some fields changed (results are immutable)."""
+        return dataclasses.replace(self, **changes)
 
     # ------------------------------------------------------------------ estimates
     @property
@@ -150,6 +169,95 @@ class IdentificationResult:
             lo, hi = weighted_quantile(v, self.weights, q)
             out[k] = (float(lo), float(hi))
         return out
+
+    @property
+    def params(self) -> pd.Series:
+        """Posterior means: K, C, f_n, zeta, BLF1..n and the effects' parameters.
+
+        Effect parameters are named ``"effect.parameter"`` (``"gait_asymmetry.a_half_n"``).
+        """
+        values = dict(self.estimates)
+        values.update({f"blf{i}": float(b) for i, b in enumerate(self.blf, start=1)})
+        for name, post in self._effect_posterior().items():
+            values[name] = post["mean"]
+        return pd.Series(values, name="estimate", dtype=float)
+
+    @property
+    def bse(self) -> pd.Series:
+        """Posterior standard deviations, indexed like :attr:`params`.
+
+        For the BLFs it is the standard error of the mean over steps.
+        """
+        values = dict(self.posterior_sd)
+        values.update({f"blf{i}": float(b) for i, b in enumerate(self.blf_sd, start=1)})
+        for name, post in self._effect_posterior().items():
+            values[name] = post["sd"]
+        return pd.Series(values, name="sd", dtype=float)
+
+    def conf_int(self, alpha: float = 0.05) -> pd.DataFrame:
+        """Posterior intervals at level ``1 - alpha``, indexed like :attr:`params`.
+
+        Equal-tailed quantiles of the posterior draws for K, C, f_n and zeta; mean plus or
+        minus the normal quantile times the standard error for the BLFs and the effects.
+
+        Parameters
+        ----------
+        alpha : float, default 0.05
+            One minus the level.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns ``lower`` and ``upper``.
+        """
+        if not (0 < alpha < 1):
+            from workbench.errors import UsageError
+
+            raise UsageError(f"conf_int: alpha must be in (0, 1), got {alpha!r}")
+        from scipy.stats import norm
+
+        rows = {k: list(v) for k, v in self.interval(1.0 - alpha).items()}
+        z = float(norm.ppf(1.0 - alpha / 2.0))
+        params, bse = self.params, self.bse
+        for key in params.index:
+            if key not in rows:
+                rows[key] = [params[key] - z * bse[key], params[key] + z * bse[key]]
+        frame = pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper"])
+        return frame.loc[params.index]
+
+    def _effect_posterior(self) -> dict[str, dict[str, float]]:
+        out: dict[str, dict[str, float]] = {}
+        for effect, post in (self.extra.get("effects") or {}).items():
+            if effect == "pilot" or not isinstance(post, dict):
+                continue
+            for param, stats in post.items():
+                out[f"{effect}.{param}"] = {"mean": stats["mean"], "sd": stats["sd"]}
+        return out
+
+    @property
+    def fitted_model(self) -> SMDModel:
+        """The identified pedestrian model: posterior-mean K and C, effects at their means."""
+        base = self.model if self.model is not None else SMDModel(harmonics=self.problem.harmonics)
+        est = self.estimates
+        effects = base.effects
+        if effects:
+            post = self._effect_posterior()
+            effects = type(effects)(
+                e.with_values(
+                    **{
+                        p: post[f"{e.name}.{p}"]["mean"]
+                        for p in e.parameter_names
+                        if f"{e.name}.{p}" in post
+                    }
+                )
+                for e in effects
+            )
+        return base.replace(
+            mass_kg=self.mass_kg,
+            stiffness_n_per_m=est["stiffness_n_per_m"],
+            damping_ns_per_m=est["damping_ns_per_m"],
+            effects=effects,
+        )
 
     @property
     def piece_blf(self) -> FloatArray:
@@ -337,20 +445,6 @@ class IdentificationResult:
             out.append(sentence)
         return out
 
-    def use_crosscheck(self, crosscheck: Any) -> None:
-        """Grade identifiability from the MCMC posterior of a cross-check of this result.
-
-        ``crosscheck`` is the :class:`~workbench.inference.crosscheck.CrosscheckResult` of
-        this result's filter on :attr:`problem`. Where one of its steps converged, the
-        ``identifiability`` report is replaced by the one of the MCMC posterior after the
-        last such step (contraction, width and correlations from the MCMC draws; its
-        ``source`` says so) and the filter's own report is kept under ``filter_report``;
-        otherwise nothing changes.
-        """
-        from workbench.inference.crosscheck import apply_mcmc_identifiability
-
-        apply_mcmc_identifiability(self, self.problem, crosscheck)
-
     # ------------------------------------------------------------------ output
     def to_json(self) -> dict[str, Any]:
         """Return the JSON object of ``workbench identify --json`` (docs/contracts.md)."""
@@ -422,6 +516,59 @@ class IdentificationResult:
         ]
         lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
+
+    def to_inference_data(self, n_draws: int | None = None) -> arviz.InferenceData:
+        """Return the posterior as arviz InferenceData (one chain of equal-weight draws).
+
+        Weighted draws (particles) are resampled systematically with the run's seed, so the
+        draws carry the posterior without weights (the weights' effective sample size is an
+        attribute). Observations are the preprocessed (u, u', u'').
+
+        Parameters
+        ----------
+        n_draws : int, optional
+            Draws to keep (default: as many as the result holds).
+
+        Returns
+        -------
+        arviz.InferenceData
+            Groups ``posterior`` (K, C, f_n, zeta), ``observed_data`` and
+            ``constant_data`` (mass, pacing).
+        """
+        import arviz as az
+
+        from workbench.inference.resampling import resample
+
+        n = self.draws.shape[0] if n_draws is None else int(n_draws)
+        rng = np.random.default_rng(int(self.settings.get("seed", 0)))
+        log_w = np.log(np.maximum(self.weights, 1e-300))
+        idx = resample(log_w, rng, "systematic", n)
+        posterior = {k: v[idx][None, :] for k, v in self._derived_draws().items()}
+        p = self.problem
+        w = self.weights / self.weights.sum()
+        return az.from_dict(
+            posterior=posterior,
+            observed_data={"u_m": p.y[:, 0], "u_dot_m_s": p.y[:, 1], "u_ddot_m_s2": p.y[:, 2]},
+            constant_data={"mass_kg": np.array([p.mass_kg]), "pacing_hz": np.array([p.pacing_hz])},
+            dims={"u_m": ["time"], "u_dot_m_s": ["time"], "u_ddot_m_s2": ["time"]},
+            coords={"time": p.time_s},
+            attrs={
+                "method": self.method,
+                "source": p.source,
+                "identifiability": str(self.identifiability.get("level", "")),
+                "weights_ess": float(1.0 / np.sum(w**2)),
+            },
+        )
+
+    def plot_diagnostics(self) -> Figure:
+        """Draw the convergence, force and residual diagnostics (one matplotlib figure).
+
+        Plotting lives in :mod:`workbench.reporting`; this calls
+        :func:`workbench.reporting.identification.plot_diagnostics`.
+        """
+        from workbench.reporting.identification import plot_diagnostics
+
+        return plot_diagnostics(self)
 
     def to_netcdf(self, path: str | Path) -> Path:
         """Save estimates, draws, traces and per-step coefficients to a netCDF file."""

@@ -1,5 +1,19 @@
 """Settings of an identification run: defaults, a TOML file, and command-line flags.
 
+An identification is set by four parts, each an object of its own:
+
+- the **model** (:class:`~workbench.models.smd.SMDModel`): force harmonics, time basis,
+  pieces, pacing and effects;
+- the **method** (:mod:`workbench.inference.methods`): ``RBPF``, ``PF`` or ``Exact`` with
+  their particles, resampling and proposals;
+- the **noise and priors** (:class:`NoiseSettings`): observation and process noise, the
+  (C, K) prior box and the channels the likelihood observes;
+- the **preprocessing** (:class:`Preprocessing`): the high-pass filter and the mass rescale;
+
+plus the seed and whether the force-model check runs. :class:`IdentifySettings` holds them
+together; its *flat* form (one key per option, the keys below) is what a ``--config`` TOML
+file, the command-line flags and the ``settings`` object of the JSON output use.
+
 Precedence: command-line flags over the TOML file (``--config FILE``) over the defaults
 below. The defaults are the seed study's settings (docs/science.md 3) except where the workbench
 documents a better choice:
@@ -50,14 +64,46 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from workbench.errors import InputError, UsageError
-from workbench.inference.problem import KALMAN_STATE_FRACTION, SEED_STATE_FRACTION
+from workbench.inference.methods import METHODS, PF, RBPF, Method, as_method
+from workbench.models.effects import Effects, as_effects
+from workbench.models.smd import SMDModel
+from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
-__all__ = ["METHODS", "IdentifySettings", "parse_obs_noise"]
+__all__ = [
+    "DEFAULT_PARTICLES",
+    "FLAT_KEYS",
+    "METHODS",
+    "IdentifySettings",
+    "NoiseSettings",
+    "Preprocessing",
+    "parse_obs_noise",
+]
 
-METHODS = ("rbpf", "pf", "exact")
 #: Particles per method when not given: the RBPF needs few, the seed's filter many.
-DEFAULT_PARTICLES = {"rbpf": 256, "pf": 4000, "exact": 0}
+DEFAULT_PARTICLES = {"rbpf": RBPF.n_particles, "pf": PF.n_particles, "exact": 0}
+#: Keys of the flat form (``--config`` file, ``settings`` in the JSON output), in order.
+FLAT_KEYS = (
+    "method",
+    "particles",
+    "harmonics",
+    "pacing_hz",
+    "highpass_hz",
+    "obs_noise",
+    "state_noise_fraction",
+    "time_basis",
+    "pieces",
+    "prior",
+    "resampling",
+    "ess_threshold",
+    "seed",
+    "force_check",
+    "observe",
+    "force_proposal",
+    "effects",
+)
 
 
 def parse_obs_noise(value: Any, where: str = "--obs-noise") -> float | str:
@@ -102,54 +148,35 @@ def parse_effects(value: Any, where: str = "--effects") -> tuple[str, ...]:
 
 
 @dataclass(frozen=True)
-class IdentifySettings:
-    """How to identify one record (see the module docstring for the defaults)."""
+class NoiseSettings:
+    """Noise model and priors of an identification.
 
-    method: str = "rbpf"
-    particles: int | None = None
-    harmonics: int = 10
-    pacing_hz: float | None = None
-    highpass_hz: float = 0.15
+    Parameters
+    ----------
+    obs_noise : float or {"auto", "seed"}, default "auto"
+        Observation noise of u, u', u'' as a fraction of their RMS; ``"auto"`` estimates it
+        from the record (maximum marginal likelihood), ``"seed"`` is the seed's 0.10.
+    state_noise_fraction : float, optional
+        Process noise of (u, u') per sample as a fraction of their RMS; None takes the
+        method's default (the seed's 0.5 % for ``PF``, none for the Kalman-based methods).
+    prior : {"modal", "seed"}, default "modal"
+        The (C, K) prior box: natural frequency 1-4 Hz and damping ratio 0.05-0.9 at the
+        body mass, or the seed's 400-1000 N s/m by 12000-20000 N/m.
+    observe : {"all", "acc"}, default "all"
+        Channels the likelihood uses: u, u', u'' as the seed does, or only u''.
+    """
+
     obs_noise: float | str = "auto"
     state_noise_fraction: float | None = None
-    time_basis: str = "step_phase"
-    pieces: str = "steps"
     prior: str = "modal"
-    resampling: str = "systematic"
-    ess_threshold: float = 0.5
-    seed: int = 0
-    force_check: bool = True
     observe: str = "all"
-    force_proposal: str = "regression"
-    effects: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "effects", parse_effects(self.effects))
-        if self.method not in METHODS:
-            raise UsageError(
-                f"--method {self.method!r} is not known; choose one of {', '.join(METHODS)}"
-            )
-        if self.particles is not None and int(self.particles) < 2:
-            raise UsageError(f"--particles must be at least 2, got {self.particles}")
-        if int(self.harmonics) < 1 or int(self.harmonics) > 40:
-            raise UsageError(f"--harmonics must be between 1 and 40, got {self.harmonics}")
         object.__setattr__(self, "obs_noise", parse_obs_noise(self.obs_noise))
         if self.prior not in ("modal", "seed"):
             raise UsageError(f"prior must be 'modal' or 'seed', got {self.prior!r}")
-        if self.time_basis not in ("step_phase", "absolute"):
-            raise UsageError(
-                f"time_basis must be 'step_phase' or 'absolute', got {self.time_basis!r}"
-            )
         if self.observe not in ("all", "acc"):
             raise UsageError(f"--observe must be 'all' or 'acc', got {self.observe!r}")
-        if self.force_proposal not in ("regression", "prior"):
-            raise UsageError(
-                f"--force-proposal must be 'regression' or 'prior', got {self.force_proposal!r}"
-            )
-        if self.pieces not in ("steps", "whole"):
-            raise UsageError(f"pieces must be 'steps' or 'whole', got {self.pieces!r}")
-        if not (0 < self.ess_threshold <= 1):
-            raise UsageError(f"ess_threshold must be in (0, 1], got {self.ess_threshold}")
         if self.state_noise_fraction is not None and not (
             0 <= float(self.state_noise_fraction) < 1
         ):
@@ -157,28 +184,253 @@ class IdentifySettings:
                 "state_noise_fraction must be a fraction in [0, 1), got "
                 f"{self.state_noise_fraction!r}"
             )
-        if self.highpass_hz < 0:
+
+    def state_fraction(self, method: Method) -> float:
+        """Process noise fraction to use with a method: the given one or the method's."""
+        if self.state_noise_fraction is not None:
+            return float(self.state_noise_fraction)
+        return method.default_state_noise_fraction
+
+
+@dataclass(frozen=True)
+class Preprocessing:
+    """How a record is preprocessed before identification.
+
+    Parameters
+    ----------
+    highpass_hz : float, default 0.15
+        Cut-off of the zero-phase high-pass of the COM response [Hz]; 0 switches it off
+        (records that start at rest, such as the seed's numerical example).
+    rescale_to_mass : bool, default False
+        Rescale the force so that its mean over whole steps is the body weight (for a
+        mis-calibrated sensor; the inspection reports the static balance either way).
+    """
+
+    highpass_hz: float = DEFAULT_HIGHPASS_HZ
+    rescale_to_mass: bool = False
+
+    def __post_init__(self) -> None:
+        hp = float(self.highpass_hz)
+        if not (hp >= 0 and hp < float("inf")):
             raise UsageError(f"--highpass-hz must be 0 (off) or positive, got {self.highpass_hz}")
 
+
+def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
+    harmonics = int(flat["harmonics"])
+    if harmonics < 1 or harmonics > 40:
+        raise UsageError(f"--harmonics must be between 1 and 40, got {flat['harmonics']}")
+    if flat["time_basis"] not in ("step_phase", "absolute"):
+        raise UsageError(
+            f"time_basis must be 'step_phase' or 'absolute', got {flat['time_basis']!r}"
+        )
+    if flat["pieces"] not in ("steps", "whole"):
+        raise UsageError(f"pieces must be 'steps' or 'whole', got {flat['pieces']!r}")
+    effects = flat["effects"]
+    if not isinstance(effects, Effects):
+        effects = as_effects(parse_effects(effects))
+    return SMDModel(
+        harmonics=harmonics,
+        effects=effects,
+        time_basis=flat["time_basis"],
+        pieces=flat["pieces"],
+        pacing_hz=flat["pacing_hz"],
+    )
+
+
+def _method_from_flat(flat: dict[str, Any]) -> Method:
+    name = flat["method"]
+    if name not in METHODS:
+        raise UsageError(f"--method {name!r} is not known; choose one of {', '.join(METHODS)}")
+    particles = flat["particles"]
+    if particles is not None and int(particles) < 2:
+        raise UsageError(f"--particles must be at least 2, got {particles}")
+    if not (0 < flat["ess_threshold"] <= 1):
+        raise UsageError(f"ess_threshold must be in (0, 1], got {flat['ess_threshold']}")
+    if flat["force_proposal"] not in ("regression", "prior"):
+        raise UsageError(
+            f"--force-proposal must be 'regression' or 'prior', got {flat['force_proposal']!r}"
+        )
+    return as_method(
+        name,
+        n_particles=int(particles) if particles else None,
+        resampling=flat["resampling"],
+        ess_threshold=flat["ess_threshold"],
+        force_proposal=flat["force_proposal"],
+    )
+
+
+_FLAT_DEFAULTS: dict[str, Any] = {
+    "method": "rbpf",
+    "particles": None,
+    "harmonics": 10,
+    "pacing_hz": None,
+    "highpass_hz": DEFAULT_HIGHPASS_HZ,
+    "obs_noise": "auto",
+    "state_noise_fraction": None,
+    "time_basis": "step_phase",
+    "pieces": "steps",
+    "prior": "modal",
+    "resampling": "systematic",
+    "ess_threshold": 0.5,
+    "seed": 0,
+    "force_check": True,
+    "observe": "all",
+    "force_proposal": "regression",
+    "effects": (),
+}
+
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """How to identify one record: model, method, noise and priors, preprocessing, seed.
+
+    Parameters
+    ----------
+    model : SMDModel, optional
+        The pedestrian model (its mass comes from the record when unset).
+    method : Method, optional
+        ``RBPF()`` (default), ``PF()`` or ``Exact()``.
+    noise : NoiseSettings, optional
+        Noise model and priors.
+    preprocessing : Preprocessing, optional
+        High-pass filter and mass rescale.
+    seed : int, default 0
+        Seed of every random draw.
+    force_check : bool, default True
+        Run the force-model check after the method (costs two mode searches).
+
+    Notes
+    -----
+    :meth:`from_flat` builds the settings from the flat keys of :data:`FLAT_KEYS` (a
+    ``--config`` file, the command-line flags); :meth:`to_json` gives them back.
+    """
+
+    model: SMDModel = dataclasses.field(default_factory=SMDModel)
+    method: Method = dataclasses.field(default_factory=RBPF)
+    noise: NoiseSettings = dataclasses.field(default_factory=NoiseSettings)
+    preprocessing: Preprocessing = dataclasses.field(default_factory=Preprocessing)
+    seed: int = 0
+    force_check: bool = True
+
+    def __post_init__(self) -> None:
+        seed = self.seed
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise UsageError(f"--seed must be a whole number of 0 or more, got {seed!r}")
+        object.__setattr__(self, "seed", int(seed))
+        object.__setattr__(self, "method", as_method(self.method))
+
+    # -- the flat form ----------------------------------------------------------------------
+    @classmethod
+    def from_flat(cls, **flat: Any) -> IdentifySettings:
+        """Build settings from flat keys (:data:`FLAT_KEYS`); unset keys take the defaults.
+
+        Parameters
+        ----------
+        **flat
+            ``method="pf", particles=5000, harmonics=6, obs_noise="seed", ...``; None values
+            take the default.
+
+        Returns
+        -------
+        IdentifySettings
+        """
+        unknown = sorted(set(flat) - set(FLAT_KEYS))
+        if unknown:
+            raise UsageError(
+                f"identification setting {unknown[0]!r} is not known; use only "
+                f"{', '.join(FLAT_KEYS)}"
+            )
+        values = {**_FLAT_DEFAULTS, **{k: v for k, v in flat.items() if v is not None}}
+        return cls(
+            model=_model_from_flat(values),
+            method=_method_from_flat(values),
+            noise=NoiseSettings(
+                obs_noise=values["obs_noise"],
+                state_noise_fraction=values["state_noise_fraction"],
+                prior=values["prior"],
+                observe=values["observe"],
+            ),
+            preprocessing=Preprocessing(highpass_hz=float(values["highpass_hz"])),
+            seed=values["seed"],
+            force_check=bool(values["force_check"]),
+        )
+
+    def flat(self) -> dict[str, Any]:
+        """Return the settings as flat keys (effects as an :class:`Effects` object).
+
+        ``particles`` is the count the method runs (None for the exact posterior).
+        """
+        method = self.method
+        model = self.model
+        particles = getattr(method, "n_particles", None)
+        return {
+            "method": method.name,
+            "particles": particles,
+            "harmonics": model.harmonics,
+            "pacing_hz": model.pacing_hz,
+            "highpass_hz": self.preprocessing.highpass_hz,
+            "obs_noise": self.noise.obs_noise,
+            "state_noise_fraction": self.noise.state_noise_fraction,
+            "time_basis": model.time_basis,
+            "pieces": model.pieces,
+            "prior": self.noise.prior,
+            "resampling": getattr(method, "resampling", _FLAT_DEFAULTS["resampling"]),
+            "ess_threshold": getattr(method, "ess_threshold", _FLAT_DEFAULTS["ess_threshold"]),
+            "seed": self.seed,
+            "force_check": self.force_check,
+            "observe": self.noise.observe,
+            "force_proposal": getattr(method, "force_proposal", _FLAT_DEFAULTS["force_proposal"]),
+            "effects": model.effects,
+        }
+
+    def replace(self, **changes: Any) -> IdentifySettings:
+        """Return a copy with flat keys or parts changed (``None`` values are ignored).
+
+        Flat keys (``method="pf"``, ``harmonics=6``) rebuild the parts they belong to; a
+        change of method without ``particles`` takes the new method's default count. Parts
+        (``model=...``, ``method=RBPF(...)``, ``noise=...``, ``preprocessing=...``) replace
+        them whole.
+        """
+        changes = {k: v for k, v in changes.items() if v is not None}
+        parts: dict[str, Any] = {
+            k: changes.pop(k) for k in ("model", "noise", "preprocessing") if k in changes
+        }
+        if isinstance(changes.get("method"), Method):
+            parts["method"] = changes.pop("method")
+        out = self
+        if changes:
+            flat = self.flat()
+            if changes.get("method", flat["method"]) != flat["method"]:
+                flat["particles"] = None
+                flat["force_proposal"] = None
+            rebuilt = IdentifySettings.from_flat(**{**flat, **changes})
+            model = dataclasses.replace(
+                self.model,
+                harmonics=rebuilt.model.harmonics,
+                effects=rebuilt.model.effects,
+                time_basis=rebuilt.model.time_basis,
+                pieces=rebuilt.model.pieces,
+                pacing_hz=rebuilt.model.pacing_hz,
+            )
+            out = dataclasses.replace(rebuilt, model=model)
+        return dataclasses.replace(out, **parts) if parts else out
+
+    # -- derived ------------------------------------------------------------------------------
     @property
     def state_fraction(self) -> float:
         """Process noise fraction to use: the given one or the method's default."""
-        if self.state_noise_fraction is not None:
-            return float(self.state_noise_fraction)
-        return SEED_STATE_FRACTION if self.method == "pf" else KALMAN_STATE_FRACTION
+        return self.noise.state_fraction(self.method)
 
     @property
     def n_particles(self) -> int:
-        """Particles to use: the given number or the method's default."""
-        return int(self.particles) if self.particles else DEFAULT_PARTICLES[self.method]
-
-    def replace(self, **changes: Any) -> IdentifySettings:
-        """Return a copy with the given fields changed (``None`` values are ignored)."""
-        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+        """Particles the method runs (0 for the exact posterior)."""
+        return int(getattr(self.method, "n_particles", 0))
 
     def to_json(self) -> dict[str, Any]:
-        """Return the settings as a JSON-able dict."""
-        return dataclasses.asdict(self)
+        """Return the settings as the flat JSON-able dict (``settings`` in the output)."""
+        flat = self.flat()
+        flat["effects"] = list(flat["effects"].names)
+        return flat
 
     @classmethod
     def from_toml(cls, path: str | Path, **overrides: Any) -> IdentifySettings:
@@ -200,13 +452,13 @@ class IdentifySettings:
                 f"is not valid TOML ({err})",
                 "fix the syntax (key = value lines)",
             ) from None
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
+        unknown = sorted(set(data) - set(FLAT_KEYS))
         if unknown:
             raise InputError(
                 path,
                 f"key {unknown[0]!r}",
                 "is not an identification setting",
-                f"use only {', '.join(sorted(known))}",
+                f"use only {', '.join(sorted(FLAT_KEYS))}",
             )
-        return cls(**data).replace(**overrides)
+        merged = {**data, **{k: v for k, v in overrides.items() if v is not None}}
+        return cls.from_flat(**merged)

@@ -25,7 +25,12 @@ from workbench.models import conversions
 from workbench.models.effects import Effect, EffectContext, Effects, as_effects
 from workbench.models.force import FourierForce
 
-__all__ = ["SMDModel"]
+__all__ = ["PIECE_MODES", "TIME_BASES", "SMDModel"]
+
+#: Clocks of the force's Fourier basis (see :mod:`workbench.models.force`).
+TIME_BASES = ("step_phase", "absolute")
+#: Whether the force coefficients are redrawn at every step or shared by the whole record.
+PIECE_MODES = ("steps", "whole")
 
 FloatArray = NDArray[np.float64]
 
@@ -65,6 +70,18 @@ class SMDModel:
         Number of harmonics n of the Fourier biomechanical force (default 10, the seed's).
     effects : Effect, Effects or iterable of Effect/str, optional
         Extra terms in the force balance (see :mod:`workbench.models.effects`).
+    time_basis : {"step_phase", "absolute"}, optional
+        Clock of the force's Fourier basis: each step's own (the default; coefficients are
+        comparable across steps) or the record's time with one pacing (the seed's).
+    pieces : {"steps", "whole"}, optional
+        Whether the force coefficients are drawn afresh at every footfall step (the seed's
+        formulation, the default) or are one set for the whole record.
+    pacing_hz : float, optional
+        Pacing (step) frequency f_p [Hz]; None lets identification take it from the record.
+    force_coefficients_n : sequence of float, optional
+        A known biomechanical force ``a0, a1, b1, ..., an, bn`` [N] (``2 n + 1`` values, the
+        order of :class:`~workbench.models.force.FourierForce`), e.g. a sampled walker on a
+        footbridge; None while unknown.
 
     Examples
     --------
@@ -78,6 +95,10 @@ class SMDModel:
     damping_ns_per_m: float | None = None
     harmonics: int = 10
     effects: Effects = field(default_factory=Effects)
+    time_basis: str = "step_phase"
+    pieces: str = "steps"
+    pacing_hz: float | None = None
+    force_coefficients_n: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mass_kg", _optional_float(self.mass_kg, "mass_kg", positive=True))
@@ -94,6 +115,29 @@ class SMDModel:
         # FourierForce validates the harmonic count and gives the one-sentence error.
         object.__setattr__(self, "harmonics", FourierForce(self.harmonics).harmonics)
         object.__setattr__(self, "effects", as_effects(self.effects))
+        if self.time_basis not in TIME_BASES:
+            raise UsageError(
+                f"SMDModel: time_basis {self.time_basis!r} is not known; use one of "
+                f"{', '.join(TIME_BASES)}"
+            )
+        if self.pieces not in PIECE_MODES:
+            raise UsageError(
+                f"SMDModel: pieces {self.pieces!r} is not known; use one of "
+                f"{', '.join(PIECE_MODES)}"
+            )
+        object.__setattr__(
+            self, "pacing_hz", _optional_float(self.pacing_hz, "pacing_hz", positive=True)
+        )
+        if self.force_coefficients_n is not None:
+            coef = np.asarray(self.force_coefficients_n, dtype=np.float64).reshape(-1)
+            expected = self.fourier_force.n_coefficients
+            if coef.size != expected or not np.all(np.isfinite(coef)):
+                raise UsageError(
+                    f"SMDModel: force_coefficients_n must be {expected} finite numbers "
+                    f"(a0, a1, b1, ... for {self.harmonics} harmonics), got {coef.size}; "
+                    "give one value per coefficient or change harmonics"
+                )
+            object.__setattr__(self, "force_coefficients_n", tuple(float(x) for x in coef))
 
     # -- construction ---------------------------------------------------------------------
     @classmethod
@@ -105,6 +149,7 @@ class SMDModel:
         *,
         harmonics: int = 10,
         effects: Effect | Effects | Iterable[Effect | str] = (),
+        **force: Any,
     ) -> SMDModel:
         """Build a model from modal parameters.
 
@@ -120,6 +165,9 @@ class SMDModel:
             Number of force harmonics.
         effects : optional
             Effects, as in the constructor.
+        **force
+            ``time_basis``, ``pieces``, ``pacing_hz``, ``force_coefficients_n`` as in the
+            constructor.
 
         Returns
         -------
@@ -127,7 +175,7 @@ class SMDModel:
         """
         k = float(conversions.stiffness_n_per_m(natural_frequency_hz, mass_kg))
         c = float(conversions.damping_ns_per_m(damping_ratio, k, mass_kg))
-        return cls(mass_kg, k, c, harmonics, as_effects(effects))
+        return cls(mass_kg, k, c, harmonics, as_effects(effects), **force)
 
     def replace(self, **changes: Any) -> SMDModel:
         """Return a copy with some fields changed (e.g. identified K and C)."""
@@ -163,6 +211,35 @@ class SMDModel:
             return None
         return float(
             conversions.damping_ratio(self.damping_ns_per_m, self.stiffness_n_per_m, self.mass_kg)
+        )
+
+    @property
+    def blf(self) -> FloatArray | None:
+        """Biomechanical load factors BLF1..BLFn of a known force, or None."""
+        if self.force_coefficients_n is None:
+            return None
+        return self.fourier_force.blf(self.force_coefficients_n, self.require("mass_kg"))
+
+    def biomechanical_force_n(self, t_s: ArrayLike) -> FloatArray:
+        """Return the known biomechanical force F_bio [N] at times ``t_s`` (absolute time).
+
+        Parameters
+        ----------
+        t_s : array_like
+            Times [s] from the start of the walk.
+
+        Returns
+        -------
+        ndarray
+            Force with the shape of ``t_s``.
+        """
+        if self.force_coefficients_n is None or self.pacing_hz is None:
+            raise UsageError(
+                f"{self!r}: the biomechanical force is not known; create the model with "
+                "pacing_hz=... and force_coefficients_n=..."
+            )
+        return self.fourier_force.evaluate(
+            self.force_coefficients_n, np.asarray(t_s, dtype=np.float64), pacing_hz=self.pacing_hz
         )
 
     @property
@@ -332,6 +409,13 @@ class SMDModel:
             if value is not None:
                 parts.append(f"{name}={value:.6g}")
         parts.append(f"harmonics={self.harmonics}")
+        for name, default in (("time_basis", "step_phase"), ("pieces", "steps")):
+            if getattr(self, name) != default:
+                parts.append(f"{name}={getattr(self, name)!r}")
+        if self.pacing_hz is not None:
+            parts.append(f"pacing_hz={self.pacing_hz:.6g}")
+        if self.force_coefficients_n is not None:
+            parts.append("force_coefficients_n=(...)")
         text = f"SMDModel({', '.join(parts)})"
         if self.effects:
             text += " + " + repr(self.effects)
@@ -346,5 +430,11 @@ class SMDModel:
             "natural_frequency_hz": self.natural_frequency_hz,
             "damping_ratio": self.damping_ratio,
             "harmonics": self.harmonics,
+            "time_basis": self.time_basis,
+            "pieces": self.pieces,
+            "pacing_hz": self.pacing_hz,
+            "force_coefficients_n": (
+                None if self.force_coefficients_n is None else list(self.force_coefficients_n)
+            ),
             "effects": [e.to_dict() for e in self.effects],
         }

@@ -259,10 +259,11 @@ def run_task(task: BatchTask) -> dict[str, Any]:
                 pacing_hz=task.pacing_hz,
                 subject=task.subject,
             )
-            settings = IdentifySettings(**{**task.settings, "seed": task.seed})
-            if settings.pieces == "whole" and settings.pacing_hz is None and record.pacing_hz:
+            settings = IdentifySettings.from_flat(**{**task.settings, "seed": task.seed})
+            model = settings.model
+            if model.pieces == "whole" and model.pacing_hz is None and record.pacing_hz:
                 settings = settings.replace(pacing_hz=float(record.pacing_hz))
-            result = identify(record, settings)
+            result = identify(record, settings=settings)
             out["row"] = result_row(result, task.path, record.subject, task.seed)
             out["status"] = "done"
         except WorkbenchError as err:

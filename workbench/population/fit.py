@@ -44,14 +44,15 @@ RANGE_PACING_HZ = (1.5, 2.5)
 MIN_RECORDS = 5
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class PopulationFit:
     """The fitted laws, their tests, the bands and the records used.
 
     Attributes
     ----------
-    summary : dict
-        The ``workbench population --json`` object (docs/contracts.md keys and more).
+    population_json : dict
+        The ``workbench population --json`` object (docs/contracts.md keys and more);
+        :meth:`to_json` returns it.
     bands : pandas.DataFrame
         Per law and pacing on a grid: mean, confidence and prediction bands.
     used : pandas.DataFrame
@@ -60,10 +61,43 @@ class PopulationFit:
         ``path, reason`` of the records left out.
     """
 
-    summary: dict[str, Any]
+    population_json: dict[str, Any]
     bands: pd.DataFrame
     used: pd.DataFrame
     excluded: pd.DataFrame
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the ``workbench population --json`` object."""
+        return dict(self.population_json)
+
+    def summary(self) -> str:
+        """Return the laws as text: each law with its 95 % intervals, residual sd and tests."""
+        s = self.population_json
+        lines = [
+            f"records used {s['records_used']}, excluded {s['records_excluded']} "
+            f"({s['exclusion_rule']})"
+        ]
+        for key, law in s["laws"].items():
+            lo, hi = law["slope_ci"]
+            ilo, ihi = law["intercept_ci"]
+            r = law["residuals"]
+            lines.append(
+                f"{key:22s} = {law['slope']:.4f} f_p {'-' if law['intercept'] < 0 else '+'} "
+                f"{abs(law['intercept']):.4f}  slope 95 % "
+                f"[{lo:.4f}, {hi:.4f}], intercept [{ilo:.4f}, {ihi:.4f}], residual sd "
+                f"{law['residual_sd']:.4g} (Shapiro p {r['shapiro_p']:.3g}, AD p "
+                f"{r['anderson_darling_p']:.3g})"
+            )
+        for key, ln in s["lognormal"].items():
+            gev = ln["aic_gev"]
+            lines.append(
+                f"{key:22s} lognormal mu {ln['mu']:.4f} "
+                f"[{ln['mu_ci'][0]:.4f}, {ln['mu_ci'][1]:.4f}], "
+                f"sigma {ln['sigma']:.4f} [{ln['sigma_ci'][0]:.4f}, {ln['sigma_ci'][1]:.4f}]; "
+                f"KS p {ln['ks_p']:.3g}; AIC lognormal {ln['aic_lognormal']:.1f} vs GEV "
+                f"{gev if gev is None else round(gev, 1)}"
+            )
+        return "\n".join(lines)
 
 
 def _flag(value: Any) -> bool:

@@ -1272,7 +1272,7 @@ def _number_argument(value: Any, name: str) -> float | None:
 
 
 def _embedded_entry(p: Path) -> Any:
-    from workbench.datasets import EMBEDDED, embedded_path
+    from workbench.datasets.catalogue import EMBEDDED, embedded_path
 
     try:
         resolved = p.resolve()

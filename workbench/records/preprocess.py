@@ -103,7 +103,7 @@ def com_acceleration(record: Record) -> FloatArray:
             record.source,
             f"column 'grf', sample {first} (t = {record.time_s[first]:g} s)",
             f"{int(bad.sum())} force samples are missing or not finite",
-            "fill or cut the gap before preprocessing (for example with Record.slice_time)",
+            "fill or cut the gap before preprocessing (for example with Record.slice)",
         )
     return (grf - mass_kg * G_M_S2) / mass_kg
 

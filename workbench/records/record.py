@@ -128,9 +128,34 @@ class Record:
         """Return a copy with the given fields changed."""
         return dataclasses.replace(self, **changes)
 
-    def slice_time(self, start_s: float, stop_s: float) -> Record:
-        """Return the part of the record with ``start_s <= t < stop_s``."""
-        keep = (self.time_s >= start_s) & (self.time_s < stop_s)
+    def slice(self, t0_s: float, t1_s: float) -> Record:
+        """Return the part of the record with ``t0_s <= t < t1_s`` (times kept as they are).
+
+        Parameters
+        ----------
+        t0_s, t1_s : float
+            Start and end of the part [s], on the record's own time axis.
+
+        Returns
+        -------
+        Record
+            The same person, mass and metadata; every column cut to the window.
+        """
+        from workbench.errors import UsageError
+
+        t0, t1 = float(t0_s), float(t1_s)
+        first, last = float(self.time_s[0]), float(self.time_s[-1])
+        if not (np.isfinite(t0) and np.isfinite(t1) and t0 < t1):
+            raise UsageError(
+                f"{self.name}: slice({t0_s!r}, {t1_s!r}) needs a finite start before its end; "
+                f"give times in seconds within {first:g}-{last:g} s"
+            )
+        keep = (self.time_s >= t0) & (self.time_s < t1)
+        if np.count_nonzero(keep) < 2:
+            raise UsageError(
+                f"{self.name}: slice({t0:g}, {t1:g}) holds fewer than two samples; the record "
+                f"spans {first:g}-{last:g} s, so give a window inside it"
+            )
         changes: dict[str, Any] = {}
         for name in ("time_s", "grf_n", "grf_left_n", "grf_right_n", "ground_acc_m_s2"):
             value = getattr(self, name)

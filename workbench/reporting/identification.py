@@ -8,14 +8,18 @@ biomechanical force and its Fourier amplitudes.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 from scipy import signal
 
-from workbench.inference.results import IdentificationResult
 from workbench.reporting.document import Section, Table
 from workbench.reporting.figures import save_figure
+
+#: An :class:`workbench.inference.results.IdentificationResult`. Not imported: the result's
+#: own ``plot_diagnostics()`` calls this module, and the import would close a cycle.
+IdentificationResult = Any
 
 __all__ = [
     "convergence_figure",

@@ -243,7 +243,7 @@ def residuals_figure(fit: PopulationFit) -> Figure:
     axes = fig.subplots(2, 3)
     for j, key in enumerate(LAW_COLUMNS):
         r = fit.used[f"{key}_residual"].to_numpy(float)
-        res = fit.summary["laws"][key]["residuals"]
+        res = fit.population_json["laws"][key]["residuals"]
         ax = axes[0, j]
         ax.hist(r, bins="auto", density=True, color="C0", alpha=0.6)
         x = np.linspace(r.min(), r.max(), 200)
@@ -271,7 +271,7 @@ def blf_figure(fit: PopulationFit) -> Figure:
     axes = fig.subplots(1, 2)
     for ax, key in zip(axes, LOGNORMAL_COLUMNS, strict=True):
         x = fit.used[key].to_numpy(float)
-        ln = fit.summary["lognormal"][key]
+        ln = fit.population_json["lognormal"][key]
         ax.hist(x, bins="auto", density=True, color="C0", alpha=0.6)
         grid = np.linspace(max(x.min() * 0.8, 1e-6), x.max() * 1.1, 300)
         ax.plot(
@@ -341,7 +341,7 @@ def population_report(
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    s = fit.summary
+    s = fit.population_json
     files: dict[str, str] = {}
     report = Report(
         title,
@@ -462,7 +462,7 @@ def run_population_demo(
     plan = study_plan(design, seed=seed)
     manifest = write_study(plan, out / "study", design)
     batch_dir = out / "batch_synthetic"
-    settings = IdentifySettings(**STUDY_SETTINGS, particles=64, seed=seed)
+    settings = IdentifySettings.from_flat(**STUDY_SETTINGS, particles=64, seed=seed)
     summaries = {
         "synthetic": run_batch(
             manifest,
@@ -489,7 +489,7 @@ def run_population_demo(
         summaries["real"] = run_batch(
             real_manifest,
             real_batch,
-            settings=IdentifySettings(seed=seed),
+            settings=IdentifySettings.from_flat(seed=seed),
             workers=workers,
             resume=real_batch.exists(),
             progress=progress,
@@ -499,7 +499,7 @@ def run_population_demo(
     fit = fit_population(results, source=str(out))
     from workbench.fileutil import atomic_write_json
 
-    atomic_write_json(out / "population.json", fit.summary)
+    atomic_write_json(out / "population.json", fit.population_json)
     laws = PopulationLaws()
     notes = [
         f"Synthetic records: {len(plan)} ({participants[0]} male, {participants[1]} female "
@@ -519,16 +519,17 @@ def run_population_demo(
             + ", identified per footfall step with the default settings."
         )
     files = population_report(results, fit, out, notes=notes)
-    fn = fit.summary["laws"]["natural_frequency_hz"]
+    summary = fit.population_json
+    fn = summary["laws"]["natural_frequency_hz"]
     return {
         "records": len(results),
-        "records_used": fit.summary["records_used"],
-        "records_excluded": fit.summary["records_excluded"],
+        "records_used": fit.population_json["records_used"],
+        "records_excluded": fit.population_json["records_excluded"],
         "failed": sum(s.failed for s in summaries.values()),
-        "laws": fit.summary["laws"],
-        "lognormal": fit.summary["lognormal"],
+        "laws": fit.population_json["laws"],
+        "lognormal": fit.population_json["lognormal"],
         "report": files["html"],
         "files": files,
-        "text": f"population: f_n = {_law_text(fn)} from {fit.summary['records_used']} records "
-        f"({fit.summary['records_excluded']} excluded); report {files['html']}",
+        "text": f"population: f_n = {_law_text(fn)} from {summary['records_used']} records "
+        f"({summary['records_excluded']} excluded); report {files['html']}",
     }

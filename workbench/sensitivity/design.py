@@ -216,19 +216,20 @@ def default_levels(name: str, base: IdentifySettings) -> list[Level]:
         )
         return _levels(name, base, values)
     if name == "highpass_hz":
-        d = base.highpass_hz
+        d = base.preprocessing.highpass_hz
         values = [d * s for s in SCALES] if d > 0 else [0.0, 0.075, 0.15]
         return _levels(name, base, values)
     if name == "particles":
-        if base.method == "exact":
+        if base.method.name == "exact":
             return _levels(name, base, [0])
         n = base.n_particles
         return _levels(name, base, sorted({max(2, n // 2), n, 2 * n}))
     if name == "harmonics":
-        n = base.harmonics
+        n = base.model.harmonics
         return _levels(name, base, sorted({max(1, round(n / 2)), n, min(40, 2 * n)}))
     if name == "method":
-        return _levels(name, base, [base.method, *(m for m in METHODS if m != base.method)])
+        method = base.method.name
+        return _levels(name, base, [method, *(m for m in METHODS if m != method)])
     return _levels(name, base, list(_CHOICES[name]))
 
 
@@ -238,12 +239,12 @@ def _default_value(name: str, base: IdentifySettings) -> float | int | str:
         return 1.0
     values: dict[str, float | int | str] = {
         "state_noise": base.state_fraction,
-        "highpass_hz": base.highpass_hz,
-        "particles": 0 if base.method == "exact" else base.n_particles,
-        "harmonics": base.harmonics,
-        "pieces": base.pieces,
-        "time_basis": base.time_basis,
-        "method": base.method,
+        "highpass_hz": base.preprocessing.highpass_hz,
+        "particles": base.n_particles,
+        "harmonics": base.model.harmonics,
+        "pieces": base.model.pieces,
+        "time_basis": base.model.time_basis,
+        "method": base.method.name,
     }
     return values[name]
 
@@ -390,13 +391,12 @@ class DesignPoint:
                 if int(value) > 0:
                     settings = settings.replace(particles=int(value))
             elif name in ("highpass_hz", "harmonics", "pieces", "time_basis"):
-                changes: dict[str, Any] = {name: value}
-                settings = dataclasses.replace(settings, **changes)
-        # The method last: a method change keeps the other factors' explicit values.
-        if "method" in v and v["method"] != settings.method:
-            settings = dataclasses.replace(settings, method=str(v["method"]))
-            if "particles" not in v or int(v["particles"]) == 0:
-                settings = dataclasses.replace(settings, particles=None)
+                settings = settings.replace(**{name: value})
+        # The method last: a method change keeps the other factors' explicit values and takes
+        # the new method's default particle count unless the design sets one.
+        if "method" in v and v["method"] != settings.method.name:
+            given = int(v["particles"]) if "particles" in v and int(v["particles"]) > 0 else None
+            settings = settings.replace(method=str(v["method"]), particles=given)
         overrides = dataclasses.replace(overrides, obs_scale=(scale[0], scale[1], scale[2]))
         return settings, overrides
 

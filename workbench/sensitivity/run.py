@@ -101,10 +101,10 @@ def run_task(task: SensitivityTask) -> dict[str, Any]:
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
         try:
-            settings = IdentifySettings(**task.settings)
+            settings = IdentifySettings.from_flat(**task.settings)
             result = identify(
                 task.record,
-                settings,
+                settings=settings,
                 adjust_problem=task.overrides.adjust_problem,
                 adjust_noise=task.overrides.adjust_noise,
             )

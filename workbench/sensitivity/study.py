@@ -357,7 +357,7 @@ def demo_record(seed: int = 1) -> tuple[str, Record]:
 
 def demo_settings(particles: int = 32) -> IdentifySettings:
     """Baseline settings for :func:`demo_record`: the model class's (whole, absolute, acc)."""
-    return IdentifySettings(
+    return IdentifySettings.from_flat(
         method="rbpf",
         particles=particles,
         harmonics=4,
