@@ -1,0 +1,197 @@
+"""The package's shape: no import cycles, modules of one idea, docs that match the code.
+
+The import graph counts every import statement in ``workbench/``, those inside functions
+(lazy) and under ``if TYPE_CHECKING:`` included: a cycle that only closes at run time in a
+rarely used branch is still a cycle in the design.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "workbench"
+#: A module longer than this states why at its top (a line starting with this phrase).
+MAX_LINES = 600
+LONG_REASON = "Why this module is long:"
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = path
+    return mods
+
+
+def _resolve(name: str, mods: dict[str, Path]) -> str | None:
+    while name:
+        if name in mods:
+            return name
+        name = name.rpartition(".")[0]
+    return None
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Edges module -> imported workbench module (a package's own parents excluded)."""
+    mods = _modules()
+    edges: dict[str, set[str]] = {m: set() for m in mods}
+    for mod, path in mods.items():
+        base = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                origin = node.module or ""
+                if node.level:
+                    b = base
+                    for _ in range(node.level - 1):
+                        b = b.rpartition(".")[0]
+                    origin = f"{b}.{node.module}" if node.module else b
+                targets = [f"{origin}.{a.name}" for a in node.names] + [origin]
+            for target in targets:
+                if not target.startswith("workbench"):
+                    continue
+                resolved = _resolve(target, mods)
+                # Importing one's own parent package runs nothing new: it is already running.
+                if resolved and resolved != mod and not mod.startswith(resolved + "."):
+                    if resolved != "workbench":
+                        edges[mod].add(resolved)
+    return edges
+
+
+def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+    counter = [0]
+    sys.setrecursionlimit(max(10_000, sys.getrecursionlimit()))
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in edges[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in edges:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_cycle_finder_finds_a_cycle() -> None:
+    """The checker itself: a lazy import back is a cycle, a one-way chain is not."""
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": set()}) == []
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycle_in_the_package() -> None:
+    edges = import_graph()
+    assert len(edges) > 50  # the walk saw the package
+    assert "workbench.inference.methods" in edges["workbench.inference.identify"]
+    assert cycles(edges) == []
+
+
+def test_models_and_records_import_no_algorithm() -> None:
+    """Models are descriptions (as in ``particles``): they never import the algorithms."""
+    edges = import_graph()
+    for mod, targets in edges.items():
+        if mod.startswith(("workbench.models", "workbench.records")):
+            bad = [t for t in targets if t.startswith(("workbench.inference", "workbench.cli"))]
+            assert not bad, f"{mod} imports {bad}"
+
+
+def test_long_modules_say_why() -> None:
+    long = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text(encoding="utf-8")
+        if text.count("\n") > MAX_LINES and LONG_REASON not in text[:6000]:
+            long.append(f"{path.relative_to(ROOT)} ({text.count(chr(10))} lines)")
+    assert not long, f"over {MAX_LINES} lines without '{LONG_REASON}' at the top: {long}"
+
+
+def test_nothing_cites_a_file_outside_the_repository() -> None:
+    pattern = re.compile(r"DESIGN\.md|\.\./shared|/work/")
+    offenders = []
+    for folder in ("workbench", "tests", "analyses", "docs"):
+        for path in (ROOT / folder).rglob("*"):
+            if path.suffix in (".py", ".md", ".toml", ".yml") and path.name != Path(__file__).name:
+                if pattern.search(path.read_text(encoding="utf-8")):
+                    offenders.append(str(path.relative_to(ROOT)))
+    assert not offenders
+
+
+def _readme_session() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    match = re.search(r"## Notebook session\s+(?:<!--.*?-->\s*)?```python\n(.*?)```", text, re.S)
+    assert match, "README.md has no notebook session block"
+    return match.group(1)
+
+
+def test_readme_is_a_front_page() -> None:
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert readme.count("\n") <= 250
+    lines = readme.splitlines()
+    start = lines.index("```bash", next(i for i, x in enumerate(lines) if "Quick start" in x))
+    end = lines.index("```", start + 1)
+    commands = lines[start + 1 : end]
+    assert len(commands) == 2 and "workbench demo" in commands[0]
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    assert commands[1] in ci  # CI runs the README's test command
+
+
+def test_the_session_is_the_same_everywhere() -> None:
+    session = _readme_session()
+    assert (ROOT / "docs" / "examples" / "notebook_session.py").read_text(
+        encoding="utf-8"
+    ) == session
+    assert session in (ROOT / "docs" / "notebook.md").read_text(encoding="utf-8")
+
+
+@pytest.mark.slow
+def test_the_notebook_session_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    """The README's session, run as a notebook would (bare expressions displayed)."""
+    sys.path.insert(0, str(ROOT / "docs" / "examples"))
+    try:
+        from run_session import run
+    finally:
+        sys.path.pop(0)
+    namespace = run(_readme_session())
+    out = capsys.readouterr().out
+    res, d = namespace["res"], namespace["d"]
+    # The session printed both summaries and displayed the estimates and intervals.
+    assert "SMD identification (rbpf)" in out and "gait_asymmetry" in out
+    assert "natural_frequency_hz" in out and "lower" in out and "upper" in out
+    params = res.params  # type: ignore[attr-defined]
+    ci = res.conf_int()  # type: ignore[attr-defined]
+    assert set(params.index) == set(ci.index)
+    assert (ci["lower"] <= params).all() and (params <= ci["upper"]).all()
+    assert "gait_asymmetry.a_half_n" in params.index
+    assert d.to_json()["verdict"] in out  # type: ignore[attr-defined]
