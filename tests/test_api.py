@@ -170,3 +170,31 @@ def test_inference_data_carries_the_weighted_posterior(result: wb.Identification
         assert abs(draws.mean() - result.estimates[key]) < 0.05 * result.posterior_sd[key]
     assert idata.observed_data["u_ddot_m_s2"].size == result.problem.n_samples
     assert idata.attrs["method"] == "rbpf"
+
+
+def test_the_simulator_takes_the_model() -> None:
+    """Simulating a model gives the walk its flat arguments give, draw for draw."""
+    model = wb.SMDModel.from_modal(
+        72.0,
+        2.6,
+        0.3,
+        harmonics=2,
+        pacing_hz=1.9,
+        force_coefficients_n=(0.0, 10.0, 250.0, 0.0, 60.0),
+    ) + wb.effects.CubicStiffness(k3_n_per_m3=4e5)
+    kwargs = {"duration_s": 4.0, "sample_rate_hz": 100, "seed": 5}
+    by_model = wb.simulate_walking(model=model, **kwargs)
+    by_args = wb.simulate_walking(
+        mass_kg=72.0,
+        natural_frequency_hz=2.6,
+        damping_ratio=0.3,
+        pacing_hz=1.9,
+        coefficients=(0.0, 10.0, 250.0, 0.0, 60.0),
+        effects=[wb.effects.CubicStiffness(k3_n_per_m3=4e5)],
+        **kwargs,
+    )
+    np.testing.assert_array_equal(by_model.record.grf_n, by_args.record.grf_n)
+    assert by_model.model.effects == model.effects
+    assert by_model.model.stiffness_n_per_m == pytest.approx(model.stiffness_n_per_m)
+    with pytest.raises(UsageError, match="given both"):
+        wb.simulate_walking(model=model, damping_ratio=0.2)

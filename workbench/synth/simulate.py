@@ -769,11 +769,19 @@ def simulate_walking(
     effects: Effect | Effects | Iterable[Effect | str] = (),
     start: Literal["rest", "steady"] = "rest",
     seed: int | np.random.Generator | None = None,
+    model: SMDModel | None = None,
 ) -> Simulation:
     r"""Simulate a pedestrian walking on the spot (or on a moving surface).
 
     Parameters
     ----------
+    model : SMDModel, optional
+        The pedestrian to simulate, as the identification describes it: its mass, K and C
+        (required), effects and, when set, its pacing and mean force coefficients
+        (``force_coefficients_n``, with its harmonics). The arguments it replaces
+        (``mass_kg``, ``natural_frequency_hz``, ``damping_ratio``, ``effects``, and
+        ``pacing_hz``/``coefficients`` when the model sets them) must then be left at their
+        defaults. The keyword arguments below describe the walk.
     mass_kg : float, optional
         Body mass [kg].
     pacing_hz : float, optional
@@ -849,6 +857,34 @@ def simulate_walking(
     their parameters, the variability and noise settings, the start mode and the seed.
     """
     where = "simulate_walking"
+    if model is not None:
+        if not isinstance(model, SMDModel):
+            raise UsageError(
+                f"{where}: 'model' must be an SMDModel, got {type(model).__name__}; build one "
+                "with SMDModel(mass_kg=..., stiffness_n_per_m=..., damping_ns_per_m=...)"
+            )
+        given = {
+            "natural_frequency_hz": natural_frequency_hz,
+            "damping_ratio": damping_ratio,
+            "coefficients": coefficients if model.force_coefficients_n is not None else None,
+            "effects": effects or None,
+        }
+        twice = [name for name, value in given.items() if value is not None]
+        if twice:
+            raise UsageError(
+                f"{where}: '{twice[0]}' is given both by the model and as an argument; give "
+                "it once (on the model)"
+            )
+        mass_kg = model.require("mass_kg")
+        model.require("stiffness_n_per_m", "damping_ns_per_m")
+        natural_frequency_hz = model.natural_frequency_hz
+        damping_ratio = model.damping_ratio
+        effects = model.effects
+        if model.pacing_hz is not None:
+            pacing_hz = model.pacing_hz
+        if model.force_coefficients_n is not None:
+            coefficients = model.force_coefficients_n
+            harmonics = model.harmonics
     mass = _positive(mass_kg, "mass_kg", where)
     fp = _positive(pacing_hz, "pacing_hz", where)
     duration = _positive(duration_s, "duration_s", where)
