@@ -53,7 +53,8 @@ def test_parse_noise_setting_rejects_with_one_sentence(setting) -> None:
     with pytest.raises(UsageError) as info:
         parse_noise_setting(setting)
     message = str(info.value)
-    assert message.startswith("--obs-noise must be")
+    assert message.startswith("'obs_noise' must be")
+    assert info.value.naming({"obs_noise": "--obs-noise"}).startswith("--obs-noise must be")
     assert "'seed'" in message and "'auto'" in message and repr(setting) in message
     assert "\n" not in message and message.count(". ") == 0
 

@@ -308,5 +308,5 @@ def test_preprocess_refuses_cutoffs_that_break_walking(cutoff_hz) -> None:
     """Tiny cut-offs need absurd padding; large ones eat the walking fundamental."""
     t = np.arange(2000) / 100.0
     rec = Record(t, 700.0 + 100.0 * np.sin(2 * np.pi * 1.8 * t), mass_kg=70.0)
-    with pytest.raises(UsageError, match="--highpass-hz"):
+    with pytest.raises(UsageError, match="'highpass_hz'"):
         preprocess(rec, highpass_hz=cutoff_hz)

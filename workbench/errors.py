@@ -45,4 +45,38 @@ class InputError(WorkbenchError):
 
 
 class UsageError(WorkbenchError):
-    """A command-line or API argument that does not make sense (not tied to a data file)."""
+    """An API argument or command-line option that does not make sense (not tied to a file).
+
+    Library code names the parameter in its own words and quotes: ``"'highpass_hz' must
+    be ..."``; with ``parameter="highpass_hz"`` the command line, which knows its flags,
+    can say ``--highpass-hz`` instead (:meth:`naming`).
+
+    Parameters
+    ----------
+    message : str
+        The one sentence.
+    parameter : str, optional
+        The parameter the sentence is about, as quoted in it.
+    """
+
+    def __init__(self, message: str, *, parameter: str | None = None) -> None:
+        super().__init__(message)
+        self.parameter = parameter
+
+    def naming(self, flags: dict[str, str]) -> str:
+        """Return the sentence with the quoted parameter replaced by its flag, if known.
+
+        Parameters
+        ----------
+        flags : dict
+            Parameter name -> command-line flag (``{"highpass_hz": "--highpass-hz"}``).
+
+        Returns
+        -------
+        str
+        """
+        text = str(self)
+        flag = flags.get(self.parameter or "")
+        if flag is None:
+            return text
+        return text.replace(f"'{self.parameter}'", flag, 1)

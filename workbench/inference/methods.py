@@ -50,17 +50,22 @@ METHODS = ("rbpf", "pf", "exact")
 def _check_resampling(resampling: str, ess_threshold: float, who: str) -> None:
     if resampling not in SCHEMES:
         raise UsageError(
-            f"{who}: resampling {resampling!r} is not known; use one of {', '.join(SCHEMES)}"
+            f"{who}: 'resampling' {resampling!r} is not known; use one of {', '.join(SCHEMES)}",
+            parameter="resampling",
         )
     if not (0 < float(ess_threshold) <= 1):
         raise UsageError(
-            f"{who}: ess_threshold must be a fraction in (0, 1], got {ess_threshold!r}"
+            f"{who}: 'ess_threshold' must be a fraction in (0, 1], got {ess_threshold!r}",
+            parameter="ess_threshold",
         )
 
 
 def _check_particles(n: int, who: str) -> int:
     if isinstance(n, bool) or int(n) != n or int(n) < 2:
-        raise UsageError(f"{who}: n_particles must be a whole number of at least 2, got {n!r}")
+        raise UsageError(
+            f"{who}: 'n_particles' must be a whole number of at least 2, got {n!r}",
+            parameter="n_particles",
+        )
     return int(n)
 
 
@@ -258,7 +263,9 @@ class PF(Method):
         _check_resampling(self.resampling, self.ess_threshold, "PF")
         if self.force_proposal not in ("regression", "prior"):
             raise UsageError(
-                f"PF: force_proposal must be 'regression' or 'prior', got {self.force_proposal!r}"
+                f"PF: 'force_proposal' must be 'regression' or 'prior', got "
+                f"{self.force_proposal!r}",
+                parameter="force_proposal",
             )
 
     def run(

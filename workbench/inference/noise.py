@@ -425,7 +425,7 @@ _SETTING_HELP = (
 
 
 def parse_noise_setting(setting: Any) -> float | str:
-    """Validate an ``--obs-noise`` value: a fraction in (0, 1], ``"seed"`` or ``"auto"``.
+    """Validate an observation-noise setting: a fraction in (0, 1], ``"seed"`` or ``"auto"``.
 
     Parameters
     ----------
@@ -442,7 +442,7 @@ def parse_noise_setting(setting: Any) -> float | str:
     UsageError
         One sentence naming the bad value and what is accepted.
     """
-    bad = UsageError(f"--obs-noise must be {_SETTING_HELP}; got {setting!r}")
+    bad = UsageError(f"'obs_noise' must be {_SETTING_HELP}; got {setting!r}", parameter="obs_noise")
     if isinstance(setting, bool) or setting is None:
         raise bad
     if isinstance(setting, str):

@@ -68,6 +68,7 @@ import numpy as np
 
 from workbench.errors import InputError, UsageError
 from workbench.inference.methods import METHODS, PF, RBPF, Method, as_method
+from workbench.inference.noise import parse_noise_setting
 from workbench.models.effects import Effects, as_effects
 from workbench.models.smd import SMDModel
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
@@ -79,7 +80,6 @@ __all__ = [
     "IdentifySettings",
     "NoiseSettings",
     "Preprocessing",
-    "parse_obs_noise",
 ]
 
 #: Particles per method when not given: the RBPF needs few, the seed's filter many.
@@ -104,28 +104,6 @@ FLAT_KEYS = (
     "force_proposal",
     "effects",
 )
-
-
-def parse_obs_noise(value: Any, where: str = "--obs-noise") -> float | str:
-    """Parse an observation-noise setting: a positive fraction, ``"seed"`` or ``"auto"``."""
-    if isinstance(value, str):
-        text = value.strip().lower()
-        if text in ("seed", "auto"):
-            return text
-        try:
-            value = float(text)
-        except ValueError:
-            raise UsageError(
-                f"{where} {value!r} is not understood; give a fraction of the RMS of u, u', u'' "
-                "such as 0.05, or 'seed' (0.10) or 'auto' (estimated from the record)"
-            ) from None
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise UsageError(f"{where} must be a number, 'seed' or 'auto', not {value!r}")
-    if not (0 < float(value) < 1):
-        raise UsageError(
-            f"{where} {value!r} must be a fraction between 0 and 1 of the RMS of u, u', u''"
-        )
-    return float(value)
 
 
 def parse_effects(value: Any, where: str = "--effects") -> tuple[str, ...]:
@@ -172,11 +150,15 @@ class NoiseSettings:
     observe: str = "all"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "obs_noise", parse_obs_noise(self.obs_noise))
+        object.__setattr__(self, "obs_noise", parse_noise_setting(self.obs_noise))
         if self.prior not in ("modal", "seed"):
-            raise UsageError(f"prior must be 'modal' or 'seed', got {self.prior!r}")
+            raise UsageError(
+                f"'prior' must be 'modal' or 'seed', got {self.prior!r}", parameter="prior"
+            )
         if self.observe not in ("all", "acc"):
-            raise UsageError(f"--observe must be 'all' or 'acc', got {self.observe!r}")
+            raise UsageError(
+                f"'observe' must be 'all' or 'acc', got {self.observe!r}", parameter="observe"
+            )
         if self.state_noise_fraction is not None and not (
             0 <= float(self.state_noise_fraction) < 1
         ):
@@ -212,19 +194,28 @@ class Preprocessing:
     def __post_init__(self) -> None:
         hp = float(self.highpass_hz)
         if not (hp >= 0 and hp < float("inf")):
-            raise UsageError(f"--highpass-hz must be 0 (off) or positive, got {self.highpass_hz}")
+            raise UsageError(
+                f"'highpass_hz' must be 0 (off) or positive, got {self.highpass_hz}",
+                parameter="highpass_hz",
+            )
 
 
 def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
     harmonics = int(flat["harmonics"])
     if harmonics < 1 or harmonics > 40:
-        raise UsageError(f"--harmonics must be between 1 and 40, got {flat['harmonics']}")
+        raise UsageError(
+            f"'harmonics' must be between 1 and 40, got {flat['harmonics']}",
+            parameter="harmonics",
+        )
     if flat["time_basis"] not in ("step_phase", "absolute"):
         raise UsageError(
-            f"time_basis must be 'step_phase' or 'absolute', got {flat['time_basis']!r}"
+            f"'time_basis' must be 'step_phase' or 'absolute', got {flat['time_basis']!r}",
+            parameter="time_basis",
         )
     if flat["pieces"] not in ("steps", "whole"):
-        raise UsageError(f"pieces must be 'steps' or 'whole', got {flat['pieces']!r}")
+        raise UsageError(
+            f"'pieces' must be 'steps' or 'whole', got {flat['pieces']!r}", parameter="pieces"
+        )
     effects = flat["effects"]
     if not isinstance(effects, Effects):
         effects = as_effects(parse_effects(effects))
@@ -240,15 +231,22 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
 def _method_from_flat(flat: dict[str, Any]) -> Method:
     name = flat["method"]
     if name not in METHODS:
-        raise UsageError(f"--method {name!r} is not known; choose one of {', '.join(METHODS)}")
+        raise UsageError(
+            f"'method' {name!r} is not known; choose one of {', '.join(METHODS)}",
+            parameter="method",
+        )
     particles = flat["particles"]
     if particles is not None and int(particles) < 2:
-        raise UsageError(f"--particles must be at least 2, got {particles}")
+        raise UsageError(f"'particles' must be at least 2, got {particles}", parameter="particles")
     if not (0 < flat["ess_threshold"] <= 1):
-        raise UsageError(f"ess_threshold must be in (0, 1], got {flat['ess_threshold']}")
+        raise UsageError(
+            f"'ess_threshold' must be in (0, 1], got {flat['ess_threshold']}",
+            parameter="ess_threshold",
+        )
     if flat["force_proposal"] not in ("regression", "prior"):
         raise UsageError(
-            f"--force-proposal must be 'regression' or 'prior', got {flat['force_proposal']!r}"
+            f"'force_proposal' must be 'regression' or 'prior', got {flat['force_proposal']!r}",
+            parameter="force_proposal",
         )
     return as_method(
         name,
@@ -315,7 +313,9 @@ class IdentifySettings:
     def __post_init__(self) -> None:
         seed = self.seed
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-            raise UsageError(f"--seed must be a whole number of 0 or more, got {seed!r}")
+            raise UsageError(
+                f"'seed' must be a whole number of 0 or more, got {seed!r}", parameter="seed"
+            )
         object.__setattr__(self, "seed", int(seed))
         object.__setattr__(self, "method", as_method(self.method))
 

@@ -491,10 +491,11 @@ def preprocess(
         )
     if highpass_hz and not (MIN_HIGHPASS_HZ <= highpass_hz <= MAX_HIGHPASS_HZ):
         raise UsageError(
-            f"--highpass-hz {highpass_hz:g} is outside {MIN_HIGHPASS_HZ:g}-{MAX_HIGHPASS_HZ:g} "
+            f"'highpass_hz' {highpass_hz:g} is outside {MIN_HIGHPASS_HZ:g}-{MAX_HIGHPASS_HZ:g} "
             "Hz: lower cut-offs need minutes of padding and let the integrals drift, higher "
             "ones remove part of the walking fundamental (1-3 Hz); use 0.15 (the seed's) or "
-            "0 to switch the filter off"
+            "0 to switch the filter off",
+            parameter="highpass_hz",
         )
     acc = com_acceleration(record)
     fs = record.sample_rate_hz
