@@ -73,10 +73,8 @@ Determinism
 from __future__ import annotations
 
 import math
-import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import emcee
@@ -84,6 +82,21 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
+from workbench.inference.mcmc_lockstep import _EnsembleError, _Lockstep, _run_chunk
+from workbench.inference.mcmc_result import McmcResult
+
+# The result type and the lockstep threads live in their own modules (each one idea);
+# McmcResult stays importable from here.
+__all__ = [
+    "ACCEPTANCE_MAX",
+    "ACCEPTANCE_MIN",
+    "ESS_MIN",
+    "RHAT_MAX",
+    "Initial",
+    "LogProb",
+    "McmcResult",
+    "run_ensembles",
+]
 
 FloatArray = NDArray[np.float64]
 LogProb = Callable[[FloatArray], ArrayLike]
@@ -102,115 +115,6 @@ _MIN_GROWTH = 0.25
 #: Aim for this much more than ``tau_factor * tau`` when extending, since the estimate of
 #: tau usually keeps growing a little as the chain gets longer.
 _EXTEND_MARGIN = 1.2
-
-
-@dataclass(frozen=True, eq=False)
-class McmcResult:
-    """What :func:`run_ensembles` returns.
-
-    Attributes
-    ----------
-    param_names : tuple of str
-        Names of the d parameters, in column order.
-    samples : ndarray, shape (n_draws, d)
-        All kept draws (after burn-in and thinning) of all ensembles and walkers, pooled.
-    mean, sd : ndarray, shape (d,)
-        Pooled posterior mean and standard deviation (``ddof=1``).
-    cov : ndarray, shape (d, d)
-        Pooled posterior covariance.
-    tau : ndarray, shape (n_ensembles, d)
-        Integrated autocorrelation time [steps] of every parameter in every ensemble, from
-        the whole final chain.
-    acceptance_fraction : ndarray, shape (n_ensembles,)
-        Mean acceptance fraction of the walkers of each ensemble over the whole run.
-    rhat, ess_bulk, ess_tail : ndarray, shape (d,)
-        Rank-normalised split R-hat and bulk / tail ESS across ensembles (arviz), with each
-        ensemble as one chain (module docstring).
-    n_steps : int
-        Steps per walker in every ensemble (all ensembles run equally long).
-    n_walkers, n_ensembles : int
-        Ensemble layout.
-    burn_in, thin : int
-        Steps discarded at the start of every walker and thinning interval (in steps).
-    n_evaluations : int
-        Number of log-density evaluations (rows passed to ``log_prob``) over all ensembles.
-    tau_rule_met : ndarray of bool, shape (n_ensembles,)
-        Whether each ensemble met the 50-tau rule (length and stable estimate).
-    converged : bool
-        All checks of the module docstring passed.
-    reasons : list of str
-        One plain sentence per failed check; empty when converged.
-    inference_data : arviz.InferenceData
-        ``posterior`` (one variable per parameter, dims ``chain`` = ensemble and ``draw`` =
-        walker-major pooled draws) and ``sample_stats`` (``lp``, the log density of every
-        kept draw, same layout).
-    seconds : float
-        Wall-clock time of the whole run, diagnostics included.
-    """
-
-    param_names: tuple[str, ...]
-    samples: FloatArray
-    mean: FloatArray
-    sd: FloatArray
-    cov: FloatArray
-    tau: FloatArray
-    acceptance_fraction: FloatArray
-    rhat: FloatArray
-    ess_bulk: FloatArray
-    ess_tail: FloatArray
-    n_steps: int
-    n_walkers: int
-    n_ensembles: int
-    burn_in: int
-    thin: int
-    n_evaluations: int
-    tau_rule_met: NDArray[np.bool_]
-    converged: bool
-    reasons: list[str] = field(default_factory=list)
-    inference_data: Any = None
-    seconds: float = 0.0
-
-    @property
-    def n_draws(self) -> int:
-        """Number of pooled draws kept."""
-        return int(self.samples.shape[0])
-
-    def to_json(self) -> dict[str, Any]:
-        """Return a JSON-able summary (no samples; NaN becomes None).
-
-        Per-parameter quantities are objects keyed by parameter name; ``tau`` is a list (one
-        entry per ensemble) of such objects.
-        """
-
-        def num(x: float) -> float | None:
-            return float(x) if np.isfinite(x) else None
-
-        def per_param(values: ArrayLike) -> dict[str, float | None]:
-            arr = np.asarray(values, dtype=float)
-            return {name: num(v) for name, v in zip(self.param_names, arr, strict=True)}
-
-        return {
-            "param_names": list(self.param_names),
-            "mean": per_param(self.mean),
-            "sd": per_param(self.sd),
-            "cov": [[num(v) for v in row] for row in self.cov],
-            "tau": [per_param(row) for row in self.tau],
-            "acceptance_fraction": [num(a) for a in self.acceptance_fraction],
-            "rhat": per_param(self.rhat),
-            "ess_bulk": per_param(self.ess_bulk),
-            "ess_tail": per_param(self.ess_tail),
-            "n_steps": self.n_steps,
-            "n_walkers": self.n_walkers,
-            "n_ensembles": self.n_ensembles,
-            "n_draws": self.n_draws,
-            "burn_in": self.burn_in,
-            "thin": self.thin,
-            "n_evaluations": self.n_evaluations,
-            "tau_rule_met": [bool(v) for v in self.tau_rule_met],
-            "converged": bool(self.converged),
-            "reasons": list(self.reasons),
-            "seconds": round(float(self.seconds), 4),
-        }
 
 
 class _CountingLogProb:
@@ -485,108 +389,6 @@ def run_ensembles(
 
 
 # -- helpers ------------------------------------------------------------------------------
-class _EnsembleError(Exception):
-    """An ensemble's run failed; ``__cause__`` is the original exception."""
-
-    def __init__(self, ensemble: int) -> None:
-        super().__init__(f"ensemble {ensemble} failed")
-        self.ensemble = ensemble
-
-
-class _PeerFailure(RuntimeError):
-    """Raised in an ensemble waiting on a round whose evaluation failed in another thread."""
-
-
-class _Lockstep:
-    """Gather the log-density requests of all running ensembles into one call per round."""
-
-    def __init__(self, target: Callable[[FloatArray], FloatArray], n: int) -> None:
-        self._target = target
-        self._cond = threading.Condition()
-        self._active = set(range(n))
-        self._pending: dict[int, FloatArray] = {}
-        self._results: dict[int, FloatArray] = {}
-        self._error: BaseException | None = None
-
-    def proxy(self, e: int) -> Callable[[FloatArray], FloatArray]:
-        """Return the log density that ensemble ``e`` sees."""
-        return lambda coords: self._submit(e, coords)
-
-    def restart(self, n: int) -> None:
-        """Before a chunk: all ``n`` ensembles run again."""
-        self._active = set(range(n))
-        self._error = None
-
-    def retire(self, e: int) -> None:
-        """Ensemble ``e`` finished its chunk (or failed): stop waiting for it."""
-        with self._cond:
-            self._active.discard(e)
-            self._evaluate_if_ready()
-
-    def _submit(self, e: int, coords: FloatArray) -> FloatArray:
-        with self._cond:
-            self._pending[e] = np.asarray(coords, dtype=np.float64)
-            self._evaluate_if_ready()
-            while e not in self._results and self._error is None:
-                self._cond.wait()
-            if e in self._results:
-                return self._results.pop(e)
-            raise _PeerFailure("another ensemble's log-density call failed") from self._error
-
-    def _evaluate_if_ready(self) -> None:
-        # Called with the lock held, by whichever thread completes the round.
-        if not self._pending or set(self._pending) != self._active:
-            return
-        keys = sorted(self._pending)
-        batch = [self._pending.pop(k) for k in keys]
-        try:
-            lp = self._target(np.concatenate(batch))
-        except BaseException as err:
-            self._error = err
-            self._cond.notify_all()
-            raise
-        edges = np.cumsum([len(x) for x in batch])[:-1]
-        for k, part in zip(keys, np.split(lp, edges), strict=True):
-            self._results[k] = part
-        self._cond.notify_all()
-
-
-def _run_chunk(
-    samplers: list[emcee.EnsembleSampler],
-    states: list[emcee.State],
-    chunk: int,
-    batcher: _Lockstep | None,
-) -> None:
-    """Advance every ensemble by ``chunk`` steps (in lockstep threads when batching)."""
-    if batcher is None:
-        for e, sampler in enumerate(samplers):
-            try:
-                states[e] = sampler.run_mcmc(states[e], chunk, progress=False)
-            except Exception as err:
-                raise _EnsembleError(e) from err
-        return
-    batcher.restart(len(samplers))
-    errors: dict[int, BaseException] = {}
-
-    def run(e: int) -> None:
-        try:
-            states[e] = samplers[e].run_mcmc(states[e], chunk, progress=False)
-        except BaseException as err:
-            errors[e] = err
-        finally:
-            batcher.retire(e)
-
-    threads = [threading.Thread(target=run, args=(e,)) for e in range(len(samplers))]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    if errors:
-        # The original failure, not the "another ensemble failed" of those waiting on it.
-        first = min(errors, key=lambda e: (isinstance(errors[e], _PeerFailure), e))
-        raise _EnsembleError(first) from errors[first]
-
-
 def _check_int(name: str, value: object, least: int) -> None:
     if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < least:
         raise UsageError(f"{name} must be an integer of at least {least}, got {value!r}")

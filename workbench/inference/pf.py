@@ -1,5 +1,14 @@
 """Seed-faithful bootstrap particle filter (method ``"pf"``), seed eqs. 15-23.
 
+Why this module is long: about 130 of its lines are this docstring, the method's
+specification (seed equations, pieces, initialisation, resampling, likelihood estimate,
+jitter, regeneration of theta, diagnostics), which belongs with the code it specifies. The
+compiled per-sample loop already lives in :mod:`workbench.inference._pf_kernel`; what
+remains -- the driver's piece loop and buffers, the regression proposal and the Liu-West
+jitter it calls between kernel blocks -- shares one state layout (a ``(4, P)`` moving state
+and a ``(P, m)`` theta table) and one order of random draws, which fixes a seed's result,
+so cutting it apart would spread one filter's bookkeeping over several modules.
+
 Every particle carries the seed's full state (eq. 15)
 
     X = (u, u', C, K, a0, a1, b1, ..., an, bn),

@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from workbench.fileutil import atomic_path
 from workbench.inference.problem import IdentificationProblem
+from workbench.inference.weighted import _moments, weighted_quantile
 from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2
 
@@ -49,20 +50,6 @@ BOUND_TOLERANCE = 0.01
 #: A filter whose particles all descend from at most this many initial particles has lost
 #: the diversity of its (C, K) cloud; reported with the frozen parameters.
 FROZEN_ANCESTORS = 5
-
-
-def weighted_quantile(values: FloatArray, weights: FloatArray, q: FloatArray) -> FloatArray:
-    """Quantiles of weighted samples (mid-point interpolation of the weighted CDF)."""
-    order = np.argsort(values)
-    v, w = np.asarray(values)[order], np.asarray(weights)[order]
-    cdf = (np.cumsum(w) - 0.5 * w) / np.sum(w)
-    return np.interp(q, cdf, v)
-
-
-def _moments(values: FloatArray, weights: FloatArray) -> tuple[float, float]:
-    mean = float(np.sum(weights * values) / np.sum(weights))
-    var = float(np.sum(weights * (values - mean) ** 2) / np.sum(weights))
-    return mean, float(np.sqrt(max(var, 0.0)))
 
 
 @dataclass(frozen=True, eq=False)
