@@ -863,13 +863,13 @@ def simulate_walking(
                 f"{where}: 'model' must be an SMDModel, got {type(model).__name__}; build one "
                 "with SMDModel(mass_kg=..., stiffness_n_per_m=..., damping_ns_per_m=...)"
             )
-        given = {
+        on_both = {
             "natural_frequency_hz": natural_frequency_hz,
             "damping_ratio": damping_ratio,
             "coefficients": coefficients if model.force_coefficients_n is not None else None,
             "effects": effects or None,
         }
-        twice = [name for name, value in given.items() if value is not None]
+        twice = [name for name, value in on_both.items() if value is not None]
         if twice:
             raise UsageError(
                 f"{where}: '{twice[0]}' is given both by the model and as an argument; give "
