@@ -52,9 +52,9 @@ from typing import Any
 import pandas as pd
 
 from workbench.errors import UsageError, WorkbenchError
+from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json
 from workbench.inference.settings import IdentifySettings
-from workbench.population.engine import run_tasks
 
 __all__ = [
     "FAILURE_COLUMNS",
