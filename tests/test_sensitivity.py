@@ -222,11 +222,9 @@ def test_factorial_grid_heat_map_and_seeds_shared_with_one_at_a_time(study, tmp_
 
 
 def test_pooled_effects_and_manifest_records(tmp_path):
-    import argparse
-
     import pandas as pd
 
-    from workbench.cli_sensitivity import load_study_records
+    from workbench.records.collection import load_study_records
     from workbench.sensitivity.analysis import pooled_effects
 
     d = [0.10, 0.14, 0.12, 0.08]
@@ -245,9 +243,6 @@ def test_pooled_effects_and_manifest_records(tmp_path):
     for name in ("a.csv", "b.csv"):
         save_record(record, tmp_path / name)
     (tmp_path / "m.csv").write_text("path,mass_kg\na.csv,70\nb.csv,71\n")
-    ns = argparse.Namespace(
-        record=str(tmp_path / "m.csv"), mass=None, pacing=None, subject=None, rescale_to_mass=False
-    )
-    recs = load_study_records(ns)
+    recs = load_study_records(str(tmp_path / "m.csv"))
     assert [k for k, _ in recs] == ["a.csv", "b.csv"]
     assert recs[1][1].mass_kg == 71.0

@@ -34,7 +34,7 @@ from workbench.records.record import Record
 from workbench.reporting.document import Report, Section, Table
 from workbench.reporting.inspection_report import inspection_section, inspection_summary_table
 
-__all__ = ["run_demo"]
+__all__ = ["run_demo", "warning_bullets"]
 
 
 Job = tuple[str, str, Path, float | None, str, str]
@@ -74,6 +74,34 @@ def _jobs() -> list[Job]:
             )
         )
     return jobs
+
+
+def warning_bullets(inspected: list[tuple[str, Inspection]]) -> list[str]:
+    """List every record's warnings, each under its record's label once.
+
+    Inspection warnings often start with the record's name already ("treadmill: ..."); that
+    name is dropped so the label is not repeated ("treadmill: treadmill: ...").
+
+    Parameters
+    ----------
+    inspected : list of (str, Inspection)
+        Label and inspection of each record.
+
+    Returns
+    -------
+    list of str
+        ``"label: warning"`` per warning, in record order.
+    """
+    bullets = []
+    for label, insp in inspected:
+        names = {label, insp.record.name, insp.record.source}
+        for warning in insp.warnings:
+            for name in names:
+                if name and warning.startswith(f"{name}: "):
+                    warning = warning[len(name) + 2 :]
+                    break
+            bullets.append(f"{label}: {warning}")
+    return bullets
 
 
 def run_demo(
@@ -124,7 +152,7 @@ def run_demo(
         sections.append(inspection_section(insp, out_dir, key, attribution=attribution))
         stages.update()
     summary.table(inspection_summary_table(inspected))
-    summary.bullets([f"{label}: {w}" for label, insp in inspected for w in insp.warnings])
+    summary.bullets(warning_bullets(inspected))
     for sec in sections:
         report.add(sec)
 

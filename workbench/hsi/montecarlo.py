@@ -24,12 +24,12 @@ from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
 from workbench.errors import UsageError
+from workbench.executor import run_tasks
 from workbench.hsi.metrics import SETRA_LIMITS_M_S2, comfort_class, running_rms
 from workbench.hsi.modes import apparent_structure_modes
 from workbench.hsi.pedestrians import PedestrianSampler, validate_pedestrians
 from workbench.hsi.simulate import CrowdBatch, Model, integrate
 from workbench.hsi.structure import ModalStructure
-from workbench.population.engine import run_tasks
 
 __all__ = ["CrossingSpec", "crossing_metrics", "draw_crossing", "run_monte_carlo"]
 

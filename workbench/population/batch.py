@@ -52,9 +52,9 @@ from typing import Any
 import pandas as pd
 
 from workbench.errors import UsageError, WorkbenchError
+from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json
 from workbench.inference.settings import IdentifySettings
-from workbench.population.engine import run_tasks
 
 __all__ = [
     "FAILURE_COLUMNS",
@@ -109,6 +109,8 @@ class BatchTask:
         The record's seed (:func:`record_seed`).
     settings : dict
         :class:`~workbench.inference.settings.IdentifySettings` as JSON.
+    allow_negative_force : bool
+        Accept force samples below zero with a warning (synthetic benchmarks).
     """
 
     key: str
@@ -119,6 +121,7 @@ class BatchTask:
     subject: str | None
     seed: int
     settings: dict[str, Any] = field(default_factory=dict)
+    allow_negative_force: bool = False
 
 
 @dataclass
@@ -258,6 +261,7 @@ def run_task(task: BatchTask) -> dict[str, Any]:
                 mass_kg=task.mass_kg,
                 pacing_hz=task.pacing_hz,
                 subject=task.subject,
+                allow_negative_force=task.allow_negative_force,
             )
             settings = IdentifySettings.from_flat(**{**task.settings, "seed": task.seed})
             model = settings.model
@@ -309,6 +313,7 @@ def run_batch(
     resume: bool = False,
     progress: bool = False,
     on_record: Callable[[dict[str, Any]], None] | None = None,
+    allow_negative_force: bool = False,
 ) -> BatchSummary:
     """Identify every record of a manifest (see the module docstring for the files).
 
@@ -332,6 +337,9 @@ def run_batch(
         Show a tqdm progress bar on stderr.
     on_record : callable, optional
         Called with each record's outcome after its file is written.
+    allow_negative_force : bool, default False
+        Accept records whose force dips below zero, with a warning (synthetic benchmarks);
+        see :func:`~workbench.records.validation.validate_record`.
 
     Returns
     -------
@@ -400,6 +408,7 @@ def run_batch(
                 subject=e.subject,
                 seed=record_seed(settings.seed, rel, content),
                 settings=settings_json,
+                allow_negative_force=allow_negative_force,
             )
         )
 

@@ -34,25 +34,38 @@ Seed defaults and the assumptions behind them (each one is written down in
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
-from workbench.errors import UsageError
+from workbench.errors import InputError, UsageError
 
 __all__ = [
     "DEFAULT_ASSUMPTIONS",
+    "SEED_DAMPING_RATIO",
+    "SEED_NATURAL_FREQUENCY_HZ",
+    "SEED_PACING_RANGE_HZ",
     "LinearLaw",
     "LognormalLaw",
     "MassDistribution",
     "PacingDistribution",
     "PopulationLaws",
     "StepLengthLaw",
+    "read_laws",
 ]
 
 #: Pacing range [Hz] of the seed's population study (its fixed metronome cases).
 SEED_PACING_RANGE_HZ = (1.5, 2.25)
+#: The seed's population law of the natural frequency (Table 2):
+#: ``f_n = 0.3049 f_p + 1.3670`` [Hz] as (slope, intercept).
+SEED_NATURAL_FREQUENCY_HZ = (0.3049, 1.3670)
+#: The seed's population law of the damping ratio (Table 2): ``zeta = -0.2116 f_p + 0.8737``
+#: as (slope, intercept).
+SEED_DAMPING_RATIO = (-0.2116, 0.8737)
 
 
 @dataclass(frozen=True)
@@ -193,11 +206,13 @@ DEFAULT_ASSUMPTIONS: tuple[str, ...] = (
 
 
 def _seed_fn() -> LinearLaw:
-    return LinearLaw(slope=0.3049, intercept=1.3670, residual_sd=0.15)
+    slope, intercept = SEED_NATURAL_FREQUENCY_HZ
+    return LinearLaw(slope=slope, intercept=intercept, residual_sd=0.15)
 
 
 def _seed_zeta() -> LinearLaw:
-    return LinearLaw(slope=-0.2116, intercept=0.8737, residual_sd=0.05)
+    slope, intercept = SEED_DAMPING_RATIO
+    return LinearLaw(slope=slope, intercept=intercept, residual_sd=0.05)
 
 
 def _young_blf1() -> LinearLaw:
@@ -315,3 +330,48 @@ def _nonneg(value: Any, name: str) -> float:
     if x < 0:
         raise UsageError(f"the population laws give {name} = {x:g}; it must not be negative")
     return x
+
+
+def read_laws(path: str | os.PathLike[str] | None) -> PopulationLaws:
+    """Read population laws from the JSON that ``workbench population`` writes.
+
+    Parameters
+    ----------
+    path : path-like or None
+        ``population.json`` of a population fit; None gives the seed's laws
+        (:class:`PopulationLaws` defaults).
+
+    Returns
+    -------
+    PopulationLaws
+        With ``source`` the path as given.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, not JSON, not an object or not a set of laws, in one
+        sentence naming the file and the fix.
+    """
+    if path is None:
+        return PopulationLaws()
+    try:
+        obj = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(
+            path, "whole file", "the file does not exist", "give the path of a population JSON"
+        ) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(
+            path,
+            "whole file",
+            f"the file is not JSON ({err})",
+            "give the file that 'workbench population --out DIR' writes (DIR/population.json)",
+        ) from None
+    if not isinstance(obj, dict):
+        raise InputError(
+            path, "whole file", "the JSON is not an object", "give a population JSON object"
+        )
+    try:
+        return PopulationLaws.from_json(obj, source=str(path))
+    except UsageError as err:
+        raise InputError(path, "whole file", str(err).rstrip("."), "fix or regenerate it") from None

@@ -216,6 +216,7 @@ def load_record(
     irregular_tolerance: float = 0.01,
     validate: bool = True,
     force_unit: str = "N",
+    allow_negative_force: bool = False,
 ) -> Record:
     """Read a GRF record from a file, with its metadata, and validate it.
 
@@ -243,6 +244,10 @@ def load_record(
     force_unit : {"N", "kN", "kgf"}, optional
         Unit of the force columns in the file; forces are converted to newtons and the
         conversion recorded in ``metadata["force_unit"]``.
+    allow_negative_force : bool, optional
+        Accept total-force samples below zero with a warning instead of refusing the record
+        (see :func:`~workbench.records.validation.validate_record`); for synthetic benchmark
+        forces that dip below zero. Default False.
 
     Returns
     -------
@@ -334,7 +339,12 @@ def load_record(
         metadata=metadata,
     )
     if validate:
-        record = validate_record(record, irregular_tolerance=irregular_tolerance, resample=resample)
+        record = validate_record(
+            record,
+            irregular_tolerance=irregular_tolerance,
+            resample=resample,
+            allow_negative_force=allow_negative_force,
+        )
     return record
 
 

@@ -103,6 +103,7 @@ def validate_record(
     irregular_tolerance: float = 0.01,
     resample: bool = False,
     require_mass: bool = True,
+    allow_negative_force: bool = False,
 ) -> Record:
     """Check a record for everything that would make identification wrong or impossible.
 
@@ -121,6 +122,11 @@ def validate_record(
     require_mass : bool, optional
         Raise if no body mass is given (default). With ``False`` the checks that need the mass
         (unit detection) are skipped when it is missing.
+    allow_negative_force : bool, optional
+        Accept total-force samples below zero (a synthetic benchmark force, such as the seed
+        study's numerical example, dips below zero where no person could pull on the ground):
+        the check becomes a sentence in ``metadata["warnings"]``. Default False: such a record
+        is refused. A negative *mean* force (a sign error) is refused either way.
 
     Returns
     -------
@@ -153,7 +159,7 @@ def validate_record(
         _check_pacing(record)
         _check_force_sign(record)
         _check_force_level(record)
-        _check_force_samples(record)
+        _check_force_samples(record, allow_negative_force, warnings)
         _check_ground_acc(record)
         _check_side_sum(record, warnings)
     metadata = dict(record.metadata)
@@ -466,21 +472,36 @@ OFF_PLATE_S = 0.15
 #: The total force cannot pull the person down: samples below this fraction of body weight
 #: are a zeroing, sign or clipping error, not walking.
 MIN_FORCE_FRACTION = -0.05
+#: Words that end the warning of a force below zero accepted with ``allow_negative_force``.
+NEGATIVE_FORCE_ACCEPTED = (
+    "accepted because negative force was allowed (a synthetic benchmark, not a measurement)"
+)
 
 
-def _check_force_samples(record: Record) -> None:
+def _check_force_samples(record: Record, allow_negative: bool, warnings: list[str]) -> None:
     if record.mass_kg is None:
         return
     weight_n = record.mass_kg * G_M_S2
     grf = record.grf_n
     low = int(np.argmin(grf))
     if grf[low] < MIN_FORCE_FRACTION * weight_n:
-        raise InputError(
-            record.source,
-            _where(record, low, "grf_n"),
+        problem = (
             f"the vertical force is {grf[low]:.6g} N, below zero by more than "
-            f"{-MIN_FORCE_FRACTION:.0%} of body weight; a person on the ground can only push",
-            "check the zero offset and sign of the force channels",
+            f"{-MIN_FORCE_FRACTION:.0%} of body weight; a person on the ground can only push"
+        )
+        if not allow_negative:
+            raise InputError(
+                record.source,
+                _where(record, low, "grf_n"),
+                problem,
+                "check the zero offset and sign of the force channels, or pass "
+                "--allow-negative-force (allow_negative_force=True in Python) for a synthetic "
+                "benchmark force that dips below zero",
+            )
+        _add_warning(
+            warnings,
+            f"{record.source}, {_where(record, low, 'grf_n')}: {problem}; "
+            f"{NEGATIVE_FORCE_ACCEPTED}.",
         )
     off = grf < OFF_PLATE_FRACTION * weight_n
     if np.any(off):

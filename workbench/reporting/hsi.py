@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -12,7 +14,13 @@ from numpy.typing import NDArray
 
 from workbench.hsi.metrics import SETRA_LIMITS_M_S2, running_rms
 
-__all__ = ["design_study_figure", "history_figure", "monte_carlo_figure"]
+__all__ = [
+    "crossing_summary",
+    "design_study_figure",
+    "history_figure",
+    "monte_carlo_figure",
+    "write_hsi_outputs",
+]
 
 _LABELS = {
     "interaction": "interaction (coupled SMDs)",
@@ -113,3 +121,113 @@ def design_study_figure(table: pd.DataFrame, *, value: str = "peak_interaction_m
     ax2.set_ylabel("interaction / moving force")
     ax1.legend(fontsize=8)
     return fig
+
+
+def crossing_summary(results: pd.DataFrame, model: str) -> dict[str, Any]:
+    """Summarise a Monte Carlo of crossings for one pedestrian model.
+
+    Parameters
+    ----------
+    results : pandas.DataFrame
+        One row per crossing, as :func:`workbench.hsi.montecarlo.run_monte_carlo` returns.
+    model : {"interaction", "moving_force"}
+        Which model's columns to summarise.
+
+    Returns
+    -------
+    dict
+        ``peak_mean_m_s2``, ``peak_p95_m_s2``, ``peak_max_m_s2``, ``rms1s_max_mean_m_s2``
+        and ``comfort_counts`` (crossings per comfort class).
+    """
+    from workbench.hsi.metrics import COMFORT_CLASSES
+
+    peak = results[f"peak_{model}_m_s2"].to_numpy()
+    rms = results[f"rms1s_{model}_m_s2"].to_numpy()
+    counts = results[f"comfort_{model}"].value_counts()
+    return {
+        "peak_mean_m_s2": float(peak.mean()),
+        "peak_p95_m_s2": float(np.quantile(peak, 0.95)),
+        "peak_max_m_s2": float(peak.max()),
+        "rms1s_max_mean_m_s2": float(rms.mean()),
+        "comfort_counts": {c: int(counts.get(c, 0)) for c in COMFORT_CLASSES},
+    }
+
+
+def write_hsi_outputs(
+    folder: Path, spec: Any, seed: int, results: pd.DataFrame, summary: dict[str, Any]
+) -> list[str]:
+    """Write a Monte Carlo's tables, figures and summary.
+
+    Writes ``crossings.csv`` (one row per crossing), ``crossing_0.csv`` and
+    ``crossing_0.png`` (the first crossing's deck acceleration with both models, redrawn from
+    its seed), ``monte_carlo.png`` and ``summary.json``.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        Output folder (created if needed).
+    spec : CrossingSpec
+        What was simulated.
+    seed : int
+        The Monte Carlo's seed.
+    results : pandas.DataFrame
+        One row per crossing.
+    summary : dict
+        The command's JSON summary, written as ``summary.json``.
+
+    Returns
+    -------
+    list of str
+        The files written.
+    """
+    from workbench.fileutil import atomic_path, atomic_write_json
+    from workbench.hsi.montecarlo import draw_crossing
+    from workbench.hsi.simulate import CrowdBatch, integrate
+    from workbench.reporting.figures import save_figure
+
+    folder.mkdir(parents=True, exist_ok=True)
+    files = []
+    path = folder / "crossings.csv"
+    with atomic_path(path) as tmp:
+        results.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+    files.append(path)
+    frame, x0, v, duration = draw_crossing(spec, seed, 0)
+    batch = CrowdBatch.from_scenarios([(frame, x0, v)])
+    hist = {
+        m: integrate(
+            spec.structure,
+            batch,
+            duration_s=duration,
+            dt_s=spec.dt_s,
+            model=m,
+            static_weight=spec.static_weight,
+            response_x_m=spec.response_x_m,
+        )
+        for m in ("interaction", "moving_force")
+    }
+    t = hist["interaction"].time_s
+    x_at = float(hist["interaction"].response_x_m[0])
+    table = {"time_s": t}
+    for m, h in hist.items():
+        table[f"{m}_m_s2"] = h.acceleration_m_s2[0, 0]
+        table[f"{m}_rms1s_m_s2"] = running_rms(h.acceleration_m_s2[0, 0], spec.dt_s)
+    path = folder / "crossing_0.csv"
+    with atomic_path(path) as tmp:
+        pd.DataFrame(table).to_csv(tmp, index=False, float_format="%.8g", lineterminator="\n")
+    files.append(path)
+    fig = history_figure(
+        t,
+        {m: h.acceleration_m_s2[0, 0] for m, h in hist.items()},
+        spec.dt_s,
+        limits_m_s2=spec.comfort_limits_m_s2,
+        title=f"crossing 0: {len(frame)} pedestrian(s), x = {x_at:g} m",
+    )
+    files.append(save_figure(fig, folder / "crossing_0.png"))
+    files.append(
+        save_figure(
+            monte_carlo_figure(results, limits_m_s2=spec.comfort_limits_m_s2),
+            folder / "monte_carlo.png",
+        )
+    )
+    files.append(atomic_write_json(folder / "summary.json", summary))
+    return [str(f) for f in files]

@@ -1,10 +1,10 @@
 """Run a sensitivity design: one identification per record, design point and replicate.
 
-Execution goes through the batch engine's executor (:mod:`workbench.population.engine`): in
+Execution goes through the study executor (:mod:`workbench.executor`): in
 this process for one worker, a local process pool (``spawn`` start method) for more, a Dask
 distributed cluster when a scheduler address is given. A design point changes more than an
 :class:`IdentifySettings` names (prior box, random walks of C and K, per-channel observation
-noise), so the study submits its own picklable tasks, and reuses the batch engine's
+noise), so the study submits its own picklable tasks, and reuses the batch's
 :func:`~workbench.population.batch.result_row` for the row.
 
 Determinism: each run's seed is :func:`~workbench.sensitivity.design.point_seed` of the
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from workbench.errors import UsageError, WorkbenchError
+from workbench.executor import run_tasks as run_engine_tasks
 from workbench.inference.settings import IdentifySettings
-from workbench.population.engine import run_tasks as run_engine_tasks
 from workbench.records.record import Record
 from workbench.sensitivity.design import DesignPoint, Overrides, point_seed
 

@@ -66,6 +66,7 @@ from workbench.errors import UsageError
 from workbench.models.effects import Effect, EffectContext, Effects, as_effects, effect_from_name
 from workbench.models.force import FourierForce, step_phase_rad
 from workbench.models.smd import SMDModel
+from workbench.population.laws import SEED_DAMPING_RATIO, SEED_NATURAL_FREQUENCY_HZ
 from workbench.records.record import G_M_S2, Record
 
 __all__ = [
@@ -85,10 +86,11 @@ FloatArray = NDArray[np.float64]
 ForceInput = Callable[[FloatArray], ArrayLike] | ArrayLike
 GroundInput = Callable[[FloatArray], ArrayLike] | ArrayLike | None
 
-#: Seed population law (Table 2): ``f_n = 0.3049 f_p + 1.3670`` as (slope, intercept).
-POPULATION_NATURAL_FREQUENCY_HZ = (0.3049, 1.3670)
+#: Seed population law (Table 2): ``f_n = 0.3049 f_p + 1.3670`` as (slope, intercept); defined
+#: once, in :mod:`workbench.population.laws`.
+POPULATION_NATURAL_FREQUENCY_HZ = SEED_NATURAL_FREQUENCY_HZ
 #: Seed population law (Table 2): ``zeta = -0.2116 f_p + 0.8737`` as (slope, intercept).
-POPULATION_DAMPING_RATIO = (-0.2116, 0.8737)
+POPULATION_DAMPING_RATIO = SEED_DAMPING_RATIO
 
 #: Default phases of the first three harmonics in the cosine convention
 #: ``A_i cos(i phi - phi_i)``: the classic sine-series pattern (0, pi/2, pi/2) of Bachmann

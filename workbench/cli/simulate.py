@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from workbench.cli.common import floats
 from workbench.errors import InputError, UsageError
 
 __all__ = ["add_simulate_parser", "parse_effect"]
@@ -39,15 +40,6 @@ def parse_effect(text: str) -> Any:
                 "for example --effect cubic_stiffness:k3_n_per_m3=2e6"
             ) from None
     return effect_from_name(name.strip(), **kwargs)
-
-
-def _floats(text: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not a comma-separated list of numbers"
-        ) from None
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
@@ -122,7 +114,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "effects": [e.name for e in effects],
         "seed": args.seed,
     }
-    lo, hi = LAW_PACING_HZ
+    from workbench.population.laws import SEED_PACING_RANGE_HZ
+
+    lo, hi = SEED_PACING_RANGE_HZ
     if (args.natural_frequency_hz is None or args.damping_ratio is None) and not (
         lo <= args.pacing <= hi
     ):
@@ -148,8 +142,6 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 #: Largest record the command writes (samples): an hour at 1 kHz.
 MAX_SAMPLES = 3_600_000
-#: Pacing range of the seed's population laws, used when f_n or zeta are not given.
-LAW_PACING_HZ = (1.5, 2.25)
 
 
 def _check_simulate_args(args: argparse.Namespace) -> None:
@@ -233,7 +225,14 @@ def _simulate(args: argparse.Namespace, effects: list[Any], ground: Any) -> Any:
 
 
 def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Register the ``simulate`` subcommand on the ``workbench`` parser."""
+    """Register the ``simulate`` subcommand on the ``workbench`` parser.
+
+    Parameters
+    ----------
+    sub : argparse subparsers action
+    out_opts : argparse.ArgumentParser
+        The shared output options (``--json``).
+    """
     p = sub.add_parser(
         "simulate",
         parents=[out_opts],
@@ -261,7 +260,7 @@ def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--blf",
-        type=_floats,
+        type=floats,
         default=(0.4, 0.1, 0.06),
         metavar="B1,B2,...",
         help="biomechanical load factors of the mean force (0.4,0.1,0.06)",

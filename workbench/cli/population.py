@@ -3,47 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
-from workbench.errors import InputError, UsageError
+from workbench.cli.common import add_allow_negative_force, emit, identify_settings
+from workbench.errors import UsageError
 
 __all__ = ["add_population_parser"]
-
-
-def _emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
-    from workbench.cli import _emit as emit
-
-    emit(args, obj, text)
-
-
-def _read_laws(path: str | None) -> Any:
-    from workbench.population.laws import PopulationLaws
-
-    if path is None:
-        return PopulationLaws()
-    try:
-        obj = json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(
-            path, "whole file", "the file does not exist", "give the path of a population JSON"
-        ) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise InputError(
-            path,
-            "whole file",
-            f"the file is not JSON ({err})",
-            "give the file that 'workbench population --out DIR' writes (DIR/population.json)",
-        ) from None
-    if not isinstance(obj, dict):
-        raise InputError(
-            path, "whole file", "the JSON is not an object", "give a population JSON object"
-        )
-    try:
-        return PopulationLaws.from_json(obj, source=str(path))
-    except UsageError as err:
-        raise InputError(path, "whole file", str(err).rstrip("."), "fix or regenerate it") from None
 
 
 # ---------------------------------------------------------------------------------------------
@@ -51,13 +17,14 @@ def _read_laws(path: str | None) -> Any:
 # ---------------------------------------------------------------------------------------------
 def _cmd_sample(args: argparse.Namespace) -> int:
     from workbench.fileutil import atomic_path
+    from workbench.population.laws import read_laws
     from workbench.population.sampler import sample_pedestrians
 
     if args.n < 1:
         raise UsageError(f"--n {args.n}: give at least one pedestrian")
     if Path(args.out).suffix.lower() != ".csv":
         raise UsageError(f"--out {args.out}: the pedestrians are written as CSV; end it in .csv")
-    laws = _read_laws(args.laws)
+    laws = read_laws(args.laws)
     table = sample_pedestrians(args.n, seed=args.seed, laws=laws)
     with atomic_path(args.out) as tmp:
         table.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
@@ -72,40 +39,25 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         f"{args.n} pedestrians from {laws.source} (seed {args.seed}) -> {args.out}\n"
         + "\n".join(f"  mean {k:22s} {v:.4g}" for k, v in summary["means"].items())
     )
-    _emit(args, summary, text)
+    emit(args, summary, text)
     return 0
 
 
 # ---------------------------------------------------------------------------------------------
 # batch
 # ---------------------------------------------------------------------------------------------
-def _batch_settings(args: argparse.Namespace) -> Any:
-    from workbench.inference.settings import IdentifySettings
-
-    overrides = {
-        "method": args.method,
-        "particles": args.particles,
-        "harmonics": args.harmonics,
-        "obs_noise": args.obs_noise,
-        "seed": args.seed,
-        "force_check": False if args.no_force_check else None,
-    }
-    if args.config:
-        return IdentifySettings.from_toml(args.config, **overrides)
-    return IdentifySettings().replace(**overrides)
-
-
 def _cmd_batch(args: argparse.Namespace) -> int:
     from workbench.population.batch import run_batch
 
     summary = run_batch(
         args.manifest,
         args.out,
-        settings=_batch_settings(args),
+        settings=identify_settings(args),
         workers=args.workers,
         scheduler=args.scheduler,
         resume=args.resume,
         progress=not args.json,
+        allow_negative_force=args.allow_negative_force,
     )
     obj = summary.to_json()
     lines = [
@@ -115,52 +67,13 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         f"failures {summary.failures_csv}",
     ]
     lines += [f"failed: {f['path']}: {f['reason']}" for f in summary.failures]
-    _emit(args, obj, "\n".join(lines))
+    emit(args, obj, "\n".join(lines))
     return 0
 
 
 # ---------------------------------------------------------------------------------------------
 # population
 # ---------------------------------------------------------------------------------------------
-def read_results(path: str) -> Any:
-    """Read ``results.csv`` from a batch folder (or the file itself) as a DataFrame."""
-    import pandas as pd
-
-    p = Path(path)
-    file = p / "results.csv" if p.is_dir() else p
-    if not file.exists():
-        raise InputError(
-            file,
-            "whole file",
-            "there is no batch results table here",
-            "give the --out folder of 'workbench batch' (it holds results.csv)",
-        )
-    try:
-        return pd.read_csv(file)
-    except (ValueError, UnicodeDecodeError) as err:
-        raise InputError(
-            file, "whole file", f"the table cannot be read ({err})", "rerun 'workbench batch'"
-        ) from None
-
-
-def write_population(fit: Any, out_dir: str | Path) -> dict[str, str]:
-    """Write ``population.json``, ``bands.csv``, ``residuals.csv``, ``excluded.csv``."""
-    from workbench.fileutil import atomic_path, atomic_write_json
-
-    out = Path(out_dir)
-    files = {
-        "population": out / "population.json",
-        "bands": out / "bands.csv",
-        "residuals": out / "residuals.csv",
-        "excluded": out / "excluded.csv",
-    }
-    atomic_write_json(files["population"], fit.summary)
-    for key, frame in (("bands", fit.bands), ("residuals", fit.used), ("excluded", fit.excluded)):
-        with atomic_path(files[key]) as tmp:
-            frame.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
-    return {k: str(v) for k, v in files.items()}
-
-
 def _law_text(summary: dict[str, Any]) -> str:
     lines = [
         f"records used {summary['records_used']}, excluded {summary['records_excluded']} "
@@ -188,6 +101,7 @@ def _law_text(summary: dict[str, Any]) -> str:
 
 
 def _cmd_population(args: argparse.Namespace) -> int:
+    from workbench.population.files import read_results, write_population
     from workbench.population.fit import fit_population
 
     results = read_results(args.results_dir)
@@ -196,7 +110,7 @@ def _cmd_population(args: argparse.Namespace) -> int:
     )
     files = write_population(fit, args.out)
     obj = {**fit.summary, "files": files}
-    _emit(args, obj, _law_text(fit.summary) + f"\nwritten to {args.out}")
+    emit(args, obj, _law_text(fit.summary) + f"\nwritten to {args.out}")
     return 0
 
 
@@ -204,6 +118,7 @@ def _cmd_population(args: argparse.Namespace) -> int:
 # report
 # ---------------------------------------------------------------------------------------------
 def _cmd_report(args: argparse.Namespace) -> int:
+    from workbench.population.files import read_results, write_population
     from workbench.population.fit import fit_population
     from workbench.reporting.population import population_report
 
@@ -222,12 +137,19 @@ def _cmd_report(args: argparse.Namespace) -> int:
         "laws": fit.summary["laws"],
         "lognormal": fit.summary["lognormal"],
     }
-    _emit(args, obj, _law_text(fit.summary) + f"\nreport {files['html']}")
+    emit(args, obj, _law_text(fit.summary) + f"\nreport {files['html']}")
     return 0
 
 
 def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands."""
+    """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands.
+
+    Parameters
+    ----------
+    sub : argparse subparsers action
+    out_opts : argparse.ArgumentParser
+        The shared output options (``--json``).
+    """
     # What `population` and `report` both read: a batch's results and which records count.
     fit_opts = argparse.ArgumentParser(add_help=False)
     fit_opts.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
@@ -279,6 +201,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--config", metavar="TOML", help="identification settings file")
     p.add_argument("--seed", type=int, help="batch seed (default 0)")
+    add_allow_negative_force(p)
     p.set_defaults(handler=_cmd_batch)
 
     p = sub.add_parser(

@@ -6,26 +6,17 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from workbench.cli.common import emit, load, positive_int, record_options, safe_key
 from workbench.errors import UsageError
 
 __all__ = ["add_crosscheck_parser"]
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
-    return value
 
 
 def _history(text: str) -> int | str:
     if text in ("grid", "all"):
         return text
     try:
-        return _positive_int(text)
+        return positive_int(text)
     except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not 'grid', 'all' or a whole number of steps"
@@ -33,7 +24,6 @@ def _history(text: str) -> int | str:
 
 
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
-    from workbench.cli import _emit, _load, _safe_key
     from workbench.inference.crosscheck import crosscheck
     from workbench.inference.identify import identify
     from workbench.inference.settings import IdentifySettings
@@ -53,7 +43,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     settings = IdentifySettings().replace(**overrides)
     if settings.pieces != "steps":
         raise UsageError("crosscheck works per footfall step; identify with --pieces steps")
-    record = _load(args)
+    record = load(args)
     insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=args.rescale_to_mass)
     n_steps = len(insp.steps.boundaries) - 1
     if args.max_steps is not None and args.max_steps > n_steps:
@@ -86,10 +76,10 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         from workbench.reporting.crosscheck import crosscheck_figures
 
         out_dir = Path(args.out)
-        key = _safe_key(record.name)
+        key = safe_key(record.name)
         out["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_crosscheck_{result.method}.nc"))
         out["figures"] = [str(p) for p in crosscheck_figures(result, problem, out_dir, key)]
-    _emit(args, out, _text(out))
+    emit(args, out, _text(out))
     return 0
 
 
@@ -116,12 +106,17 @@ def _text(out: dict[str, Any]) -> str:
 
 
 def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Register the ``crosscheck`` subcommand on the ``workbench`` parser."""
-    from workbench.cli import _record_options
+    """Register the ``crosscheck`` subcommand on the ``workbench`` parser.
 
+    Parameters
+    ----------
+    sub : argparse subparsers action
+    out_opts : argparse.ArgumentParser
+        The shared output options (``--json``).
+    """
     p = sub.add_parser(
         "crosscheck",
-        parents=[out_opts, _record_options()],
+        parents=[out_opts, record_options()],
         help="cross-check the particle filter's per-step posterior with emcee",
         description="Run a particle filter on a record, then sample every footfall step's "
         "posterior of (C, K) with several independent emcee ensembles (force coefficients "
@@ -168,9 +163,9 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "walker (all: exact, cost growing with the step index), or the last N per walker "
         "with a normal fit before them (approximate)",
     )
-    p.add_argument("--max-steps", type=_positive_int, metavar="N", help="check the first N steps")
-    p.add_argument("--ensembles", type=_positive_int, default=4, metavar="N", help="(4)")
-    p.add_argument("--walkers", type=_positive_int, metavar="N", help="per ensemble (32)")
+    p.add_argument("--max-steps", type=positive_int, metavar="N", help="check the first N steps")
+    p.add_argument("--ensembles", type=positive_int, default=4, metavar="N", help="(4)")
+    p.add_argument("--walkers", type=positive_int, metavar="N", help="per ensemble (32)")
     p.add_argument("--seed", type=int, help="random seed (default 0)")
     p.add_argument("--out", metavar="DIR", help="write the InferenceData (netCDF) and figures")
     p.set_defaults(handler=_cmd_crosscheck)

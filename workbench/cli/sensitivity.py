@@ -6,77 +6,24 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from workbench.errors import InputError, UsageError
+from workbench.cli.common import (
+    add_allow_negative_force,
+    emit,
+    identify_settings,
+    warn_accepted_negative_force,
+)
+from workbench.errors import UsageError
 
-__all__ = ["add_sensitivity_parser", "load_study_records"]
-
-
-def _is_manifest(path: Path) -> bool:
-    if path.suffix.lower() != ".csv" or not path.is_file():
-        return False
-    try:
-        with path.open(encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                if line.strip():
-                    cells = [
-                        c.strip().strip('"').lower() for c in line.replace(";", ",").split(",")
-                    ]
-                    return "path" in cells and "grf" not in cells
-    except OSError:
-        return False
-    return False
-
-
-def _rescaled(record: Any, args: argparse.Namespace) -> Any:
-    if not getattr(args, "rescale_to_mass", False):
-        return record
-    from workbench.records.inspection import inspect_record
-
-    # The study identifies the rescaled record, as 'identify --rescale-to-mass' would.
-    return inspect_record(record, rescale=True).record
-
-
-def load_study_records(args: argparse.Namespace) -> list[tuple[str, Any]]:
-    """Load the record, or every record of a manifest, as ``(key, Record)`` pairs."""
-    from workbench.records.io import load_manifest, load_record
-
-    path = Path(args.record)
-    if not path.exists():
-        raise InputError(
-            path, "whole file", "the record or manifest does not exist", "check the path"
-        )
-    if not _is_manifest(path):
-        rec = load_record(path, mass_kg=args.mass, pacing_hz=args.pacing, subject=args.subject)
-        return [(path.name, _rescaled(rec, args))]
-    out = []
-    for entry in load_manifest(path):
-        file = entry.path if entry.path.is_absolute() else path.parent / entry.path
-        rec = load_record(
-            file,
-            mass_kg=entry.mass_kg if entry.mass_kg is not None else args.mass,
-            pacing_hz=entry.pacing_hz if entry.pacing_hz is not None else args.pacing,
-            subject=entry.subject,
-        )
-        # Keys relative to the manifest: the seeds then do not depend on where it lies.
-        try:
-            key = file.resolve().relative_to(path.parent.resolve()).as_posix()
-        except ValueError:
-            key = str(entry.path)
-        out.append((key, _rescaled(rec, args)))
-    if not out:
-        raise InputError(path, "whole file", "the manifest lists no records", "add rows")
-    return out
+__all__ = ["add_sensitivity_parser"]
 
 
 def _settings(args: argparse.Namespace) -> Any:
     # The study's own seeds replace the baseline's: the baseline carries no --seed.
-    from workbench.cli import _identify_settings
-
-    return _identify_settings(argparse.Namespace(**{**vars(args), "seed": None}))
+    return identify_settings(argparse.Namespace(**{**vars(args), "seed": None}))
 
 
 def _cmd_sensitivity(args: argparse.Namespace) -> int:
-    from workbench.cli import _emit
+    from workbench.records.collection import load_study_records
     from workbench.sensitivity.design import parse_factors, parse_levels
     from workbench.sensitivity.study import run_sensitivity
 
@@ -92,7 +39,16 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--levels names {unknown[0]!r}, which is not among --factors; add it there"
         )
-    records = load_study_records(args)
+    records = load_study_records(
+        args.record,
+        mass_kg=args.mass,
+        pacing_hz=args.pacing,
+        subject=args.subject,
+        rescale_to_mass=args.rescale_to_mass,
+        allow_negative_force=args.allow_negative_force,
+    )
+    for _, record in records:
+        warn_accepted_negative_force(record)
     study = run_sensitivity(
         records,
         base=base,
@@ -112,12 +68,19 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
     report = Report("Sensitivity of the identified parameters to the settings")
     report.add(sensitivity_section(study, Path(args.out)))
     study.files["report"] = str(report.write(args.out))
-    _emit(args, study.to_json(), study.text() + f"\nreport: {study.files['report']}")
+    emit(args, study.to_json(), study.text() + f"\nreport: {study.files['report']}")
     return 0
 
 
 def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Add the ``sensitivity`` subcommand to the ``workbench`` parser."""
+    """Add the ``sensitivity`` subcommand to the ``workbench`` parser.
+
+    Parameters
+    ----------
+    sub : argparse subparsers action
+    out_opts : argparse.ArgumentParser
+        The shared output options (``--json``).
+    """
     from workbench.sensitivity.design import DESIGNS, FACTORS
 
     p = sub.add_parser(
@@ -165,4 +128,5 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         action="store_true",
         help="scale the GRF so its mean over whole steps equals M g (sensor gain error)",
     )
+    add_allow_negative_force(r)
     p.set_defaults(handler=_cmd_sensitivity)

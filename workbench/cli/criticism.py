@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from workbench.cli.common import DEFAULT_HIGHPASS_HZ, emit, load, record_options
 from workbench.errors import UsageError
 
 __all__ = ["add_criticism_parser", "parse_effect_names"]
@@ -46,17 +47,14 @@ def _check_harmonics(args: argparse.Namespace) -> None:
 
 
 def _prepared(args: argparse.Namespace) -> Any:
-    from workbench.cli import _load
     from workbench.diagnostics.criticism import prepare
-    from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
-    record = _load(args)
+    record = load(args)
     highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz
     return prepare(record, highpass_hz=highpass_hz, pacing_hz=args.pacing)
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from workbench.cli import _emit
     from workbench.diagnostics.criticism import diagnose
 
     _check_harmonics(args)
@@ -96,7 +94,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         from workbench.reporting.criticism import write_criticism_report
 
         obj["report"] = str(write_criticism_report(result, args.out))
-    _emit(args, obj, "\n".join(lines))
+    emit(args, obj, "\n".join(lines))
     return 0
 
 
@@ -105,7 +103,6 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str
 
     Returns the posterior-predictive check's JSON object.
     """
-    from workbench.cli import _load
     from workbench.diagnostics.posterior_predictive import posterior_predictive
     from workbench.diagnostics.predictive import attach_one_step, one_step_from_result
     from workbench.inference.identify import identify
@@ -117,16 +114,16 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str
         particles=ONE_STEP_PARTICLES,
         force_check=False,
         effects=tuple(n for n in names if n in available_effects()),
+        seed=args.seed,
     )
     if args.highpass_hz is not None:
         settings = settings.replace(highpass_hz=args.highpass_hz)
-    result = identify(_load(args), settings)
+    result = identify(load(args), settings)
     attach_one_step(diag, one_step_from_result(result))
-    return posterior_predictive(result, replicates=ONE_STEP_REPLICATES).to_dict()
+    return posterior_predictive(result, replicates=ONE_STEP_REPLICATES, seed=args.seed).to_dict()
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:
-    from workbench.cli import _emit
     from workbench.diagnostics.criticism import compare
 
     names = parse_effect_names(args.effects)
@@ -141,15 +138,20 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         f"LB p {r.ljung_box_p:.3g}  score {r.score:.3f}"
         for r in rows
     )
-    _emit(args, obj, text)
+    emit(args, obj, text)
     return 0
 
 
 def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Register the ``diagnose`` and ``compare`` subcommands on the ``workbench`` parser."""
-    from workbench.cli import _record_options
+    """Register the ``diagnose`` and ``compare`` subcommands on the ``workbench`` parser.
 
-    rec_opts = _record_options()
+    Parameters
+    ----------
+    sub : argparse subparsers action
+    out_opts : argparse.ArgumentParser
+        The shared output options (``--json``).
+    """
+    rec_opts = record_options()
     # What diagnose and compare share: the baseline's shape and how its error is scored.
     level = argparse.ArgumentParser(add_help=False)
     level.add_argument("--harmonics", type=int, default=6, help="harmonics of the shared shape (6)")
@@ -158,6 +160,14 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         action="store_true",
         help="score the raw held-out error instead of the error beyond each step's own size "
         "and timing of the shared force shape",
+    )
+    level.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="random seed (default 0) of diagnose's identification (rbpf) and "
+        "posterior-predictive replicates; compare's cross-validation draws nothing random, "
+        "so its result does not depend on it",
     )
     p = sub.add_parser(
         "diagnose",

@@ -1,4 +1,4 @@
-"""The batch engine's executor: run tasks in this process, a local pool or a Dask cluster.
+"""The study executor: run tasks in this process, a local pool or a Dask cluster.
 
 Batch identification, sensitivity studies and other study-scale jobs hand it a picklable
 function and a list of tasks; it yields the results as they finish. Determinism is the

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from workbench.cli.common import emit, floats
 from workbench.errors import UsageError
-from workbench.simulate_cli import _floats
 
 __all__ = ["add_hsi_parser"]
 
@@ -33,26 +33,11 @@ def _sampler(args: argparse.Namespace) -> tuple[Any, str]:
             raise UsageError("give either --pedestrians or --laws, not both")
         table = read_pedestrians(args.pedestrians)
         return TableSampler(table, str(args.pedestrians)), str(args.pedestrians)
-    from workbench.cli_population import _read_laws
+    from workbench.population.laws import read_laws
     from workbench.population.sampler import sample_pedestrians
 
-    laws = _read_laws(args.laws)
+    laws = read_laws(args.laws)
     return partial(sample_pedestrians, laws=laws), f"population sampler ({laws.source})"
-
-
-def _summary(results: Any, model: str, limits: tuple[float, ...]) -> dict[str, Any]:
-    from workbench.hsi.metrics import COMFORT_CLASSES
-
-    peak = results[f"peak_{model}_m_s2"].to_numpy()
-    rms = results[f"rms1s_{model}_m_s2"].to_numpy()
-    counts = results[f"comfort_{model}"].value_counts()
-    return {
-        "peak_mean_m_s2": float(peak.mean()),
-        "peak_p95_m_s2": float(np.quantile(peak, 0.95)),
-        "peak_max_m_s2": float(peak.max()),
-        "rms1s_max_mean_m_s2": float(rms.mean()),
-        "comfort_counts": {c: int(counts.get(c, 0)) for c in COMFORT_CLASSES},
-    }
 
 
 def _structure(args: argparse.Namespace) -> Any:
@@ -82,10 +67,10 @@ def _structure(args: argparse.Namespace) -> Any:
 
 
 def _cmd_hsi(args: argparse.Namespace) -> int:
-    from workbench.cli import _emit
     from workbench.hsi.loads import setra_crowd_load
     from workbench.hsi.metrics import SETRA_LIMITS_M_S2
     from workbench.hsi.montecarlo import CrossingSpec, run_monte_carlo
+    from workbench.reporting.hsi import crossing_summary
 
     _positive(args, "span", "mass_per_m", "frequency", "width", "dt", "duration", "density", "flow")
     if args.crossings < 1:
@@ -131,8 +116,8 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         "dt_s": args.dt,
         "integrator": "Newmark average acceleration (unconditionally stable, second order)",
         "comfort_limits_m_s2": list(limits),
-        "interaction": _summary(results, "interaction", limits),
-        "moving_force": _summary(results, "moving_force", limits),
+        "interaction": crossing_summary(results, "interaction"),
+        "moving_force": crossing_summary(results, "moving_force"),
         "interaction_ratio": {
             "mean": float(ratio.mean()),
             "p05": float(np.quantile(ratio, 0.05)),
@@ -158,70 +143,11 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
             "peak_acceleration_m_s2": setra.peak_acceleration_m_s2,
         }
     if args.out:
-        out["files"] = _write_outputs(Path(args.out), spec, args.seed, results, out)
-    _emit(args, out, _text(out))
+        from workbench.reporting.hsi import write_hsi_outputs
+
+        out["files"] = write_hsi_outputs(Path(args.out), spec, args.seed, results, out)
+    emit(args, out, _text(out))
     return 0
-
-
-def _write_outputs(
-    folder: Path, spec: Any, seed: int, results: Any, summary: dict[str, Any]
-) -> list[str]:
-    from workbench.fileutil import atomic_path, atomic_write_json
-    from workbench.hsi.montecarlo import draw_crossing
-    from workbench.hsi.simulate import CrowdBatch, integrate
-    from workbench.reporting.figures import save_figure
-    from workbench.reporting.hsi import history_figure, monte_carlo_figure
-
-    folder.mkdir(parents=True, exist_ok=True)
-    files = []
-    path = folder / "crossings.csv"
-    with atomic_path(path) as tmp:
-        results.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
-    files.append(path)
-    frame, x0, v, duration = draw_crossing(spec, seed, 0)
-    batch = CrowdBatch.from_scenarios([(frame, x0, v)])
-    hist = {
-        m: integrate(
-            spec.structure,
-            batch,
-            duration_s=duration,
-            dt_s=spec.dt_s,
-            model=m,
-            static_weight=spec.static_weight,
-            response_x_m=spec.response_x_m,
-        )
-        for m in ("interaction", "moving_force")
-    }
-    t = hist["interaction"].time_s
-    x_at = float(hist["interaction"].response_x_m[0])
-    import pandas as pd
-
-    from workbench.hsi.metrics import running_rms
-
-    table = {"time_s": t}
-    for m, h in hist.items():
-        table[f"{m}_m_s2"] = h.acceleration_m_s2[0, 0]
-        table[f"{m}_rms1s_m_s2"] = running_rms(h.acceleration_m_s2[0, 0], spec.dt_s)
-    path = folder / "crossing_0.csv"
-    with atomic_path(path) as tmp:
-        pd.DataFrame(table).to_csv(tmp, index=False, float_format="%.8g", lineterminator="\n")
-    files.append(path)
-    fig = history_figure(
-        t,
-        {m: h.acceleration_m_s2[0, 0] for m, h in hist.items()},
-        spec.dt_s,
-        limits_m_s2=spec.comfort_limits_m_s2,
-        title=f"crossing 0: {len(frame)} pedestrian(s), x = {x_at:g} m",
-    )
-    files.append(save_figure(fig, folder / "crossing_0.png"))
-    files.append(
-        save_figure(
-            monte_carlo_figure(results, limits_m_s2=spec.comfort_limits_m_s2),
-            folder / "monte_carlo.png",
-        )
-    )
-    files.append(atomic_write_json(folder / "summary.json", summary))
-    return [str(f) for f in files]
 
 
 def _text(o: dict[str, Any]) -> str:
@@ -258,7 +184,14 @@ def _text(o: dict[str, Any]) -> str:
 
 
 def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Register the ``hsi`` subcommand on the ``workbench`` parser."""
+    """Register the ``hsi`` subcommand on the ``workbench`` parser.
+
+    Parameters
+    ----------
+    sub : argparse subparsers action
+    out_opts : argparse.ArgumentParser
+        The shared output options (``--json``).
+    """
     p = sub.add_parser(
         "hsi",
         parents=[out_opts],
@@ -316,7 +249,7 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument("--dt", type=float, default=0.005, metavar="S", help="time step (0.005 s)")
     g.add_argument(
         "--comfort-limits",
-        type=_floats,
+        type=floats,
         metavar="A,B,C",
         help="comfort limits in m/s^2 (Setra 0.5,1.0,2.5)",
     )

@@ -1,0 +1,313 @@
+"""What every ``workbench`` subcommand shares: options, record loading, output, settings.
+
+Command modules import this module and nothing else from :mod:`workbench.cli`, so the
+command line has no import cycle: :mod:`workbench.cli.main` imports the command modules,
+they import this one, and this one imports only the library.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, NoReturn
+
+__all__ = [
+    "CURRENT_ARGV",
+    "DEFAULT_HIGHPASS_HZ",
+    "Parser",
+    "add_allow_negative_force",
+    "emit",
+    "floats",
+    "identify_settings",
+    "json_default",
+    "load",
+    "output_options",
+    "positive_int",
+    "record_options",
+    "safe_key",
+    "warn_accepted_negative_force",
+]
+
+#: The seed's high-pass cut-off [Hz]; ``--highpass-hz`` left out means this (or, for
+#: ``identify``, the value of the ``--config`` file).
+DEFAULT_HIGHPASS_HZ = 0.15
+
+#: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
+CURRENT_ARGV: list[str] = []
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors honour ``--json`` (one JSON object on stdout)."""
+
+    def error(self, message: str) -> NoReturn:  # argparse's hook for usage errors
+        """Print the usage error (also as JSON under ``--json``) and exit with status 2.
+
+        Parameters
+        ----------
+        message : str
+            Argparse's description of the error.
+        """
+        if "--json" in sys.argv[1:] or "--json" in CURRENT_ARGV:
+            print(json.dumps({"error": f"{self.prog}: {message}"}))
+        super().error(message)
+
+
+def output_options() -> Parser:
+    """Parent parser of every subcommand: ``--json``.
+
+    Returns
+    -------
+    Parser
+    """
+    p = Parser(add_help=False)
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    return p
+
+
+def add_allow_negative_force(group: Any) -> None:
+    """Add ``--allow-negative-force`` to a parser or argument group.
+
+    Parameters
+    ----------
+    group : argparse.ArgumentParser or argument group
+    """
+    group.add_argument(
+        "--allow-negative-force",
+        action="store_true",
+        help="accept a total force that dips below zero (a synthetic benchmark force such as "
+        "the seed study's numerical example) with a warning instead of refusing the record",
+    )
+
+
+def record_options() -> Parser:
+    """Parent parser of the subcommands that read one record: mass, pacing, format, ...
+
+    Returns
+    -------
+    Parser
+    """
+    p = Parser(add_help=False)
+    g = p.add_argument_group("record")
+    g.add_argument("--mass", type=float, metavar="KG", help="body mass [kg] (overrides sidecar)")
+    g.add_argument("--pacing", type=float, metavar="HZ", help="stated pacing frequency [Hz]")
+    g.add_argument("--subject", help="subject identifier")
+    g.add_argument(
+        "--format",
+        dest="fmt",
+        choices=["csv", "mot", "insole", "c3d"],
+        help="file format (detected from the file when omitted)",
+    )
+    g.add_argument(
+        "--force-unit",
+        choices=["N", "kN", "kgf"],
+        default="N",
+        help="unit of the force columns in the file; converted to N on loading (default N)",
+    )
+    g.add_argument(
+        "--resample",
+        action="store_true",
+        help="interpolate irregularly sampled records onto a uniform grid at the median rate",
+    )
+    g.add_argument(
+        "--rescale-to-mass",
+        action="store_true",
+        help="scale the GRF so its mean over whole steps equals M g (assumes a sensor gain error)",
+    )
+    g.add_argument(
+        "--highpass-hz",
+        type=float,
+        default=None,
+        metavar="F",
+        help="high-pass cut-off for the COM response [Hz]; 0 switches it off (default 0.15)",
+    )
+    add_allow_negative_force(g)
+    return p
+
+
+def load(args: argparse.Namespace) -> Any:
+    """Load ``args.record`` with the record options.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments of a subcommand with :func:`record_options`.
+
+    Returns
+    -------
+    Record
+    """
+    from workbench.records.io import load_record
+
+    record = load_record(
+        args.record,
+        fmt=args.fmt,
+        mass_kg=args.mass,
+        pacing_hz=args.pacing,
+        subject=args.subject,
+        resample=args.resample,
+        force_unit=args.force_unit,
+        allow_negative_force=getattr(args, "allow_negative_force", False),
+    )
+    warn_accepted_negative_force(record)
+    return record
+
+
+def warn_accepted_negative_force(record: Any) -> None:
+    """Say on stderr that a record's force below zero was accepted (``--allow-negative-force``).
+
+    Commands whose JSON does not carry the record's warnings (identify, diagnose, ...) would
+    otherwise accept such a record silently.
+
+    Parameters
+    ----------
+    record : Record
+        A loaded record; its ``metadata["warnings"]`` are searched.
+    """
+    from workbench.records.validation import NEGATIVE_FORCE_ACCEPTED
+
+    for warning in record.metadata.get("warnings", []):
+        if NEGATIVE_FORCE_ACCEPTED in str(warning):
+            print(f"workbench: warning: {warning}", file=sys.stderr)
+
+
+def emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
+    """Print the command's result: ``obj`` as JSON under ``--json``, else ``text``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    obj : dict
+        The JSON result.
+    text : str
+        The human summary.
+    """
+    if getattr(args, "json", False):
+        print(json.dumps(obj, indent=2, default=json_default))
+    else:
+        print(text)
+
+
+def json_default(obj: Any) -> Any:
+    """Turn numpy scalars and arrays and paths into JSON values (``json.dumps`` hook).
+
+    Parameters
+    ----------
+    obj : object
+
+    Returns
+    -------
+    object
+        A JSON-serialisable value.
+
+    Raises
+    ------
+    TypeError
+        For any other type.
+    """
+    import numpy as np
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def safe_key(name: str) -> str:
+    """Make a file-name-safe key of a record name.
+
+    Parameters
+    ----------
+    name : str
+
+    Returns
+    -------
+    str
+        ``name`` with every character other than letters, digits, ``-`` and ``_`` replaced
+        by ``_`` (``"record"`` if empty).
+    """
+    return "".join(c if c.isalnum() or c in "-_" else "_" for c in name) or "record"
+
+
+def identify_settings(args: argparse.Namespace) -> Any:
+    """Build the identification settings from a subcommand's flags (flags win over ``--config``).
+
+    Subcommands that identify (``identify``, ``sensitivity``, ...) share these flags; a flag a
+    subcommand does not offer counts as not given.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    IdentifySettings
+    """
+    from workbench.inference.settings import IdentifySettings
+
+    def flag(name: str) -> Any:
+        return getattr(args, name, None)
+
+    overrides = {
+        "method": flag("method"),
+        "particles": flag("particles"),
+        "harmonics": flag("harmonics"),
+        "pacing_hz": flag("pacing"),
+        "highpass_hz": flag("highpass_hz"),
+        "obs_noise": flag("obs_noise"),
+        "time_basis": flag("time_basis"),
+        "pieces": flag("pieces"),
+        "prior": flag("prior"),
+        "seed": flag("seed"),
+        "state_noise_fraction": flag("state_noise"),
+        "observe": flag("observe"),
+        "force_proposal": flag("force_proposal"),
+        "force_check": False if flag("no_force_check") else None,
+        "effects": flag("effects"),
+    }
+    if flag("config"):
+        return IdentifySettings.from_toml(args.config, **overrides)
+    return IdentifySettings().replace(**overrides)
+
+
+def floats(text: str) -> tuple[float, ...]:
+    """Argparse type: a comma-separated list of numbers.
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    tuple of float
+    """
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a comma-separated list of numbers"
+        ) from None
+
+
+def positive_int(text: str) -> int:
+    """Argparse type: a whole number of at least 1.
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    int
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
+    return value

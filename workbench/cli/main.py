@@ -1,0 +1,133 @@
+"""The ``workbench`` command: the parser, the dispatch and the exit statuses.
+
+One entry point with subcommands (docs/contracts.md). Every subcommand accepts ``--json`` to print
+one JSON object on stdout instead of human text, and writes files only under ``--out``.
+Problems the user can fix are reported as one sentence on stderr with exit status 2; an
+unexpected internal failure prints one sentence too (exit 3) and shows the traceback only when
+``WORKBENCH_DEBUG=1`` is set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+
+from workbench.cli import (
+    criticism,
+    crosscheck,
+    demo,
+    hsi,
+    identify,
+    population,
+    records,
+    sensitivity,
+    simulate,
+)
+from workbench.cli.common import CURRENT_ARGV, Parser, output_options
+from workbench.errors import WorkbenchError
+
+__all__ = ["EXIT_INTERNAL_ERROR", "EXIT_USER_ERROR", "build_parser", "main"]
+
+#: Exit status of a problem the user can fix.
+EXIT_USER_ERROR = 2
+#: Exit status of an unexpected internal failure.
+EXIT_INTERNAL_ERROR = 3
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser of the ``workbench`` command.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        With one subparser per subcommand; each sets ``handler`` to the function that runs it.
+    """
+    parser = Parser(
+        prog="workbench",
+        description="Identify, criticise and simulate spring-mass-damper pedestrian models "
+        "from vertical ground reaction force records.",
+    )
+    from workbench import __version__
+
+    parser.add_argument("--version", action="version", version=f"workbench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    out_opts = output_options()
+    records.add_records_parser(sub, out_opts)
+    identify.add_identify_parser(sub, out_opts)
+    simulate.add_simulate_parser(sub, out_opts)
+    sensitivity.add_sensitivity_parser(sub, out_opts)
+    hsi.add_hsi_parser(sub, out_opts)
+    population.add_population_parser(sub, out_opts)
+    criticism.add_criticism_parser(sub, out_opts)
+    crosscheck.add_crosscheck_parser(sub, out_opts)
+    demo.add_demo_parser(sub, out_opts)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``workbench`` command and return its exit status.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments after the program name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        0 on success, 2 for a problem the user can fix, 3 for an internal error, 130 when
+        interrupted.
+    """
+    parser = build_parser()
+    CURRENT_ARGV[:] = list(argv) if argv is not None else []
+    args = parser.parse_args(argv)
+    handler: Handler = args.handler
+    try:
+        return handler(args)
+    except WorkbenchError as err:
+        _report_error(args, str(err))
+        return err.exit_code
+    except OSError as err:
+        target = err.filename or "the output"
+        _report_error(
+            args,
+            f"could not write or read {target} ({err.strerror or err}); choose a folder you "
+            "can write to with --out, or check the path",
+        )
+        return EXIT_USER_ERROR
+    except MemoryError:
+        _report_error(
+            args,
+            "ran out of memory; the record or the requested output is too large for this "
+            "machine, so cut the record or lower the sample rate or duration",
+        )
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("workbench: interrupted", file=sys.stderr)
+        return 130
+    except Exception as err:  # the user must never see a bare traceback
+        if os.environ.get("WORKBENCH_DEBUG"):
+            traceback.print_exc()
+        _report_error(
+            args,
+            f"internal error ({type(err).__name__}: {err}); this is a bug in the workbench, "
+            "please report it with the command you ran (set WORKBENCH_DEBUG=1 to see the "
+            "traceback).",
+        )
+        return EXIT_INTERNAL_ERROR
+
+
+def _report_error(args: argparse.Namespace, message: str) -> None:
+    print(f"workbench: error: {message}", file=sys.stderr)
+    if getattr(args, "json", False):
+        print(json.dumps({"error": message}))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
