@@ -247,7 +247,7 @@ def identify_settings(args: argparse.Namespace) -> Any:
     -------
     IdentifySettings
     """
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.settings import IdentifySettings, Preprocessing
 
     def flag(name: str) -> Any:
         return getattr(args, name, None)
@@ -270,8 +270,14 @@ def identify_settings(args: argparse.Namespace) -> Any:
         "effects": flag("effects"),
     }
     if flag("config"):
-        return IdentifySettings.from_toml(args.config, **overrides)
-    return IdentifySettings().replace(**overrides)
+        settings = IdentifySettings.from_toml(args.config, **overrides)
+    else:
+        settings = IdentifySettings().replace(**overrides)
+    if flag("rescale_to_mass"):
+        settings = settings.replace(
+            preprocessing=Preprocessing(settings.preprocessing.highpass_hz, rescale_to_mass=True)
+        )
+    return settings
 
 
 def floats(text: str) -> tuple[float, ...]:

@@ -109,16 +109,15 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str
     from workbench.inference.settings import IdentifySettings
     from workbench.models.effects import available_effects
 
-    settings = IdentifySettings(
+    settings = IdentifySettings.from_flat(
         method="rbpf",
         particles=ONE_STEP_PARTICLES,
         force_check=False,
         effects=tuple(n for n in names if n in available_effects()),
         seed=args.seed,
+        highpass_hz=args.highpass_hz,
     )
-    if args.highpass_hz is not None:
-        settings = settings.replace(highpass_hz=args.highpass_hz)
-    result = identify(load(args), settings)
+    result = identify(load(args), settings=settings)
     attach_one_step(diag, one_step_from_result(result))
     return posterior_predictive(result, replicates=ONE_STEP_REPLICATES, seed=args.seed).to_dict()
 

@@ -24,7 +24,7 @@ def _history(text: str) -> int | str:
 
 
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
-    from workbench.inference.crosscheck import crosscheck
+    from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability
     from workbench.inference.identify import identify
     from workbench.inference.settings import IdentifySettings
     from workbench.records.inspection import inspect_record
@@ -41,17 +41,19 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         "force_check": False,
     }
     settings = IdentifySettings().replace(**overrides)
-    if settings.pieces != "steps":
+    if settings.model.pieces != "steps":
         raise UsageError("crosscheck works per footfall step; identify with --pieces steps")
     record = load(args)
-    insp = inspect_record(record, highpass_hz=settings.highpass_hz, rescale=args.rescale_to_mass)
+    insp = inspect_record(
+        record, highpass_hz=settings.preprocessing.highpass_hz, rescale=args.rescale_to_mass
+    )
     n_steps = len(insp.steps.boundaries) - 1
     if args.max_steps is not None and args.max_steps > n_steps:
         raise UsageError(
             f"--max-steps {args.max_steps}: {record.name} has only {n_steps} whole steps; "
             f"give at most {n_steps}"
         )
-    ident = identify(insp, settings, progress=False)
+    ident = identify(insp, settings=settings, progress=False)
     problem = ident.problem
     result = crosscheck(
         problem,
@@ -66,7 +68,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         history=args.history,
         progress=not args.json,
     )
-    ident.use_crosscheck(result)
+    ident = with_mcmc_identifiability(ident, result)
     out: dict[str, Any] = result.to_json()
     out["record"] = record.name
     out["mass_kg"] = problem.mass_kg

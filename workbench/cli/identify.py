@@ -16,21 +16,21 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from workbench.inference.identify import identify
 
     settings = identify_settings(args)
-    if args.crosscheck and (settings.method == "exact" or settings.pieces != "steps"):
+    if args.crosscheck and (settings.method.name == "exact" or settings.model.pieces != "steps"):
         raise UsageError(
             "--crosscheck cross-checks a particle filter per footfall step; use it with "
             "--method rbpf or pf and --pieces steps"
         )
-    if args.crosscheck and settings.effects:
+    if args.crosscheck and settings.model.effects:
         raise UsageError("--crosscheck works on the baseline model; drop --effects to use it")
     record = load(args)
-    result = identify(record, settings, rescale=args.rescale_to_mass, progress=not args.json)
+    result = identify(record, settings=settings, progress=not args.json)
     check = None
     if args.crosscheck:
-        from workbench.inference.crosscheck import crosscheck
+        from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability
 
         check = crosscheck(result.problem, result, seed=settings.seed, progress=not args.json)
-        result.use_crosscheck(check)
+        result = with_mcmc_identifiability(result, check)
     out = result.to_json()
     if check is not None:
         out["crosscheck"] = {

@@ -28,7 +28,7 @@ from workbench.cli import (
     simulate,
 )
 from workbench.cli.common import CURRENT_ARGV, Parser, output_options
-from workbench.errors import WorkbenchError
+from workbench.errors import UsageError, WorkbenchError
 
 __all__ = ["EXIT_INTERNAL_ERROR", "EXIT_USER_ERROR", "build_parser", "main"]
 
@@ -70,6 +70,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: The flag that sets each library parameter, for error messages.
+FLAG_FOR_PARAMETER = {
+    "method": "--method",
+    "particles": "--particles",
+    "n_particles": "--particles",
+    "harmonics": "--harmonics",
+    "pacing_hz": "--pacing",
+    "highpass_hz": "--highpass-hz",
+    "obs_noise": "--obs-noise",
+    "state_noise_fraction": "--state-noise",
+    "time_basis": "--time-basis",
+    "pieces": "--pieces",
+    "prior": "--prior",
+    "observe": "--observe",
+    "force_proposal": "--force-proposal",
+    "seed": "--seed",
+}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``workbench`` command and return its exit status.
 
@@ -90,6 +109,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler: Handler = args.handler
     try:
         return handler(args)
+    except UsageError as err:
+        # Library messages name their parameters; here the user typed flags.
+        _report_error(args, err.naming(FLAG_FOR_PARAMETER))
+        return err.exit_code
     except WorkbenchError as err:
         _report_error(args, str(err))
         return err.exit_code

@@ -74,32 +74,6 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------
 # population
 # ---------------------------------------------------------------------------------------------
-def _law_text(summary: dict[str, Any]) -> str:
-    lines = [
-        f"records used {summary['records_used']}, excluded {summary['records_excluded']} "
-        f"({summary['exclusion_rule']})"
-    ]
-    for key, law in summary["laws"].items():
-        lo, hi = law["slope_ci"]
-        ilo, ihi = law["intercept_ci"]
-        r = law["residuals"]
-        lines.append(
-            f"{key:22s} = {law['slope']:.4f} f_p {'-' if law['intercept'] < 0 else '+'} "
-            f"{abs(law['intercept']):.4f}  slope 95 % "
-            f"[{lo:.4f}, {hi:.4f}], intercept [{ilo:.4f}, {ihi:.4f}], residual sd "
-            f"{law['residual_sd']:.4g} (Shapiro p {r['shapiro_p']:.3g}, AD p "
-            f"{r['anderson_darling_p']:.3g})"
-        )
-    for key, ln in summary["lognormal"].items():
-        lines.append(
-            f"{key:22s} lognormal mu {ln['mu']:.4f} [{ln['mu_ci'][0]:.4f}, {ln['mu_ci'][1]:.4f}], "
-            f"sigma {ln['sigma']:.4f} [{ln['sigma_ci'][0]:.4f}, {ln['sigma_ci'][1]:.4f}]; "
-            f"KS p {ln['ks_p']:.3g}; AIC lognormal {ln['aic_lognormal']:.1f} vs GEV "
-            f"{ln['aic_gev'] if ln['aic_gev'] is None else round(ln['aic_gev'], 1)}"
-        )
-    return "\n".join(lines)
-
-
 def _cmd_population(args: argparse.Namespace) -> int:
     from workbench.population.files import read_results, write_population
     from workbench.population.fit import fit_population
@@ -109,8 +83,8 @@ def _cmd_population(args: argparse.Namespace) -> int:
         results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
     )
     files = write_population(fit, args.out)
-    obj = {**fit.summary, "files": files}
-    emit(args, obj, _law_text(fit.summary) + f"\nwritten to {args.out}")
+    obj = {**fit.to_json(), "files": files}
+    emit(args, obj, fit.summary() + f"\nwritten to {args.out}")
     return 0
 
 
@@ -128,16 +102,17 @@ def _cmd_report(args: argparse.Namespace) -> int:
     )
     files = write_population(fit, args.out)
     files.update(population_report(results, fit, args.out, title=args.title))
+    laws = fit.to_json()
     obj = {
         "report": files["html"],
         "markdown": files["markdown"],
         "files": files,
-        "records_used": fit.summary["records_used"],
-        "records_excluded": fit.summary["records_excluded"],
-        "laws": fit.summary["laws"],
-        "lognormal": fit.summary["lognormal"],
+        "records_used": laws["records_used"],
+        "records_excluded": laws["records_excluded"],
+        "laws": laws["laws"],
+        "lognormal": laws["lognormal"],
     }
-    emit(args, obj, _law_text(fit.summary) + f"\nreport {files['html']}")
+    emit(args, obj, fit.summary() + f"\nreport {files['html']}")
     return 0
 
 

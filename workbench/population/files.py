@@ -72,7 +72,7 @@ def write_population(fit: Any, out_dir: str | os.PathLike[str]) -> dict[str, str
         "residuals": out / "residuals.csv",
         "excluded": out / "excluded.csv",
     }
-    atomic_write_json(files["population"], fit.summary)
+    atomic_write_json(files["population"], fit.to_json())
     for key, frame in (("bands", fit.bands), ("residuals", fit.used), ("excluded", fit.excluded)):
         with atomic_path(files[key]) as tmp:
             frame.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
