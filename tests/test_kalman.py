@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 import scipy.integrate
@@ -19,6 +21,7 @@ from workbench.inference.problem import (
     seed_example_problem,
 )
 from workbench.models.force import FourierForce
+from workbench.models.smd import SMDModel
 from workbench.records.preprocess import COMResponse
 from workbench.synth.simulate import simulate_walking
 
@@ -143,6 +146,82 @@ def test_transition_matrices_match_quadrature(c: float, k: float) -> None:
     np.testing.assert_array_equal(phi_e, np.eye(2) + a * dt)
     np.testing.assert_array_equal(e0, b * dt)
     assert not np.any(e1)
+
+
+SEED = SMDModel.from_modal(75.0, 2.5, 0.4, harmonics=10)
+
+
+def _free_vibration(t: np.ndarray, u0: float, v0: float, model: SMDModel) -> np.ndarray:
+    wn = 2 * np.pi * model.natural_frequency_hz
+    z = model.damping_ratio
+    wd = wn * np.sqrt(1 - z**2)
+    return np.exp(-z * wn * t) * (u0 * np.cos(wd * t) + (v0 + z * wn * u0) / wd * np.sin(wd * t))
+
+
+def test_euler_transition_is_one_explicit_euler_step_of_the_model() -> None:
+    rng = np.random.default_rng(7)
+    m, c, k = SEED.mass_kg, SEED.damping_ns_per_m, SEED.stiffness_n_per_m
+    coef = rng.normal(scale=100.0, size=21)
+    x = np.array([0.012, -0.08])
+    t, dt, fp = 3.217, 0.001, 0.5
+    force = float(SEED.fourier_force.evaluate(coef, t, fp))
+    phi, g0, g1 = (a[0] for a in kf.transition_matrices(m, c, k, dt, "euler"))
+    x_next = phi @ x + g0 * force
+    acc = SEED.acceleration(x[0], x[1], t, force)  # the model's equation of motion
+    np.testing.assert_allclose(x_next[0], x[0] + dt * x[1], rtol=1e-14)
+    np.testing.assert_allclose(x_next[1], x[1] + dt * acc, rtol=1e-12)
+    assert not np.any(g1)
+
+
+@pytest.mark.parametrize("discretisation", ["foh", "zoh", "euler"])
+def test_transition_matrices_batch_over_pairs(discretisation: str) -> None:
+    ks = np.array([12000.0, 16000.0, 20000.0])
+    cs = np.array([400.0, 700.0, 1000.0])
+    batch = kf.transition_matrices(75.0, cs, ks, 0.01, discretisation)
+    assert batch[0].shape == (3, 2, 2) and batch[1].shape == (3, 2)
+    for i in range(3):
+        one = kf.transition_matrices(75.0, cs[i], ks[i], 0.01, discretisation)
+        for a, b in zip(batch, one, strict=True):
+            np.testing.assert_allclose(a[i], b[0], rtol=1e-14, atol=1e-300)
+
+
+@pytest.mark.parametrize("discretisation", ["foh", "zoh"])
+def test_free_vibration_is_exact(discretisation: str) -> None:
+    dt = 0.01
+    t = np.arange(300) * dt
+    phi = kf.transition_matrices(
+        75.0, SEED.damping_ns_per_m, SEED.stiffness_n_per_m, dt, discretisation
+    )[0][0]
+    x = np.array([0.01, 0.2])
+    u = []
+    for _ in t:
+        u.append(x[0])
+        x = phi @ x
+    np.testing.assert_allclose(u, _free_vibration(t, 0.01, 0.2, SEED), rtol=0, atol=1e-9 * 0.01)
+
+
+def test_first_order_hold_of_harmonic_forcing_converges_at_second_order() -> None:
+    # From rest under F = a cos(w t) + b sin(w t): steady state plus the decaying transient.
+    m, k, c = SEED.mass_kg, SEED.stiffness_n_per_m, SEED.damping_ns_per_m
+    a, b, fp = 300.0, -200.0, 1.7
+    w = 2 * np.pi * fp
+    h = 1.0 / (k - m * w**2 + 1j * c * w)
+    errors = []
+    for dt in (0.02, 0.01, 0.005):
+        t = np.arange(round(4.0 / dt)) * dt
+        u_ss = (h * (a - 1j * b) * np.exp(1j * w * t)).real
+        u_exact = u_ss + _free_vibration(t, -u_ss[0], -(1j * w * h * (a - 1j * b)).real, SEED)
+        force = a * np.cos(w * t) + b * np.sin(w * t)
+        phi, g0, g1 = (x[0] for x in kf.transition_matrices(m, c, k, dt, "foh"))
+        x = np.zeros(2)
+        u = [0.0]
+        for i in range(t.size - 1):
+            x = phi @ x + g0 * force[i] + g1 * force[i + 1]
+            u.append(x[0])
+        errors.append(np.max(np.abs(np.array(u) - u_exact)) / np.max(np.abs(u_exact)))
+    assert errors[0] < 0.01
+    for coarse, fine in itertools.pairwise(errors):
+        assert 3.5 < coarse / fine < 4.5
 
 
 # -- exactness ------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""SMD model, conversions, Fourier force and state-space forms against exact answers."""
+"""SMD model, conversions and Fourier force against exact answers."""
 
 from __future__ import annotations
 
@@ -10,21 +10,14 @@ from workbench.models import (
     FourierForce,
     SMDModel,
     blf,
-    continuous_matrix,
     damping_ns_per_m,
     damping_ratio,
-    discrete_matrix,
     natural_frequency_hz,
-    observation_matrix,
     piece_time_origin_s,
-    reduced_matrices,
-    reduced_state_names,
-    state_names,
     step_index,
     step_phase_rad,
     stiffness_n_per_m,
 )
-from workbench.models.effects import CubicStiffness
 from workbench.records.record import G_M_S2
 
 SEED = SMDModel.from_modal(75.0, 2.5, 0.4, harmonics=10)
@@ -184,138 +177,3 @@ def test_model_repr_and_parameter_names() -> None:
     )
     assert model.parameter_names == ("damping_ns_per_m", "stiffness_n_per_m")
     assert model.fourier_force == FourierForce(4)
-
-
-# -- state-space: full seed state --------------------------------------------------------
-def test_state_names_follow_eq_15() -> None:
-    assert state_names(2) == ("u", "u_dot", "C", "K", "a0", "a1", "b1", "a2", "b2")
-    assert reduced_state_names(1) == ("u", "u_dot", "a0", "a1", "b1")
-
-
-def test_continuous_matrix_has_zero_c_and_k_columns() -> None:
-    a = continuous_matrix(SEED, 0.37, 0.5)
-    assert a.shape == (25, 25)
-    np.testing.assert_array_equal(a[:, 2:4], 0.0)
-    np.testing.assert_array_equal(a[2:], 0.0)
-    assert a[1, 0] == pytest.approx(-SEED.stiffness_n_per_m / 75.0)
-    assert a[1, 1] == pytest.approx(-SEED.damping_ns_per_m / 75.0)
-
-
-def test_euler_step_of_full_state_is_one_explicit_euler_step() -> None:
-    rng = np.random.default_rng(7)
-    m = SEED.mass_kg
-    c, k = SEED.damping_ns_per_m, SEED.stiffness_n_per_m
-    coef = rng.normal(scale=100.0, size=21)
-    x = np.concatenate([[0.012, -0.08, c, k], coef])
-    t, dt, fp = 3.217, 0.001, 0.5
-    x_next = discrete_matrix(SEED, t, fp, dt) @ x
-    force = SEED.fourier_force.evaluate(coef, t, fp)
-    acc = (force - c * x[1] - k * x[0]) / m  # the ODE, written out
-    np.testing.assert_allclose(x_next[0], x[0] + dt * x[1], rtol=1e-14)
-    np.testing.assert_allclose(x_next[1], x[1] + dt * acc, rtol=1e-12)
-    np.testing.assert_array_equal(x_next[2:], x[2:])
-
-
-def test_observation_row_three_is_the_equation_of_motion() -> None:
-    rng = np.random.default_rng(8)
-    coef = rng.normal(scale=100.0, size=21)
-    x = np.concatenate([[0.02, 0.05, SEED.damping_ns_per_m, SEED.stiffness_n_per_m], coef])
-    t = np.array([0.0, 1.1, 2.345])
-    y = observation_matrix(SEED, t, 0.5) @ x
-    force = SEED.fourier_force.evaluate(coef, t, 0.5)
-    np.testing.assert_allclose(y[:, 0], 0.02)
-    np.testing.assert_allclose(y[:, 1], 0.05)
-    np.testing.assert_allclose(y[:, 2], SEED.acceleration(0.02, 0.05, t, force), rtol=1e-12)
-
-
-def test_full_state_matrices_broadcast_over_particles() -> None:
-    ks = np.array([12000.0, 16000.0, 20000.0])
-    cs = np.array([400.0, 700.0, 1000.0])
-    a = discrete_matrix(SEED, 0.5, 0.5, 0.01, stiffness_n_per_m=ks, damping_ns_per_m=cs)
-    assert a.shape == (3, 25, 25)
-    for i in range(3):
-        one = discrete_matrix(
-            SEED.replace(stiffness_n_per_m=ks[i], damping_ns_per_m=cs[i]), 0.5, 0.5, 0.01
-        )
-        np.testing.assert_array_equal(a[i], one)
-
-
-def test_state_space_refuses_models_with_effects() -> None:
-    with pytest.raises(UsageError, match="has effects"):
-        continuous_matrix(SEED + CubicStiffness(), 0.0, 0.5)
-
-
-# -- state-space: reduced state ----------------------------------------------------------
-def _free_vibration(t: np.ndarray, u0: float, v0: float, model: SMDModel) -> np.ndarray:
-    wn = 2 * np.pi * model.natural_frequency_hz
-    z = model.damping_ratio
-    wd = wn * np.sqrt(1 - z**2)
-    return np.exp(-z * wn * t) * (u0 * np.cos(wd * t) + (v0 + z * wn * u0) / wd * np.sin(wd * t))
-
-
-@pytest.mark.parametrize("method", ["exact", "zoh"])
-def test_reduced_discretisation_of_free_vibration_is_exact(method: str) -> None:
-    dt = 0.01
-    t = np.arange(300) * dt
-    f, _ = reduced_matrices(
-        75.0, SEED.stiffness_n_per_m, SEED.damping_ns_per_m, 2, 0.0, 0.5, dt, method=method
-    )
-    z = np.array([0.01, 0.2, 0, 0, 0, 0, 0])
-    u = []
-    for _ in t:
-        u.append(z[0])
-        z = f @ z
-    np.testing.assert_allclose(u, _free_vibration(t, 0.01, 0.2, SEED), rtol=0, atol=1e-9 * 0.01)
-
-
-def test_reduced_exact_discretisation_of_harmonic_forcing_is_exact() -> None:
-    # From rest under F = a cos(w t) + b sin(w t): steady state plus the decaying transient.
-    m, k, c = SEED.mass_kg, SEED.stiffness_n_per_m, SEED.damping_ns_per_m
-    a, b, fp = 300.0, -200.0, 1.7
-    w = 2 * np.pi * fp
-    h = 1.0 / (k - m * w**2 + 1j * c * w)
-    dt = 0.02  # coarse on purpose: the exact scheme does not care
-    t = np.arange(200) * dt
-    u_ss = (h * (a - 1j * b) * np.exp(1j * w * t)).real
-    u_ss0, v_ss0 = u_ss[0], (1j * w * h * (a - 1j * b)).real
-    u_exact = u_ss + _free_vibration(t, -u_ss0, -v_ss0, SEED)
-    f, hm = reduced_matrices(m, k, c, 1, t, fp, dt)
-    z = np.array([0.0, 0.0, 0.0, a, b])
-    u = []
-    for i in range(t.size):
-        u.append(z[0])
-        z = f[i] @ z
-    np.testing.assert_allclose(u, u_exact, rtol=0, atol=1e-9 * np.max(np.abs(u_exact)))
-    assert hm.shape == (200, 3, 5)
-
-
-def test_reduced_euler_is_the_seed_matrix_without_c_and_k() -> None:
-    ks = np.array([15000.0, 18000.0])
-    cs = np.array([900.0, 950.0])
-    t = 1.234
-    red, obs = reduced_matrices(75.0, ks, cs, 10, t, 0.5, 0.001, method="euler")
-    keep = [0, 1, *range(4, 25)]
-    for i in range(2):
-        full = SEED.replace(stiffness_n_per_m=ks[i], damping_ns_per_m=cs[i])
-        np.testing.assert_allclose(red[i], discrete_matrix(full, t, 0.5, 0.001)[np.ix_(keep, keep)])
-        np.testing.assert_allclose(obs[i], observation_matrix(full, t, 0.5)[:, keep])
-
-
-def test_reduced_observation_row_is_the_equation_of_motion() -> None:
-    rng = np.random.default_rng(3)
-    z = np.concatenate([[0.01, -0.03], rng.normal(scale=50.0, size=7)])
-    model = SEED.replace(harmonics=3)
-    _, obs = reduced_matrices(
-        75.0, model.stiffness_n_per_m, model.damping_ns_per_m, 3, 0.8, 1.9, 0.005
-    )
-    force = model.fourier_force.evaluate(z[2:], 0.8, 1.9)
-    assert obs @ z == pytest.approx(
-        [0.01, -0.03, float(model.acceleration(0.01, -0.03, 0.8, force))]
-    )
-
-
-def test_reduced_matrices_reject_bad_arguments() -> None:
-    with pytest.raises(UsageError, match="unknown method"):
-        reduced_matrices(75.0, 1e4, 500.0, 2, 0.0, 1.8, 0.01, method="rk4")  # type: ignore[arg-type]
-    with pytest.raises(UsageError, match="dt_s"):
-        reduced_matrices(75.0, 1e4, 500.0, 2, 0.0, 1.8, 0.0)

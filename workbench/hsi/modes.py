@@ -13,10 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from workbench.hsi.pedestrians import PedestrianArrays, validate_pedestrians
+from workbench.hsi.pedestrians import Pedestrians, pedestrian_arrays
 from workbench.hsi.structure import ModalStructure
 
 __all__ = ["CoupledMode", "apparent_structure_modes", "coupled_matrices", "coupled_modes"]
@@ -71,16 +70,26 @@ def coupled_matrices(
 
 
 def coupled_modes(
-    structure: ModalStructure, pedestrians: pd.DataFrame, positions_m: ArrayLike
+    structure: ModalStructure, pedestrians: Pedestrians, positions_m: ArrayLike
 ) -> list[CoupledMode]:
-    """All modes of the structure occupied by the pedestrians of a table at ``positions_m``.
+    """All modes of the structure occupied by pedestrians standing at ``positions_m``.
+
+    Parameters
+    ----------
+    structure : ModalStructure
+        The modes of the empty structure.
+    pedestrians : DataFrame, Walker, SMDModel or sequence of Walker / SMDModel
+        A pedestrian table (checked here) or the pedestrians' models; only M, K and C
+        matter here.
+    positions_m : array_like
+        Where each pedestrian is [m].
 
     Returns
     -------
     list of CoupledMode
         Sorted by structure share, largest first (deck-dominated modes first).
     """
-    a = PedestrianArrays.from_frame(validate_pedestrians(pedestrians))
+    a = pedestrian_arrays(pedestrians, 0.0)
     return _modes(structure, a.mass_kg, a.stiffness_n_per_m, a.damping_ns_per_m, positions_m)
 
 

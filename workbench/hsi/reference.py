@@ -9,12 +9,11 @@ accuracy reference.
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
 from workbench.hsi.modes import coupled_matrices
-from workbench.hsi.pedestrians import G, PedestrianArrays, validate_pedestrians
+from workbench.hsi.pedestrians import G, Pedestrians, pedestrian_arrays
 from workbench.hsi.structure import ModalStructure
 
 __all__ = ["solve_ivp_crossing"]
@@ -22,7 +21,7 @@ __all__ = ["solve_ivp_crossing"]
 
 def solve_ivp_crossing(
     structure: ModalStructure,
-    pedestrians: pd.DataFrame,
+    pedestrians: Pedestrians,
     x0_m: NDArray[np.float64],
     speed_m_s: NDArray[np.float64],
     time_s: NDArray[np.float64],
@@ -30,8 +29,29 @@ def solve_ivp_crossing(
     response_x_m: float | None = None,
     rtol: float = 1e-8,
 ) -> NDArray[np.float64]:
-    """Deck acceleration at ``response_x_m`` (midspan) at ``time_s``, coupled model."""
-    a = PedestrianArrays.from_frame(validate_pedestrians(pedestrians))
+    """Deck acceleration at ``response_x_m`` (midspan) at ``time_s``, coupled model.
+
+    Parameters
+    ----------
+    structure : ModalStructure
+        The modes.
+    pedestrians : DataFrame, Walker, SMDModel or sequence of Walker / SMDModel
+        A pedestrian table (checked here) or the pedestrians' models.
+    x0_m, speed_m_s : array
+        Position of each pedestrian at ``t = 0`` [m] and the speed it moves at [m/s].
+    time_s : array
+        Output times [s]; the integration starts at ``time_s[0]``.
+    response_x_m : float, optional
+        Where the acceleration is taken (default midspan).
+    rtol : float
+        Relative tolerance of ``solve_ivp``.
+
+    Returns
+    -------
+    ndarray
+        Deck acceleration [m/s^2] at ``time_s``.
+    """
+    a = pedestrian_arrays(pedestrians, speed_m_s)
     j, p = structure.n_modes, a.mass_kg.size
     n = j + p
     i = np.arange(1, a.blf.shape[1] + 1)
@@ -40,7 +60,7 @@ def solve_ivp_crossing(
     def force(t: float) -> NDArray[np.float64]:
         # The biomechanical force pushes the body up and the deck down.
         vec = np.zeros(n)
-        vec[j:] = G * a.mass_kg * np.sum(a.blf * np.cos(w * t + a.phase_rad), axis=1)
+        vec[j:] = G * a.mass_kg * np.sum(a.blf * np.cos(w * t + a.phase_rad), axis=1) + a.a0_n
         vec[:j] = -structure.shapes(x0_m + speed_m_s * t).T @ vec[j:]
         return vec
 
@@ -67,7 +87,7 @@ def solve_ivp_crossing(
         )
     )
     s0 = np.zeros(2 * n)
-    s0[j:n] = amp.real.sum(axis=1)
+    s0[j:n] = amp.real.sum(axis=1) + a.a0_n / a.stiffness_n_per_m
     s0[n + j :] = (1j * w * amp).real.sum(axis=1)
     sol = solve_ivp(
         rhs, (time_s[0], time_s[-1]), s0, t_eval=time_s, rtol=rtol, atol=1e-12, method="DOP853"

@@ -36,6 +36,7 @@ Monte Carlo runs fast.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -44,10 +45,21 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.hsi.pedestrians import G, PedestrianArrays, validate_pedestrians
+from workbench.hsi.pedestrians import (
+    HARMONICS,
+    G,
+    Pedestrians,
+    pedestrian_arrays,
+)
 from workbench.hsi.structure import ModalStructure
 
-__all__ = ["CrowdBatch", "HsiHistory", "Model", "integrate", "simulate_pedestrians"]
+__all__ = [
+    "CrowdBatch",
+    "HsiHistory",
+    "Model",
+    "integrate",
+    "simulate_pedestrians",
+]
 
 Model = Literal["interaction", "moving_force", "biomechanical_force"]
 MODELS: tuple[Model, ...] = ("interaction", "moving_force", "biomechanical_force")
@@ -60,7 +72,9 @@ class CrowdBatch:
     """Scenarios side by side: ``B`` scenarios of up to ``P`` pedestrians (padded).
 
     Positions are ``x0_m + speed_m_s t``; a padded slot has ``active`` False and stays off
-    the deck. Arrays are ``(B, P)``; force terms ``(B, P, H)``.
+    the deck. Arrays are ``(B, P)``; force terms ``(B, P, H)``. The pedestrians' force is
+    ``a0_n + G M sum_i blf_i cos(2 pi i f_p t + phase_i)``, their models' biomechanical
+    force (:class:`~workbench.hsi.pedestrians.PedestrianArrays`).
     """
 
     mass_kg: NDArray[np.float64]
@@ -72,15 +86,34 @@ class CrowdBatch:
     x0_m: NDArray[np.float64]
     speed_m_s: NDArray[np.float64]
     active: NDArray[np.bool_]
+    a0_n: NDArray[np.float64]
 
     @classmethod
     def from_scenarios(
-        cls, scenarios: list[tuple[pd.DataFrame, NDArray[np.float64], NDArray[np.float64]]]
+        cls, scenarios: Sequence[tuple[Pedestrians, ArrayLike, ArrayLike]]
     ) -> CrowdBatch:
-        """Stack ``(table, x0_m, speed_m_s)`` scenarios, padding to the largest crowd."""
+        """Stack ``(pedestrians, x0_m, speed_m_s)`` scenarios, padding to the largest crowd.
+
+        Parameters
+        ----------
+        scenarios : sequence of (pedestrians, x0_m, speed_m_s)
+            The pedestrians of each scenario (a table, walkers, models or their arrays, see
+            :func:`pedestrian_arrays`), where each is at ``t = 0`` and how fast it moves
+            (this speed, not the walker's own, moves it: 0 for someone standing).
+
+        Returns
+        -------
+        CrowdBatch
+        """
+        arrays = [
+            pedestrian_arrays(peds, np.asarray(vs, float))
+            if not isinstance(peds, pd.DataFrame) or len(peds)
+            else None
+            for peds, _, vs in scenarios
+        ]
         b = len(scenarios)
-        p = max(1, max(len(s[0]) for s in scenarios))
-        h = 3
+        p = max(1, max((a.mass_kg.size for a in arrays if a is not None), default=0))
+        h = max((a.blf.shape[1] for a in arrays if a is not None), default=HARMONICS)
         mass = np.ones((b, p))
         k = np.ones((b, p))
         c = np.ones((b, p))
@@ -90,15 +123,16 @@ class CrowdBatch:
         x0 = np.full((b, p), -1.0)
         v = np.zeros((b, p))
         act = np.zeros((b, p), bool)
-        for i, (frame, xs, vs) in enumerate(scenarios):
-            n = len(frame)
-            if n == 0:
+        a0 = np.zeros((b, p))
+        for i, (a, (_, xs, vs)) in enumerate(zip(arrays, scenarios, strict=True)):
+            n = 0 if a is None else a.mass_kg.size
+            if a is None or n == 0:
                 continue
-            a = PedestrianArrays.from_frame(frame)
+            hh = a.blf.shape[1]
             mass[i, :n], k[i, :n], c[i, :n] = a.mass_kg, a.stiffness_n_per_m, a.damping_ns_per_m
-            fp[i, :n], blf[i, :n], ph[i, :n] = a.pacing_hz, a.blf, a.phase_rad
-            x0[i, :n], v[i, :n], act[i, :n] = xs, vs, True
-        return cls(mass, k, c, fp, blf, ph, x0, v, act)
+            fp[i, :n], blf[i, :n, :hh], ph[i, :n, :hh] = a.pacing_hz, a.blf, a.phase_rad
+            x0[i, :n], v[i, :n], act[i, :n], a0[i, :n] = xs, vs, True, a.a0_n
+        return cls(mass, k, c, fp, blf, ph, x0, v, act, a0)
 
     def positions(self, t: float | NDArray[np.float64]) -> NDArray[np.float64]:
         """Positions at time ``t`` (``-1`` for padded slots, which is off the deck)."""
@@ -108,17 +142,22 @@ class CrowdBatch:
         """Biomechanical forces ``F_p(t)`` [N], ``(B, P)``."""
         i = np.arange(1, self.blf.shape[-1] + 1)
         arg = 2 * np.pi * i * self.pacing_hz[..., None] * t + self.phase_rad
-        return np.asarray(G * self.mass_kg * np.sum(self.blf * np.cos(arg), axis=-1))
+        dynamic = G * self.mass_kg * np.sum(self.blf * np.cos(arg), axis=-1)
+        return np.asarray(dynamic + self.a0_n)
 
     def steady_state(self, t: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """COM displacement and velocity of each SMD walking steadily on rigid ground."""
+        """COM displacement and velocity of each SMD walking steadily on rigid ground.
+
+        A constant force ``a0_n`` only moves the static equilibrium, by ``a0_n / K``.
+        """
         i = np.arange(1, self.blf.shape[-1] + 1)
         w = 2 * np.pi * i * self.pacing_hz[..., None]
         m, k, c = (
             a[..., None] for a in (self.mass_kg, self.stiffness_n_per_m, self.damping_ns_per_m)
         )
         amp = G * m * self.blf * np.exp(1j * (w * t + self.phase_rad)) / (k - m * w**2 + 1j * c * w)
-        return np.sum(amp.real, axis=-1), np.sum((1j * w * amp).real, axis=-1)
+        offset = self.a0_n / self.stiffness_n_per_m
+        return np.sum(amp.real, axis=-1) + offset, np.sum((1j * w * amp).real, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -263,8 +302,9 @@ def integrate(
 
 def simulate_pedestrians(
     structure: ModalStructure,
-    pedestrians: pd.DataFrame,
+    pedestrians: Pedestrians,
     *,
+    speed_m_s: ArrayLike | None = None,
     entry_times_s: ArrayLike | None = None,
     positions_m: ArrayLike | None = None,
     duration_s: float | None = None,
@@ -273,17 +313,24 @@ def simulate_pedestrians(
     response_x_m: ArrayLike | None = None,
     static_weight: bool = False,
 ) -> HsiHistory:
-    """Simulate one scenario: the pedestrians of a table walking over (or standing on) the deck.
+    """Simulate one scenario: pedestrians walking over (or standing on) the deck.
 
     Parameters
     ----------
     structure : ModalStructure
         The modes.
-    pedestrians : pandas.DataFrame
-        Pedestrian table (the shared contract; checked here).
+    pedestrians : DataFrame, Walker, SMDModel or sequence of Walker / SMDModel
+        A pedestrian table (the shared contract; checked here), or the pedestrians as
+        :class:`~workbench.hsi.pedestrians.Walker` s or
+        :class:`~workbench.models.smd.SMDModel` s with M, K, C, ``pacing_hz`` and
+        ``force_coefficients_n`` known (their force is
+        :meth:`~workbench.models.smd.SMDModel.biomechanical_force_n`, in the simulation's
+        time).
+    speed_m_s : float or sequence of float, optional
+        Walking speed of bare SMD models (tables and walkers carry their own).
     entry_times_s : array, optional
         When each walker steps on the deck at ``x = 0`` (default all at ``t = 0``); they
-        walk at their ``speed_m_s``.
+        walk at their speed.
     positions_m : array, optional
         Instead of walking, pedestrians stand (bounce) at these positions.
     duration_s : float, optional
@@ -295,21 +342,43 @@ def simulate_pedestrians(
     -------
     HsiHistory
         With ``B = 1``.
+
+    Examples
+    --------
+    >>> from workbench.hsi.structure import simply_supported_beam
+    >>> from workbench.models import FourierForce, SMDModel
+    >>> beam = simply_supported_beam(50.0, 500.0, 2.0, 0.005)
+    >>> walker = SMDModel.from_modal(
+    ...     73.85, 2.21, 0.297, harmonics=1, pacing_hz=2.0,
+    ...     force_coefficients_n=FourierForce(1).from_blf([0.4305], None, 73.85))
+    >>> hist = simulate_pedestrians(beam, [walker], speed_m_s=1.25, dt_s=0.01)
+    >>> round(float(abs(hist.acceleration_m_s2).max()), 2)
+    1.68
     """
-    frame = validate_pedestrians(pedestrians)
-    speed = frame["speed_m_s"].to_numpy(float)
-    if positions_m is not None:
+    standing = positions_m is not None
+    if standing and speed_m_s is None:
+        speed_m_s = 0.0  # bare models need no speed to stand
+    arrays = pedestrian_arrays(pedestrians, speed_m_s)
+    speed = arrays.speed_m_s
+    if speed.size == 0:
+        raise UsageError("there are no pedestrians to simulate; give at least one")
+    if standing:
         x0 = np.broadcast_to(np.asarray(positions_m, float), speed.shape).copy()
         speed = np.zeros_like(speed)
         if duration_s is None:
             raise UsageError("give a duration for pedestrians standing on the deck")
     else:
+        if np.any(speed <= 0):
+            raise UsageError(
+                "a walker has speed 0 and would never cross; give it a positive speed_m_s, "
+                "or use positions_m for pedestrians standing on the deck"
+            )
         te = np.zeros_like(speed) if entry_times_s is None else np.asarray(entry_times_s, float)
         te = np.broadcast_to(te, speed.shape)
         x0 = -speed * te
         if duration_s is None:
             duration_s = float(np.max(te + structure.span_m / speed))
-    batch = CrowdBatch.from_scenarios([(frame, x0, speed)])
+    batch = CrowdBatch.from_scenarios([(arrays, x0, speed)])
     return integrate(
         structure,
         batch,

@@ -1,12 +1,12 @@
-"""Models: the SMD pedestrian, its Fourier biomechanical force, state-space forms, effects.
+"""Models: the SMD pedestrian, its Fourier biomechanical force, effects.
 
-Models are plain descriptions; algorithms (in :mod:`workbench.inference`) take them.
+Models are plain descriptions; algorithms (in :mod:`workbench.inference`) take them. The
+discrete state-space form of the SMD given (C, K) is the Kalman filter's
+(:func:`workbench.inference.kalman.transition_matrices`), the one discretisation.
 
 - :mod:`~workbench.models.conversions`: K, C <-> f_n, zeta; BLF.
 - :mod:`~workbench.models.force`: :class:`FourierForce` and step-phase helpers.
 - :mod:`~workbench.models.smd`: :class:`SMDModel` (``SMDModel(...) + CubicStiffness()``).
-- :mod:`~workbench.models.statespace`: the seed's state-space form and the reduced
-  linear-Gaussian form given (C, K).
 - :mod:`~workbench.models.effects`: the effect mechanism, registry and catalogue.
 """
 
@@ -42,15 +42,6 @@ from workbench.models.force import (
     step_phase_rad,
 )
 from workbench.models.smd import SMDModel
-from workbench.models.statespace import (
-    ReducedMatrices,
-    continuous_matrix,
-    discrete_matrix,
-    observation_matrix,
-    reduced_matrices,
-    reduced_state_names,
-    state_names,
-)
 
 __all__ = [
     "BaseMotion",
@@ -64,24 +55,17 @@ __all__ = [
     "PacingDrift",
     "Parameter",
     "QuadraticDamping",
-    "ReducedMatrices",
     "SMDModel",
     "StiffnessDrift",
     "available_effects",
     "blf",
-    "continuous_matrix",
     "damping_ns_per_m",
     "damping_ratio",
-    "discrete_matrix",
     "effect_class",
     "effect_from_name",
     "natural_frequency_hz",
-    "observation_matrix",
     "piece_time_origin_s",
-    "reduced_matrices",
-    "reduced_state_names",
     "register_effect",
-    "state_names",
     "step_index",
     "step_phase_rad",
     "stiffness_n_per_m",
