@@ -21,10 +21,8 @@ from workbench.diagnostics.criticism import (
     _moving_average,
     compare,
     diagnose,
-    feature_group_from_effect,
     ljung_box_p,
     prepare,
-    unregister_feature_group,
 )
 from workbench.models import (
     BaseMotion,
@@ -312,6 +310,7 @@ class BreathingModulation(Effect):
     """User-written effect: breathing at 0.3 Hz modulates the force's first harmonic."""
 
     name = "breathing_modulation"
+    reason = "the force's size rises and falls with breath"
     breathing_hz = 0.3
     parameters = (
         Parameter("mod_cos_n", "N", 0.0, "modulation in phase with cos(2 pi f_b t)"),
@@ -328,11 +327,9 @@ class BreathingModulation(Effect):
 @pytest.fixture
 def breathing() -> Iterator[None]:
     register_effect(BreathingModulation)
-    feature_group_from_effect(BreathingModulation, "the force's size rises and falls with breath")
     try:
         yield
     finally:
-        unregister_feature_group("breathing_modulation")
         unregister_effect("breathing_modulation")
 
 

@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 from workbench.errors import UsageError
 from workbench.inference.kalman import record_loglik
 from workbench.inference.problem import ForcePrior, IdentificationProblem
-from workbench.models.effects import EffectContext, Effects, HeelImpact, as_effects
+from workbench.models.effects import EffectContext, Effects, as_effects
 from workbench.records.preprocess import highpass, integrate
 from workbench.records.record import G_M_S2
 
@@ -154,8 +154,10 @@ def effect_terms(
     problem : IdentificationProblem
         The baseline problem (its ``y`` gives the observed u, u').
     effects : Effect, Effects, or iterable of Effect or names
-        The effects; a linear effect may be any registered one, a nonlinear one only
-        ``heel_impact`` (its ``decay_s`` is held at the instance's value).
+        The effects; each gives its columns by
+        :meth:`~workbench.models.effects.Effect.identification_columns`: any linear one, and
+        nonlinear ones that override it (``heel_impact``, its ``decay_s`` held at the
+        instance's value).
     ground_acc_m_s2 : ndarray, shape (N,), optional
         Ground acceleration on the problem's samples (needed by ``base_motion``).
     highpass_hz : float, default 0.15
@@ -178,20 +180,9 @@ def effect_terms(
     blocks: list[FloatArray] = []
     names: list[str] = []
     for eff in effs:
-        if isinstance(eff, HeelImpact):
-            decay = float(eff.values["decay_s"])
-            r = eff.force(u, v, t, np.array([1.0, decay]), ctx)[:, None]
-            names.append(f"{eff.name}.impact_n")
-        elif eff.linear:
-            r = np.asarray(eff.regressors(u, v, t, ctx), dtype=np.float64).reshape(t.size, -1)
-            names += list(eff.qualified_parameter_names)
-        else:
-            raise UsageError(
-                f"effect {eff.name!r} is nonlinear in its parameters; identification accepts "
-                "linear effects (and heel_impact); give it regressors() or leave it out of "
-                "--effects"
-            )
-        blocks.append(-r)
+        r, qualified = eff.identification_columns(u, v, t, ctx)
+        blocks.append(-np.asarray(r, dtype=np.float64).reshape(t.size, -1))
+        names += list(qualified)
     columns = np.ascontiguousarray(np.column_stack(blocks), dtype=np.float64)
     rms = np.sqrt(np.mean(columns**2, axis=0))
     dead = [n for n, r in zip(names, rms, strict=True) if not (np.isfinite(r) and r > 0)]

@@ -6,6 +6,7 @@ half-harmonics marked, error against state, and the scoreboard with the error fa
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -125,7 +126,7 @@ def one_step_figure(diag: Diagnosis, seconds: float = 6.0) -> Figure:
     return fig
 
 
-def scoreboard_figure(rows: list[ScoreRow]) -> Figure:
+def scoreboard_figure(rows: Sequence[ScoreRow]) -> Figure:
     """Held-out RMSE per model, baseline first, with the fold-to-fold uncertainty of each drop."""
     fig = Figure(figsize=(6, 3))
     ax = fig.add_subplot()
@@ -142,7 +143,7 @@ def scoreboard_figure(rows: list[ScoreRow]) -> Figure:
     return fig
 
 
-def _rows_table(rows: list[ScoreRow]) -> Table:
+def _rows_table(rows: Sequence[ScoreRow]) -> Table:
     return Table(
         ["model", "held-out RMSE [N]", "fit %", "Ljung-Box p", "score"],
         [

@@ -1,0 +1,333 @@
+"""A record prepared for model criticism, and the baseline's columns.
+
+:func:`prepare` turns a record into :class:`CriticismData`: its whole steps, the step phase
+of the pacing component of the COM acceleration, the preprocessed COM response and the
+measured ground motion. The criticism baseline's columns (:func:`baseline_columns`) and the
+helpers the candidates' columns share (the state without its steady stride lines, the
+shared force shape's phase slope, the slow pacing change) are here; an effect reaches the
+helpers through the methods of :class:`CriticismData`
+(:class:`~workbench.models.effect_context.CriticismRecord`). See the module docstring of
+:mod:`workbench.diagnostics.criticism` for the method.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+
+from workbench.models.effect_context import CRITICISM_HARMONICS, phase_harmonics
+from workbench.models.force import step_phase_rad
+from workbench.records.preprocess import (
+    DEFAULT_HIGHPASS_HZ,
+    COMResponse,
+    highpass,
+    integrate,
+    preprocess,
+)
+from workbench.records.record import G_M_S2, Record
+from workbench.records.steps import Steps, segment_steps
+
+__all__ = [
+    "DEFAULT_HARMONICS",
+    "SLOW_STEPS",
+    "CriticismData",
+    "baseline_columns",
+    "prepare",
+    "slow_pacing_change",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Harmonics of the shared force shape of the baseline.
+DEFAULT_HARMONICS = CRITICISM_HARMONICS
+#: Steps over which a change counts as slow (drifts) rather than step-to-step jitter.
+SLOW_STEPS = 8
+
+_harmonics = phase_harmonics
+
+
+@dataclass(frozen=True, eq=False)
+class CriticismData:
+    """A record prepared for criticism: target, COM response, step phase, ground motion.
+
+    Only samples inside whole steps are kept.
+
+    Attributes
+    ----------
+    time_s : ndarray
+        Sample times [s].
+    grf_n : ndarray
+        Measured GRF [N].
+    target_n : ndarray
+        ``GRF - M g`` [N], the quantity predicted.
+    disp_m, vel_m_s : ndarray
+        COM displacement [m] and velocity [m/s] (preprocessed).
+    phase_rad : ndarray
+        Step phase, ``2 pi`` per step, 0 at the first kept footfall.
+    step : ndarray of int
+        Index of the step each sample belongs to.
+    mass_kg, pacing_hz, sample_rate_hz : float
+        Body mass, mean pacing (from the footfalls) and sample rate.
+    footfall_times_s : ndarray
+        Step boundaries of the kept steps [s] (where the step phase crosses ``2 pi k``).
+    ground : tuple of ndarray or None
+        Ground displacement [m], velocity [m/s], acceleration [m/s^2], when measured.
+    source : str
+        Where the record came from.
+    pacing_local_hz : ndarray, optional
+        Local pacing rate [Hz]: the step phase's rate, averaged over a stride.
+    """
+
+    time_s: FloatArray
+    grf_n: FloatArray
+    target_n: FloatArray
+    disp_m: FloatArray
+    vel_m_s: FloatArray
+    phase_rad: FloatArray
+    step: NDArray[np.int64]
+    mass_kg: float
+    pacing_hz: float
+    sample_rate_hz: float
+    footfall_times_s: FloatArray
+    ground: tuple[FloatArray, FloatArray, FloatArray] | None
+    source: str = "<memory>"
+    pacing_local_hz: FloatArray | None = None
+
+    @property
+    def n_steps(self) -> int:
+        """Number of whole steps kept."""
+        return int(self.footfall_times_s.size - 1)
+
+    @property
+    def step_fraction(self) -> FloatArray:
+        """Position within the step, 0 at footfall and 1 at the next (gait phase)."""
+        return np.asarray(self.phase_rad / (2.0 * np.pi) - self.step, dtype=np.float64)
+
+    def centred_time(self) -> FloatArray:
+        """Time scaled to ``[-1/2, 1/2]`` over the kept samples (dimensionless)."""
+        return _centred_time(self)
+
+    def state_without_stride_lines(self) -> tuple[FloatArray, FloatArray]:
+        """``u`` and ``u'`` without their steady lines at odd multiples of ``f_p / 2``.
+
+        See :func:`_without_stride_lines`.
+        """
+        return _without_stride_lines(self)
+
+    def shape_slope(self) -> FloatArray:
+        """Step-phase derivative of the record's shared force shape, all steps [N/rad]."""
+        return _shape_slope(self)
+
+    def slow_pacing_change(self) -> FloatArray | None:
+        """Slow change of the pacing along the record [Hz] (see :func:`slow_pacing_change`)."""
+        return slow_pacing_change(self)
+
+
+def prepare(
+    record: Record,
+    *,
+    highpass_hz: float = DEFAULT_HIGHPASS_HZ,
+    pacing_hz: float | None = None,
+    steps: Steps | None = None,
+) -> CriticismData:
+    """Preprocess a record and keep its whole steps (docs/science.md 2).
+
+    Parameters
+    ----------
+    record : Record
+        GRF record with a body mass.
+    highpass_hz : float, optional
+        High-pass cut-off for the COM response [Hz].
+    pacing_hz : float, optional
+        Expected pacing, passed to the step detection.
+    steps : Steps, optional
+        Steps already segmented (else found from the record).
+
+    Returns
+    -------
+    CriticismData
+    """
+    mass = record.require_mass()
+    com = preprocess(record, highpass_hz=highpass_hz)
+    if steps is None:
+        steps = segment_steps(com, pacing_hz=pacing_hz or record.pacing_hz, min_steps=6)
+    lo, hi, phase, footfalls = _fundamental_phase(com, steps)
+    t = np.asarray(record.time_s[lo:hi], dtype=np.float64)
+    n_steps = footfalls.size - 1
+    step = np.clip(np.floor(phase / (2.0 * np.pi)).astype(np.int64), 0, n_steps - 1)
+    ground = None
+    if record.ground_acc_m_s2 is not None:
+        acc_g = np.asarray(record.ground_acc_m_s2, dtype=np.float64)
+        fs = record.sample_rate_hz
+        if highpass_hz > 0:
+            acc_g = highpass(acc_g, fs, highpass_hz)
+            vel_g = highpass(integrate(acc_g, 1.0 / fs), fs, highpass_hz)
+            disp_g = highpass(integrate(vel_g, 1.0 / fs), fs, highpass_hz)
+        else:
+            vel_g = integrate(acc_g, 1.0 / fs)
+            disp_g = integrate(vel_g, 1.0 / fs)
+        ground = (disp_g[lo:hi], vel_g[lo:hi], acc_g[lo:hi])
+    grf = np.asarray(record.grf_n[lo:hi], dtype=np.float64)
+    return CriticismData(
+        time_s=t,
+        grf_n=grf,
+        target_n=grf - mass * G_M_S2,
+        disp_m=np.asarray(com.disp_m[lo:hi], dtype=np.float64),
+        vel_m_s=np.asarray(com.vel_m_s[lo:hi], dtype=np.float64),
+        phase_rad=phase,
+        step=step,
+        mass_kg=mass,
+        pacing_hz=float(1.0 / np.mean(np.diff(footfalls))),
+        sample_rate_hz=record.sample_rate_hz,
+        footfall_times_s=footfalls,
+        ground=ground,
+        source=record.source,
+        pacing_local_hz=np.gradient(phase) * record.sample_rate_hz / (2.0 * np.pi),
+    )
+
+
+def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatArray, FloatArray]:
+    """Step phase from the pacing component of the COM acceleration.
+
+    Peaks of the acceleration mark footfalls, but with a double-humped force they can jump
+    between the humps from step to step, and where the response changes (stiffness drift, a
+    nonlinear spring) they shift against the force. Both would enter the criticism as an
+    error of the force's timing. The phase of the acceleration's pacing component (a
+    zero-phase band-pass of 0.7-1.4 f_p, then the angle of its analytic signal) advances
+    smoothly by ``2 pi`` per step and is set so that its circular mean at the detected
+    footfalls is 0: step phase 0 is, on average, the footfall peak.
+
+    Returns
+    -------
+    lo, hi : int
+        Sample span of the whole steps kept.
+    phase_rad : ndarray
+        Phase on that span, starting in ``[0, 2 pi)``.
+    boundaries_s : ndarray
+        Times where the phase crosses multiples of ``2 pi`` (step boundaries) [s].
+    """
+    fs = com.sample_rate_hz
+    fp = float(1.0 / np.median(steps.durations_s))
+    band = np.array([0.7, 1.4]) * fp / (0.5 * fs)
+    sos = signal.butter(4, np.clip(band, 1e-6, 0.99), btype="bandpass", output="sos")
+    acc = np.asarray(com.acc_m_s2, dtype=np.float64)
+    pacing = signal.sosfiltfilt(sos, acc - acc.mean())
+    unwrapped = np.unwrap(np.angle(signal.hilbert(pacing)))
+    # Average the phase rate over two steps (one stride): left/right asymmetry leaks into the
+    # band as an alternating timing, which would otherwise hide it in the phase.
+    width = max(round(2.0 * fs / fp), 1)
+    smooth = _moving_average(np.diff(unwrapped), width)
+    unwrapped = unwrapped[0] + np.concatenate([[0.0], np.cumsum(smooth)])
+    # Footfall peaks of the acceleration sit near the maxima of its pacing component, where
+    # the analytic signal's angle is 0.
+    at_footfalls = np.exp(1j * np.interp(steps.footfall_times_s, com.time_s, unwrapped))
+    unwrapped = unwrapped - float(np.angle(np.mean(at_footfalls)))
+    # Keep whole cycles away from the band-pass's edge effects (one step at either end).
+    first = steps.start
+    last = steps.stop
+    k0 = int(np.ceil(unwrapped[first] / (2.0 * np.pi)))
+    k1 = int(np.floor(unwrapped[last - 1] / (2.0 * np.pi)))
+    if k1 - k0 < 6 or np.any(np.diff(unwrapped[first:last]) <= 0):
+        # An irregular record (stops, turns): fall back to the detected footfalls.
+        t = com.time_s[first:last]
+        return (
+            first,
+            last,
+            step_phase_rad(t, steps.footfall_times_s),
+            np.asarray(steps.footfall_times_s, dtype=np.float64),
+        )
+    crossings = 2.0 * np.pi * np.arange(k0, k1 + 1)
+    lo = int(np.searchsorted(unwrapped, crossings[0]))
+    hi = int(np.searchsorted(unwrapped, crossings[-1]))
+    boundaries = np.interp(crossings, unwrapped, com.time_s)
+    phase = unwrapped[lo:hi] - crossings[0]
+    return lo, hi, np.asarray(phase, dtype=np.float64), np.asarray(boundaries, dtype=np.float64)
+
+
+def _without_stride_lines(data: CriticismData) -> tuple[FloatArray, FloatArray]:
+    """``u`` and ``u'`` with their steady components at odd multiples of ``f_p / 2`` removed.
+
+    ``u`` is the double integral of ``GRF / M``, so a steady line at angular frequency ``w``
+    in the GRF is also in ``u``, scaled by ``-1 / (M w^2)``: a free ``K`` can take up any
+    such line. Lines at whole multiples of ``f_p`` belong to the force shape anyway; lines
+    at odd multiples of ``f_p / 2`` are what left/right asymmetry makes, and ``K`` must not
+    hide them. Only their steady (constant-amplitude) part is projected out, so ``u`` and
+    ``u'`` still follow the step-to-step variation of the response.
+    """
+    q, _ = np.linalg.qr(_harmonics(data.phase_rad, (0.5, 1.5, 2.5, 3.5)))
+    u = data.disp_m - q @ (q.T @ data.disp_m)
+    v = data.vel_m_s - q @ (q.T @ data.vel_m_s)
+    return np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64)
+
+
+def _centred_time(data: CriticismData) -> FloatArray:
+    t = data.time_s
+    return np.asarray((t - 0.5 * (t[0] + t[-1])) / max(t[-1] - t[0], 1e-12), dtype=np.float64)
+
+
+def _max_order(data: CriticismData) -> float:
+    # Columns above 0.45 of the sample rate would alias.
+    return 0.45 * data.sample_rate_hz / data.pacing_hz
+
+
+def baseline_columns(data: CriticismData, harmonics: int = DEFAULT_HARMONICS) -> FloatArray:
+    """Baseline design: constant, ``harmonics`` step-phase harmonics, ``u`` and ``u'``.
+
+    Parameters
+    ----------
+    data : CriticismData
+    harmonics : int, optional
+
+    Returns
+    -------
+    ndarray
+        Shape ``(n_samples, 3 + 2 harmonics)``.
+    """
+    n = int(min(harmonics, math.floor(_max_order(data))))
+    cols = [np.ones_like(data.time_s), _harmonics(data.phase_rad, range(1, n + 1))]
+    u, v = _without_stride_lines(data)
+    cols += [u[:, None], v[:, None]]
+    return np.column_stack(cols)
+
+
+def _moving_average(x: FloatArray, width: int) -> FloatArray:
+    """Centred moving average with the ends padded by their own means."""
+    width = int(min(width, x.size))
+    padded = np.concatenate(
+        [np.full(width, x[:width].mean()), x, np.full(width, x[-width:].mean())]
+    )
+    out = np.convolve(padded, np.ones(width) / width, mode="same")[width:-width]
+    return np.asarray(out, dtype=np.float64)
+
+
+def slow_pacing_change(data: CriticismData) -> FloatArray | None:
+    """Slow change of the pacing along the record [Hz] (None without a local pacing).
+
+    The local pacing averaged over :data:`SLOW_STEPS` steps, minus its mean: a change of
+    walking speed, not the step-to-step jitter of durations, whose dynamic effects the
+    baseline leaves in its error on any record. Its sd over the mean pacing is what
+    :data:`~workbench.models.effects.PACING_CHANGE_MIN` gates.
+    """
+    if data.pacing_local_hz is None:
+        return None
+    width = max(round(SLOW_STEPS * data.sample_rate_hz / data.pacing_hz), 1)
+    slow = _moving_average(data.pacing_local_hz, width)
+    return np.asarray(slow - float(np.mean(slow)), dtype=np.float64)
+
+
+def _shape_slope(data: CriticismData) -> FloatArray:
+    """Return the step-phase derivative of the record's shared force shape (all steps)."""
+    x = baseline_columns(data)
+    coef, *_ = np.linalg.lstsq(x, data.target_n, rcond=None)
+    n = (x.shape[1] - 3) // 2
+    orders = np.arange(1, n + 1)
+    a, b = coef[1 : 1 + 2 * n : 2], coef[2 : 2 + 2 * n : 2]
+    phi = data.phase_rad[:, None]
+    return np.asarray(
+        np.sum(orders * (-a * np.sin(orders * phi) + b * np.cos(orders * phi)), axis=1),
+        dtype=np.float64,
+    )

@@ -1,0 +1,358 @@
+"""The held-out engine of model criticism: step variation, cross-validation and scores.
+
+:class:`StepVariation` takes each step's own size and timing of the shared force shape out
+of a signal; :class:`_CV` holds per-fold Gram matrices of the baseline's and the candidates'
+columns, so any subset is scored by step-blocked cross-validation cheaply. See the module
+docstring of :mod:`workbench.diagnostics.criticism` for the method.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from workbench.diagnostics.criticism_data import (
+    DEFAULT_HARMONICS,
+    SLOW_STEPS,
+    CriticismData,
+    _harmonics,
+    _moving_average,
+    _shape_slope,
+    _without_stride_lines,
+    baseline_columns,
+)
+from workbench.diagnostics.criticism_results import ScoreRow
+from workbench.models.effects import Effect
+
+__all__ = [
+    "BLOCK_STEPS",
+    "DEFAULT_FOLDS",
+    "RESPONSE_MODULATION_ORDERS",
+    "StepVariation",
+    "ljung_box_p",
+]
+
+FloatArray = NDArray[np.float64]
+ArrayLikeFloat = FloatArray | Sequence[float]
+
+#: Folds of the step-blocked cross-validation (fewer on short records, at least 3 steps each).
+DEFAULT_FOLDS = 10
+#: Steps per block; blocks are dealt to the folds in turn (block b goes to fold b mod K).
+BLOCK_STEPS = 3
+#: Ridge added to the normal equations of standardised features (numerical safety only).
+_RIDGE = 1e-8
+
+
+#: Orders of the step-phase harmonics that modulate ``u`` and ``u'`` in the baseline's
+#: nuisance block (module docstring, "Response modulation"). Orders 1 and 2 hold the
+#: first-order part of ``u^3`` and ``|u'| u'``: with a response led by its first harmonic,
+#: ``U^2`` and ``|U'|`` have most of their power at orders 0 and 2, and the product of the
+#: first and second harmonics puts some at order 1. ``response_modulation=False`` in
+#: :func:`diagnose` and :func:`compare` leaves the block out.
+RESPONSE_MODULATION_ORDERS: tuple[int, ...] = (1, 2)
+
+
+def _modulation_columns(data: CriticismData) -> FloatArray:
+    """``u`` and ``u'`` times the step-phase harmonics of :data:`RESPONSE_MODULATION_ORDERS`."""
+    u, v = _without_stride_lines(data)
+    h = _harmonics(data.phase_rad, RESPONSE_MODULATION_ORDERS)
+    return np.column_stack([u[:, None] * h, v[:, None] * h])
+
+
+# -- step-to-step variation of the force's size and timing -------------------------------
+class StepVariation:
+    """The linear map that takes each step's own size and timing jitter out of a signal.
+
+    For step ``j`` with samples ``s`` and nuisance columns ``N_s = [S(phi_s), S'(phi_s)]``
+    (the baseline's shared force shape fitted to all steps, and its phase slope), a signal
+    ``a`` has per-step coefficients ``c_j = argmin |a_s - N_s c|``. Their moving average over
+    :data:`SLOW_STEPS` steps is the slow part ``c_slow``; the map returns
+    ``a_s - N_s (c_j - c_slow,j)`` (module docstring). The map is linear in ``a``, so
+    regressing the mapped target on the mapped columns is the regression with each step's
+    size and timing jitter as nuisance parameters.
+
+    Parameters
+    ----------
+    data : CriticismData
+    harmonics : int, optional
+        Harmonics of the shared shape.
+    baseline : ndarray, optional
+        :func:`baseline_columns` of ``data`` with those harmonics, when already built.
+    """
+
+    def __init__(
+        self,
+        data: CriticismData,
+        harmonics: int = DEFAULT_HARMONICS,
+        baseline: FloatArray | None = None,
+    ) -> None:
+        x = baseline_columns(data, harmonics) if baseline is None else baseline
+        coef, *_ = np.linalg.lstsq(x, data.target_n, rcond=None)
+        n = (x.shape[1] - 3) // 2
+        shape = x[:, 1 : 1 + 2 * n] @ coef[1 : 1 + 2 * n]
+        self.columns = np.column_stack([shape, _shape_slope(data)])
+        self.step = data.step
+        self.n_steps = data.n_steps
+        # Per-step least-squares operators (2 x n_j), built once for every signal mapped.
+        self._pinv = [np.linalg.pinv(self.columns[data.step == j]) for j in range(data.n_steps)]
+
+    def __call__(self, values: FloatArray) -> FloatArray:
+        """Map a signal (n_samples,) or columns (n_samples, k) (class docstring)."""
+        a = np.asarray(values, dtype=np.float64)
+        flat = a.reshape(a.shape[0], -1)
+        coefs = np.stack([p @ flat[self.step == j] for j, p in enumerate(self._pinv)])
+        width = max(min(SLOW_STEPS, self.n_steps), 1)
+        series = coefs.reshape(self.n_steps, -1)
+        slow = np.column_stack(
+            [_moving_average(series[:, i], width) for i in range(series.shape[1])]
+        )
+        jitter = coefs - slow.reshape(coefs.shape)
+        out = flat - np.einsum("sa,sak->sk", self.columns, jitter[self.step])
+        return np.asarray(out.reshape(a.shape), dtype=np.float64)
+
+
+# -- cross-validation engine --------------------------------------------------------------
+class _CV:
+    """Per-fold Gram matrices of all columns, so any column subset is scored cheaply."""
+
+    def __init__(
+        self,
+        data: CriticismData,
+        blocks: dict[str, FloatArray],
+        folds: int,
+        step_variation: StepVariation | None = None,
+    ) -> None:
+        self.data = data
+        self.names = list(blocks)
+        mats = [blocks[k] for k in self.names]
+        x = np.column_stack(mats)
+        y = np.asarray(data.target_n, dtype=np.float64)
+        if step_variation is not None:
+            # One pass over the steps for the columns and the target together.
+            mapped = step_variation(np.column_stack([x, y]))
+            x, y = mapped[:, :-1], mapped[:, -1]
+        # RMS, not sd: after the step-variation map the constant column varies a little,
+        # and dividing it by that small sd would make the normal equations ill-conditioned.
+        scale = np.sqrt(np.mean(x**2, axis=0))
+        scale[scale == 0] = 1.0
+        x = x / scale
+        self.x = x
+        self.y = y
+        self.slices: dict[str, NDArray[np.intp]] = {}
+        start = 0
+        for k, m in zip(self.names, mats, strict=True):
+            self.slices[k] = np.arange(start, start + m.shape[1])
+            start += m.shape[1]
+        n_blocks = max(data.n_steps // BLOCK_STEPS, 1)
+        n_folds = int(max(3, min(folds, n_blocks)))
+        block = np.minimum(data.step // BLOCK_STEPS, n_blocks - 1)
+        self.fold_of = block % n_folds
+        self.block_of = block
+        self.n_blocks = n_blocks
+        self._block_cache: dict[tuple[str, ...], FloatArray] = {}
+        self.n_folds = n_folds
+        self.gram = np.empty((n_folds, x.shape[1], x.shape[1]))
+        self.xty = np.empty((n_folds, x.shape[1]))
+        self.yty = np.empty(n_folds)
+        self.count = np.empty(n_folds)
+        for f in range(n_folds):
+            sel = self.fold_of == f
+            xf, yf = x[sel], self.y[sel]
+            self.gram[f] = xf.T @ xf
+            self.xty[f] = xf.T @ yf
+            self.yty[f] = yf @ yf
+            self.count[f] = sel.sum()
+        self.gram_all = self.gram.sum(axis=0)
+        self.xty_all = self.xty.sum(axis=0)
+
+    def columns(self, groups: Sequence[str]) -> NDArray[np.intp]:
+        return np.concatenate([self.slices[g] for g in ("baseline", *groups)])
+
+    def _solve(self, g: FloatArray, b: FloatArray) -> FloatArray:
+        ridge = _RIDGE * np.trace(g) / g.shape[0]
+        return np.asarray(np.linalg.solve(g + ridge * np.eye(g.shape[0]), b), dtype=np.float64)
+
+    def fold_sse(self, groups: Sequence[str]) -> tuple[FloatArray, FloatArray]:
+        """Held-out SSE per fold and training residual variance per fold."""
+        idx = self.columns(groups)
+        sse = np.empty(self.n_folds)
+        train_var = np.empty(self.n_folds)
+        g_all = self.gram_all[np.ix_(idx, idx)]
+        b_all = self.xty_all[idx]
+        yty_all = float(self.yty.sum())
+        for f in range(self.n_folds):
+            g_f = self.gram[f][np.ix_(idx, idx)]
+            b_f = self.xty[f][idx]
+            beta = self._solve(g_all - g_f, b_all - b_f)
+            sse[f] = max(self.yty[f] - 2.0 * beta @ b_f + beta @ g_f @ beta, 0.0)
+            train_sse = (yty_all - self.yty[f]) - 2.0 * beta @ (b_all - b_f)
+            train_sse += beta @ (g_all - g_f) @ beta
+            n_train = self.count.sum() - self.count[f]
+            train_var[f] = max(train_sse, 1e-300) / max(n_train - idx.size, 1.0)
+        return sse, train_var
+
+    def heldout_prediction(self, groups: Sequence[str]) -> FloatArray:
+        idx = self.columns(groups)
+        pred = np.empty_like(self.y)
+        g_all = self.gram_all[np.ix_(idx, idx)]
+        b_all = self.xty_all[idx]
+        for f in range(self.n_folds):
+            sel = self.fold_of == f
+            beta = self._solve(g_all - self.gram[f][np.ix_(idx, idx)], b_all - self.xty[f][idx])
+            pred[sel] = self.x[np.ix_(sel, idx)] @ beta
+        return pred
+
+    def separable_fraction(self, group: str, base: Sequence[str]) -> float:
+        """Share of a group's variation the baseline (plus ``base``) cannot represent.
+
+        ``1 - R^2`` of the group's columns regressed on the model's columns over the whole
+        record, pooled over the columns (their variances add). A candidate whose columns
+        lie almost wholly in the model's span cannot show its error however large it is.
+        """
+        idx_m = self.columns(base)
+        idx_g = self.slices[group]
+        g = self.gram_all
+        g_mm = g[np.ix_(idx_m, idx_m)]
+        g_mg = g[np.ix_(idx_m, idx_g)]
+        coef = self._solve(g_mm, g_mg)
+        total = np.diag(g[np.ix_(idx_g, idx_g)]).copy()
+        n = self.count.sum()
+        mean = self.x[:, idx_g].mean(axis=0)
+        total_c = total - n * mean**2
+        resid = total - np.einsum("ij,ij->j", g_mg, coef)
+        keep = total_c > 0
+        if not np.any(keep):
+            return 0.0
+        return float(np.clip(np.sum(resid[keep]) / np.sum(total_c[keep]), 0.0, 1.0))
+
+    def block_sse(self, groups: Sequence[str]) -> FloatArray:
+        """Held-out SSE per block of steps (each block predicted by its fold's fit)."""
+        key = tuple(groups)
+        if key not in self._block_cache:
+            resid = self.y - self.heldout_prediction(groups)
+            sse = np.bincount(self.block_of, weights=resid**2, minlength=self.n_blocks)
+            self._block_cache[key] = np.asarray(sse, dtype=np.float64)
+        return self._block_cache[key]
+
+    def gain(self, base: Sequence[str], extended: Sequence[str]) -> tuple[float, float, float]:
+        """Pooled fraction of held-out SSE removed, its block-to-block SE, and the t ratio.
+
+        The pooled fraction is the mean over blocks of ``(SSE_base,b - SSE_ext,b)`` divided
+        by the mean baseline SSE per block, so its standard error is the spread of those
+        paired differences over the blocks (units of three steps, whose errors are nearly
+        independent) divided by ``sqrt(n_blocks)``.
+        """
+        sse_b = self.block_sse(base)
+        sse_e = self.block_sse(extended)
+        scale = max(float(sse_b.mean()), 1e-300)
+        diff = (sse_b - sse_e) / scale
+        pooled = float(diff.mean())
+        se = float(np.std(diff, ddof=1) / np.sqrt(diff.size))
+        t = pooled / se if se > 0 else (np.inf if pooled > 0 else 0.0)
+        return pooled, se, float(t)
+
+
+def ljung_box_p(residual: ArrayLikeFloat, lags: int) -> float:
+    """Ljung-Box p-value that a series is white up to ``lags``.
+
+    Parameters
+    ----------
+    residual : array_like
+    lags : int
+
+    Returns
+    -------
+    float
+    """
+    x = np.asarray(residual, dtype=np.float64)
+    x = x - x.mean()
+    n = x.size
+    lags = int(min(lags, n - 2))
+    denom = float(x @ x)
+    if lags < 1 or denom == 0:
+        return 1.0
+    q = 0.0
+    for k in range(1, lags + 1):
+        rho = float(x[k:] @ x[:-k]) / denom
+        q += rho * rho / (n - k)
+    q *= n * (n + 2)
+    return float(stats.chi2.sf(q, lags))
+
+
+def _step_binned(data: CriticismData, resid: FloatArray, per_step: int = 10) -> FloatArray:
+    """Average the residual in ``per_step`` equal phase bins of every step.
+
+    The whiteness of that series is about step-to-step structure, not the smoothness of
+    the error within a step.
+    """
+    bins = np.minimum((data.step_fraction * per_step).astype(int), per_step - 1)
+    key = data.step * per_step + bins
+    sums = np.bincount(key, weights=resid, minlength=data.n_steps * per_step)
+    counts = np.bincount(key, minlength=data.n_steps * per_step)
+    ok = counts > 0
+    return np.asarray(sums[ok] / counts[ok], dtype=np.float64)
+
+
+def _row(cv: _CV, groups: Sequence[str], label: str, base_sse: FloatArray | None) -> ScoreRow:
+    sse, train_var = cv.fold_sse(groups)
+    n = cv.count.sum()
+    rmse = float(np.sqrt(sse.sum() / n))
+    pred = cv.heldout_prediction(groups)
+    resid = cv.y - pred
+    y = cv.y
+    fit = 100.0 * (1.0 - float(np.linalg.norm(resid) / np.linalg.norm(y - y.mean())))
+    series = _step_binned(cv.data, resid)
+    lb = ljung_box_p(series, 20)
+    # Gaussian log predictive density per sample with each fold's training variance.
+    lpd = -0.5 * np.sum(cv.count * np.log(2 * np.pi * train_var) + sse / train_var) / n
+    drop = se = 0.0
+    if base_sse is not None:
+        drop = 1.0 - rmse / float(np.sqrt(base_sse.sum() / n))
+        per_fold = 1.0 - np.sqrt(sse / np.maximum(base_sse, 1e-300))
+        se = float(np.std(per_fold, ddof=1) / np.sqrt(cv.n_folds))
+    return ScoreRow(label, rmse, fit, lb, float(lpd), drop, se)
+
+
+def _build_cv(
+    data: CriticismData,
+    effects: Iterable[str | Effect],
+    harmonics: int,
+    folds: int,
+    step_variation: bool = True,
+    response_modulation: bool = True,
+) -> tuple[_CV, list[str]]:
+    """Build the engine on the baseline and the effects' criticism columns.
+
+    Parameters
+    ----------
+    data : CriticismData
+    effects : iterable of Effect or str
+        Effects (specs are read by :meth:`Effect.from_spec`); their names key the blocks.
+    harmonics, folds : int
+    step_variation, response_modulation : bool, optional
+
+    Returns
+    -------
+    (_CV, list of str)
+        The engine and the names of the effects the record cannot test.
+    """
+    base = baseline_columns(data, harmonics)
+    # The step-variation map needs the plain baseline (its shared shape); the modulation
+    # columns are nuisance columns of the baseline block itself.
+    jitter = StepVariation(data, harmonics, base) if step_variation else None
+    if response_modulation and RESPONSE_MODULATION_ORDERS:
+        base = np.column_stack([base, _modulation_columns(data)])
+    blocks: dict[str, FloatArray] = {"baseline": base}
+    untestable = []
+    for item in effects:
+        effect = item if isinstance(item, Effect) else Effect.from_spec(item)
+        cols = effect.criticism_columns(data)
+        if cols is None:
+            untestable.append(effect.name)
+        else:
+            cols = np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
+            blocks[effect.name] = cols
+    return _CV(data, blocks, folds, jitter), untestable
