@@ -151,12 +151,12 @@ def test_unknown_effect_is_one_sentence(walk_csv, capsys):
     err = capsys.readouterr().err
     assert "wobble" in err and "Traceback" not in err
     with pytest.raises(UsageError):
-        IdentifySettings(effects=("cubic_stiffness", "cubic_stiffness"))
+        IdentifySettings.from_flat(effects=("cubic_stiffness", "cubic_stiffness"))
 
 
 def test_effect_columns_of_the_catalogue(walk_csv):
     """Every catalogue effect gives named columns; state-acting ones use the observed u, u'."""
-    from workbench.inference.identify import problem_from_inspection
+    from workbench.inference.identify import compile_problem
     from workbench.models.effects import (
         BaseMotion,
         GaitAsymmetry,
@@ -169,7 +169,7 @@ def test_effect_columns_of_the_catalogue(walk_csv):
     from workbench.records.io import load_record
 
     rec = load_record(walk_csv)
-    problem = problem_from_inspection(inspect_record(rec), IdentifySettings(harmonics=4))
+    problem = compile_problem(inspect_record(rec), IdentifySettings.from_flat(harmonics=4))
     u, v, t = problem.y[:, 0], problem.y[:, 1], problem.time_s
     ground = 0.5 * np.sin(2 * np.pi * 2.7 * t)
     effects = [

@@ -15,7 +15,6 @@ from workbench.diagnostics.criticism import (
     candidate_effects,
     compare,
     diagnose,
-    feature_group,
     prepare,
 )
 from workbench.errors import UsageError
@@ -165,7 +164,7 @@ def test_user_effect_is_a_candidate_and_a_compare_row(user_effects: None) -> Non
     assert mine.testable and "; ; " not in mine.evidence
     rows = compare(data, ["sway_coupling:k_sway_n_per_m=3"], folds=5)
     assert [r.model for r in rows] == ["baseline", "baseline + sway_coupling"]
-    assert feature_group("sway_coupling") == SwayCoupling()  # deprecated name check
+    assert candidate_effects("sway_coupling") == (SwayCoupling(),)
 
 
 def test_user_effect_in_identification(user_effects: None) -> None:
@@ -238,6 +237,5 @@ def test_one_step_residuals_join_a_copy(data) -> None:  # type: ignore[no-untype
     joined = diag.with_one_step(one)
     assert joined.one_step is one and joined.baseline["one_step_rmse_n"] == 1.0
     assert diag.one_step is None and "one_step_rmse_n" not in diag.baseline
-    # Transitional: attach_one_step sets it in place.
-    diag.one_step = one
-    assert diag.one_step is one
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        diag.one_step = one  # type: ignore[misc]

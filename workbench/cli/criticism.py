@@ -27,15 +27,14 @@ def parse_effect_names(text: str | None) -> list[str]:
     -------
     list of str
     """
-    from workbench.diagnostics.criticism import feature_group
+    from workbench.diagnostics.criticism import candidate_effects
 
-    names = [n.strip() for n in (text or "").split(",") if n.strip()]
-    for name in names:
-        try:
-            feature_group(name)
-        except UsageError as err:
-            raise UsageError(f"--effects {text}: {err}") from None
-    return names
+    if not (text or "").strip():
+        return []
+    try:
+        return [e.name for e in candidate_effects(text)]
+    except UsageError as err:
+        raise UsageError(f"--effects {text}: {err}") from None
 
 
 def _check_harmonics(args: argparse.Namespace) -> None:
@@ -63,7 +62,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     result = diagnose(
         data, effects=names, harmonics=args.harmonics, step_variation=not args.raw_error
     )
-    check = _one_step(args, result, names) if not args.no_one_step else None
+    check = None
+    if not args.no_one_step:
+        result, check = _one_step(args, result, names)
     obj = result.to_dict()
     if check is not None:
         obj["posterior_predictive"] = check
@@ -98,10 +99,11 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
-def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str, Any]:
+def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> tuple[Any, dict[str, Any]]:
     """Identify the record (rbpf), attach one-step-ahead residuals, run the replicate check.
 
-    Returns the posterior-predictive check's JSON object.
+    Returns the diagnosis with the one-step residuals and the posterior-predictive check's
+    JSON object.
     """
     from workbench.diagnostics.posterior_predictive import posterior_predictive
     from workbench.diagnostics.predictive import attach_one_step, one_step_from_result
@@ -118,8 +120,9 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> dict[str
         highpass_hz=args.highpass_hz,
     )
     result = identify(load(args), settings=settings)
-    attach_one_step(diag, one_step_from_result(result))
-    return posterior_predictive(result, replicates=ONE_STEP_REPLICATES, seed=args.seed).to_dict()
+    diag = attach_one_step(diag, one_step_from_result(result))
+    check = posterior_predictive(result, replicates=ONE_STEP_REPLICATES, seed=args.seed)
+    return diag, check.to_dict()
 
 
 def _cmd_compare(args: argparse.Namespace) -> int:

@@ -24,22 +24,12 @@ def parse_effect(text: str) -> Any:
     >>> parse_effect("cubic_stiffness:k3_n_per_m3=2e6")
     CubicStiffness(k3_n_per_m3=2000000.0)
     """
-    from workbench.models.effects import effect_from_name
+    from workbench.models.effects import Effect
 
-    name, _, params = text.partition(":")
-    kwargs: dict[str, float] = {}
-    for item in filter(None, (p.strip() for p in params.split(","))):
-        key, eq, value = item.partition("=")
-        try:
-            if not eq:
-                raise ValueError
-            kwargs[key.strip()] = float(value)
-        except ValueError:
-            raise UsageError(
-                f"--effect {text!r}: parameter {item!r} is not of the form NAME=NUMBER; write "
-                "for example --effect cubic_stiffness:k3_n_per_m3=2e6"
-            ) from None
-    return effect_from_name(name.strip(), **kwargs)
+    try:
+        return Effect.from_spec(text)
+    except UsageError as err:
+        raise UsageError(f"--effect {text}: {err}") from None
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:

@@ -1,4 +1,4 @@
-# Over 600 lines: a long module docstring (the method of model criticism) and the ranking;
+# Why this module is long: a long module docstring (the method of model criticism) and the ranking;
 # the data, the engine and the results are in their own modules.
 """Model criticism: held-out prediction of GRF, effect ranking and the scoreboard.
 
@@ -166,7 +166,6 @@ __all__ = [
     "diagnose",
     "error_by_gait_phase",
     "error_by_step",
-    "feature_group",
     "ljung_box_p",
     "prepare",
     "residual_spectrum",
@@ -227,29 +226,6 @@ def candidate_effects(specs: EffectsLike = None) -> tuple[Effect, ...]:
             )
         out.setdefault(effect.name, effect)
     return tuple(out.values())
-
-
-def feature_group(name: str) -> Effect:
-    """Check that an effect can be criticised and return it (deprecated).
-
-    Deprecated: feature groups are gone; an effect is a criticism candidate by itself. Use
-    :func:`candidate_effects` (or :meth:`~workbench.models.effects.Effect.from_spec`). Kept
-    for the command line's name check.
-
-    Parameters
-    ----------
-    name : str
-        Effect name or spec.
-
-    Returns
-    -------
-    Effect
-        The effect with default values.
-    """
-    found = candidate_effects([name])
-    if not found:
-        raise UsageError(f"effect spec {name!r} names no effect; give an effect name")
-    return found[0]
 
 
 def _resolve(

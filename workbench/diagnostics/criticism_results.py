@@ -125,17 +125,12 @@ class Diagnosis:
         The baseline's held-out error and prediction of ``GRF - M g`` [N].
     current_effects : tuple of str
         Effects already in the model (their columns joined the baseline).
-    one_step_residuals : OneStepResiduals or None
-        One-step-ahead residuals of an identified model (:meth:`with_one_step`); also
-        readable as ``one_step``.
+    one_step : OneStepResiduals or None
+        One-step-ahead residuals of an identified model (:meth:`with_one_step`).
 
     Notes
     -----
-    Frozen, with one transitional exception: ``diag.one_step = residuals`` still sets the
-    residuals in place, for
-    :func:`workbench.diagnostics.predictive.attach_one_step`, which predates
-    :meth:`with_one_step`. Use :meth:`with_one_step`; the exception goes once
-    ``attach_one_step`` returns ``diag.with_one_step(one_step)``.
+    Frozen: :meth:`with_one_step` returns a copy with one-step-ahead residuals.
     """
 
     baseline: dict[str, Any]
@@ -145,17 +140,7 @@ class Diagnosis:
     residual_n: FloatArray
     prediction_n: FloatArray
     current_effects: tuple[str, ...] = ()
-    one_step_residuals: Any = None
-
-    @property
-    def one_step(self) -> Any:
-        """One-step-ahead residuals of an identified model, or None."""
-        return self.one_step_residuals
-
-    @one_step.setter
-    def one_step(self, value: Any) -> None:
-        # Transitional (class docstring, Notes): attach_one_step sets it in place.
-        object.__setattr__(self, "one_step_residuals", value)
+    one_step: Any = None
 
     def with_one_step(self, one_step: Any) -> Diagnosis:
         """Return the diagnosis with one-step-ahead residuals (``baseline`` gains their scores).
@@ -170,7 +155,7 @@ class Diagnosis:
         Diagnosis
         """
         baseline = {**self.baseline, **one_step.to_dict()}
-        return dataclasses.replace(self, baseline=baseline, one_step_residuals=one_step)
+        return dataclasses.replace(self, baseline=baseline, one_step=one_step)
 
     def to_json(self) -> dict[str, Any]:
         """Return the JSON object of ``workbench diagnose``."""
@@ -207,20 +192,6 @@ class Diagnosis:
         lines += _table(header, rows) if rows else ["(no candidates)"]
         lines += ["", f"verdict: {self.verdict}"]
         return "\n".join(lines)
-
-
-_frozen_setattr = Diagnosis.__setattr__
-
-
-def _diagnosis_setattr(self: Diagnosis, name: str, value: Any) -> None:
-    """Frozen, except the transitional ``one_step`` (Diagnosis docstring, Notes)."""
-    if name == "one_step":
-        object.__setattr__(self, name, value)
-    else:
-        _frozen_setattr(self, name, value)
-
-
-setattr(Diagnosis, "__setattr__", _diagnosis_setattr)  # noqa: B010 (a method, not a field)
 
 
 @dataclass(frozen=True, eq=False)

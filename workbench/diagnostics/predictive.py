@@ -177,8 +177,6 @@ def attach_one_step(diag: Diagnosis, one_step: OneStepResiduals) -> Diagnosis:
     Returns
     -------
     Diagnosis
-        The same object, updated.
+        A new diagnosis (results are immutable).
     """
-    diag.one_step = one_step
-    diag.baseline.update(one_step.to_dict())
-    return diag
+    return diag.with_one_step(one_step)

@@ -44,7 +44,9 @@ from workbench.inference.results import IdentificationResult
 from workbench.inference.settings import IdentifySettings, NoiseSettings, Preprocessing
 from workbench.models.smd import SMDModel
 from workbench.records.inspection import Inspection, inspect_record
+from workbench.records.preprocess import COMResponse, preprocess
 from workbench.records.record import Record
+from workbench.records.steps import Steps
 
 __all__ = ["compile_problem", "identify", "identify_problem"]
 
@@ -64,7 +66,37 @@ class _NoiseInfo:
         return {"obs_fraction": self.fraction, "source": self.source, "label": label, **self.detail}
 
 
-def compile_problem(insp: Inspection, settings: IdentifySettings) -> IdentificationProblem:
+@dataclass(frozen=True)
+class _Prepared:
+    """What compiling needs of a record: without footfalls when the model needs none."""
+
+    record: Record
+    com: COMResponse
+    steps: Steps | None
+    warnings: tuple[str, ...]
+    measured_pacing_hz: float | None = None
+
+    @classmethod
+    def of(cls, record: Record | Inspection, settings: IdentifySettings) -> _Prepared:
+        if isinstance(record, Inspection):
+            insp = record
+        else:
+            model, pre = settings.model, settings.preprocessing
+            if model.pieces == "whole" and model.pacing_hz is not None and not pre.rescale_to_mass:
+                # One force for the whole record at a stated pacing needs no footfalls: a
+                # benchmark record (the seed's numerical example, a short or non-walking
+                # input) is identified as it is.
+                record.require_mass()
+                com = preprocess(record, highpass_hz=pre.highpass_hz)
+                warnings = tuple(str(w) for w in record.metadata.get("warnings", []))
+                return cls(record, com, None, warnings)
+            insp = inspect_record(record, highpass_hz=pre.highpass_hz, rescale=pre.rescale_to_mass)
+        return cls(insp.record, insp.com, insp.steps, tuple(insp.warnings), insp.pacing.pacing_hz)
+
+
+def compile_problem(
+    insp: Inspection | _Prepared, settings: IdentifySettings
+) -> IdentificationProblem:
     """Compile the settings' model on an inspected record into the shared problem.
 
     The observation noise is not yet set (:func:`identify` sets it).
@@ -89,7 +121,7 @@ def compile_problem(insp: Inspection, settings: IdentifySettings) -> Identificat
     )
     pacing = model.pacing_hz
     if pacing is None and model.pieces == "whole":
-        pacing = insp.pacing.pacing_hz
+        pacing = insp.pacing.pacing_hz if isinstance(insp, Inspection) else insp.measured_pacing_hz
     return build_problem(
         insp.com,
         insp.steps if model.pieces == "steps" else None,
@@ -230,15 +262,7 @@ def identify(
         preprocessing=preprocessing,
         force_check=force_check,
     )
-    record = _with_mass(record, model)
-    if isinstance(record, Inspection):
-        insp = record
-    else:
-        insp = inspect_record(
-            record,
-            highpass_hz=settings.preprocessing.highpass_hz,
-            rescale=settings.preprocessing.rescale_to_mass,
-        )
+    insp = _Prepared.of(_with_mass(record, model), settings)
     problem = compile_problem(insp, settings)
     if adjust_problem is not None:
         problem = adjust_problem(problem)
@@ -272,7 +296,7 @@ def identify(
     return downgrade_untrustworthy(result)
 
 
-def _ground_on(insp: Inspection, problem: IdentificationProblem) -> Any:
+def _ground_on(insp: _Prepared, problem: IdentificationProblem) -> Any:
     """Return the record's ground acceleration on the problem's samples, or None."""
     rec = insp.record
     if rec.ground_acc_m_s2 is None:

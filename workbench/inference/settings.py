@@ -69,7 +69,7 @@ import numpy as np
 from workbench.errors import InputError, UsageError
 from workbench.inference.methods import METHODS, PF, RBPF, Method, as_method
 from workbench.inference.noise import parse_noise_setting
-from workbench.models.effects import Effects, as_effects
+from workbench.models.effects import Effect, parse_effect_specs
 from workbench.models.smd import SMDModel
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
@@ -104,25 +104,6 @@ FLAT_KEYS = (
     "force_proposal",
     "effects",
 )
-
-
-def parse_effects(value: Any, where: str = "--effects") -> tuple[str, ...]:
-    """Parse effect names: ``"a,b"`` or a sequence of names, each a registered effect."""
-    from workbench.models.effects import available_effects
-
-    if value is None:
-        return ()
-    items = value.split(",") if isinstance(value, str) else list(value)
-    names = tuple(str(v).strip() for v in items if str(v).strip())
-    known = available_effects()
-    for name in names:
-        if name not in known:
-            raise UsageError(
-                f"{where}: effect {name!r} is not known; choose from {', '.join(known)}"
-            )
-    if len(set(names)) != len(names):
-        raise UsageError(f"{where}: an effect is named twice in {', '.join(names)}")
-    return names
 
 
 @dataclass(frozen=True)
@@ -200,6 +181,27 @@ class Preprocessing:
             )
 
 
+def effect_spec(effect: Effect) -> str:
+    """Return the spec of an effect: its name, with the values that differ from the defaults.
+
+    Parameters
+    ----------
+    effect : Effect
+
+    Returns
+    -------
+    str
+        ``"cubic_stiffness"`` or ``"heel_impact:decay_s=0.02"`` (:meth:`Effect.from_spec`
+        reads it back).
+    """
+    changed = [
+        f"{p.name}={effect.values[p.name]!r}"
+        for p in effect.parameters
+        if effect.values[p.name] != p.default
+    ]
+    return ":".join([effect.name, *changed])
+
+
 def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
     harmonics = int(flat["harmonics"])
     if harmonics < 1 or harmonics > 40:
@@ -216,9 +218,7 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
         raise UsageError(
             f"'pieces' must be 'steps' or 'whole', got {flat['pieces']!r}", parameter="pieces"
         )
-    effects = flat["effects"]
-    if not isinstance(effects, Effects):
-        effects = as_effects(parse_effects(effects))
+    effects = parse_effect_specs(flat["effects"], where="'effects'")
     return SMDModel(
         harmonics=harmonics,
         effects=effects,
@@ -427,9 +427,14 @@ class IdentifySettings:
         return int(getattr(self.method, "n_particles", 0))
 
     def to_json(self) -> dict[str, Any]:
-        """Return the settings as the flat JSON-able dict (``settings`` in the output)."""
+        """Return the settings as the flat JSON-able dict (``settings`` in the output).
+
+        ``effects`` lists effect names, as specs (``"heel_impact:decay_s=0.02"``) for an
+        effect with parameter values other than its defaults, so the dict rebuilds the
+        same settings (:meth:`from_flat`).
+        """
         flat = self.flat()
-        flat["effects"] = list(flat["effects"].names)
+        flat["effects"] = [effect_spec(e) for e in flat["effects"]]
         return flat
 
     @classmethod

@@ -1,4 +1,4 @@
-# Over 600 lines: the Effect base class, Effects, the registry and the spec parser are one
+# Why this module is long: the Effect base class, Effects, the registry and the spec parser are one
 # mechanism; split, the base class and the registry would import each other.
 """The effect mechanism: the :class:`Effect` base class, collections, registry and specs.
 
