@@ -44,8 +44,13 @@ def load(name: str, **options: object) -> Record:
     Record
     """
     if name in EMBEDDED:
-        return load_record(embedded_path(name), **options)  # type: ignore[arg-type]
-    for path in synthetic_paths():
-        if path.stem == name:
-            return load_record(path, **options)  # type: ignore[arg-type]
-    raise UsageError(f"no embedded record is called {name!r}; choose one of {', '.join(names())}")
+        path = embedded_path(name)
+    else:
+        path = next((p for p in synthetic_paths() if p.stem == name), None)  # type: ignore[assignment]
+        if path is None:
+            raise UsageError(
+                f"no embedded record is called {name!r}; choose one of {', '.join(names())}"
+            )
+    record = load_record(path, **options)  # type: ignore[arg-type]
+    # Named from the package, not from wherever it is installed.
+    return record.replace(source=f"workbench/datasets/{path.parent.name}/{path.name}")

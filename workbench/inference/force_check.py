@@ -269,7 +269,8 @@ def force_model_check(
             if dependent[j]
         )
         sentence = (
-            f"{' and '.join(moved)} depend on the force model: letting harmonics 1-{n_mod} "
+            f"{' and '.join(moved)} {'depend' if len(moved) > 1 else 'depends'} on the force "
+            f"model: letting harmonics 1-{n_mod} "
             f"drift linearly across each step moves {detail}, so the record's misfit, not its "
             "information, sets the value and the band is too narrow"
         )
