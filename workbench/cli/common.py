@@ -15,7 +15,6 @@ from typing import Any, NoReturn
 
 __all__ = [
     "CURRENT_ARGV",
-    "DEFAULT_HIGHPASS_HZ",
     "Parser",
     "add_allow_negative_force",
     "emit",
@@ -30,9 +29,6 @@ __all__ = [
     "warn_accepted_negative_force",
 ]
 
-#: The seed's high-pass cut-off [Hz]; ``--highpass-hz`` left out means this (or, for
-#: ``identify``, the value of the ``--config`` file).
-DEFAULT_HIGHPASS_HZ = 0.15
 
 #: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
 CURRENT_ARGV: list[str] = []

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from workbench.cli.common import DEFAULT_HIGHPASS_HZ, emit, load, record_options
+from workbench.cli.common import emit, load, record_options
 from workbench.errors import UsageError
 
 __all__ = ["add_criticism_parser", "parse_effect_names"]
@@ -47,6 +47,7 @@ def _check_harmonics(args: argparse.Namespace) -> None:
 
 def _prepared(args: argparse.Namespace) -> Any:
     from workbench.diagnostics.criticism import prepare
+    from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
     record = load(args)
     highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz

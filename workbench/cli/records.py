@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from workbench.cli.common import DEFAULT_HIGHPASS_HZ, emit, load, record_options, safe_key
+from workbench.cli.common import emit, load, record_options, safe_key
 
 __all__ = ["add_records_parser"]
 
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from workbench.records.inspection import inspect_record
+    from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
     record = load(args)
     highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz

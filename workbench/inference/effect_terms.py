@@ -56,7 +56,7 @@ from workbench.errors import UsageError
 from workbench.inference.kalman import record_loglik
 from workbench.inference.problem import ForcePrior, IdentificationProblem
 from workbench.models.effects import EffectContext, Effects, as_effects
-from workbench.records.preprocess import highpass, integrate
+from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ, highpass, integrate
 from workbench.records.record import G_M_S2
 
 __all__ = [
@@ -145,7 +145,7 @@ def effect_terms(
     effects: Any,
     *,
     ground_acc_m_s2: FloatArray | None = None,
-    highpass_hz: float = 0.15,
+    highpass_hz: float = DEFAULT_HIGHPASS_HZ,
 ) -> EffectTerms:
     """Build the force columns of effects on a problem's samples (module docstring).
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import InputError
-from workbench.records.preprocess import COMResponse, preprocess
+from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ, COMResponse, preprocess
 from workbench.records.record import G_M_S2, Record
 from workbench.records.steps import (
     PacingEstimate,
@@ -139,7 +139,7 @@ def _check_walking(record: Record, steps: Steps, pacing: PacingEstimate) -> None
 def inspect_record(
     record: Record,
     *,
-    highpass_hz: float = 0.15,
+    highpass_hz: float = DEFAULT_HIGHPASS_HZ,
     rescale: bool = False,
     balance_tolerance: float = 0.05,
 ) -> Inspection:
