@@ -107,10 +107,6 @@ class Method:
         """
         raise NotImplementedError
 
-    def flat_settings(self) -> dict[str, Any]:
-        """Return the method's part of the flat settings (``--config`` file keys)."""
-        return {"method": self.name}
-
     def replace(self, **changes: Any) -> Method:
         """Return a copy with some options changed."""
         return dataclasses.replace(self, **changes)
@@ -180,7 +176,38 @@ def _filter_identifiability(
 
 
 @dataclass(frozen=True)
-class RBPF(Method):
+class _ParticleFilter(Method):
+    """What the two particle filters share: particles, resampling and the result."""
+
+    n_particles: int = 256
+    resampling: str = "systematic"
+    ess_threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        who = type(self).__name__
+        object.__setattr__(self, "n_particles", _check_particles(self.n_particles, who))
+        _check_resampling(self.resampling, self.ess_threshold, who)
+
+    def _filter(
+        self, problem: IdentificationProblem, seed: int, progress: bool
+    ) -> ParticleFilterOutput:
+        raise NotImplementedError
+
+    def run(
+        self,
+        problem: IdentificationProblem,
+        *,
+        seed: int = 0,
+        progress: bool = False,
+        common: dict[str, Any] | None = None,
+    ) -> IdentificationResult:
+        """Run the filter on a compiled problem (see :meth:`Method.run`)."""
+        out = self._filter(problem, seed, progress)
+        return _filter_result(problem, out, seed, common or {})
+
+
+@dataclass(frozen=True)
+class RBPF(_ParticleFilter):
     """Rao-Blackwellised particle filter over (C, K) (the default method).
 
     Parameters
@@ -194,26 +221,13 @@ class RBPF(Method):
     """
 
     name: ClassVar[str] = "rbpf"
-    n_particles: int = 256
-    resampling: str = "systematic"
-    ess_threshold: float = 0.5
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "n_particles", _check_particles(self.n_particles, "RBPF"))
-        _check_resampling(self.resampling, self.ess_threshold, "RBPF")
-
-    def run(
-        self,
-        problem: IdentificationProblem,
-        *,
-        seed: int = 0,
-        progress: bool = False,
-        common: dict[str, Any] | None = None,
-    ) -> IdentificationResult:
-        """Run the filter on a compiled problem (see :meth:`Method.run`)."""
+    def _filter(
+        self, problem: IdentificationProblem, seed: int, progress: bool
+    ) -> ParticleFilterOutput:
         from workbench.inference.rbpf import run_rbpf
 
-        out = run_rbpf(
+        return run_rbpf(
             problem,
             n_particles=self.n_particles,
             seed=seed,
@@ -221,20 +235,10 @@ class RBPF(Method):
             ess_threshold=self.ess_threshold,
             progress=progress,
         )
-        return _filter_result(problem, out, seed, common or {})
-
-    def flat_settings(self) -> dict[str, Any]:
-        """Return the method's part of the flat settings (``--config`` file keys)."""
-        return {
-            "method": self.name,
-            "particles": self.n_particles,
-            "resampling": self.resampling,
-            "ess_threshold": self.ess_threshold,
-        }
 
 
 @dataclass(frozen=True)
-class PF(Method):
+class PF(_ParticleFilter):
     """The seed study's bootstrap particle filter over the whole state.
 
     Parameters
@@ -254,13 +258,10 @@ class PF(Method):
     name: ClassVar[str] = "pf"
     default_state_noise_fraction: ClassVar[float] = SEED_STATE_FRACTION
     n_particles: int = 4000
-    resampling: str = "systematic"
-    ess_threshold: float = 0.5
     force_proposal: str = "regression"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "n_particles", _check_particles(self.n_particles, "PF"))
-        _check_resampling(self.resampling, self.ess_threshold, "PF")
+        super().__post_init__()
         if self.force_proposal not in ("regression", "prior"):
             raise UsageError(
                 f"PF: 'force_proposal' must be 'regression' or 'prior', got "
@@ -268,18 +269,12 @@ class PF(Method):
                 parameter="force_proposal",
             )
 
-    def run(
-        self,
-        problem: IdentificationProblem,
-        *,
-        seed: int = 0,
-        progress: bool = False,
-        common: dict[str, Any] | None = None,
-    ) -> IdentificationResult:
-        """Run the filter on a compiled problem (see :meth:`Method.run`)."""
+    def _filter(
+        self, problem: IdentificationProblem, seed: int, progress: bool
+    ) -> ParticleFilterOutput:
         from workbench.inference.pf import run_pf
 
-        out = run_pf(
+        return run_pf(
             problem,
             n_particles=self.n_particles,
             seed=seed,
@@ -288,17 +283,6 @@ class PF(Method):
             force_proposal=self.force_proposal,
             progress=progress,
         )
-        return _filter_result(problem, out, seed, common or {})
-
-    def flat_settings(self) -> dict[str, Any]:
-        """Return the method's part of the flat settings (``--config`` file keys)."""
-        return {
-            "method": self.name,
-            "particles": self.n_particles,
-            "resampling": self.resampling,
-            "ess_threshold": self.ess_threshold,
-            "force_proposal": self.force_proposal,
-        }
 
 
 @dataclass(frozen=True)
