@@ -5,7 +5,7 @@ parts share one buffer layout and one chunking of the samples -- ``_filter_piece
 Riccati recursion it drives sample by sample (``_Riccati``), the gains and whitening of a
 chunk of samples at once (``_step_coefficients``), the Cholesky solves of the piece's Gram
 matrix and the one-step predictive -- plus :func:`record_loglik`, which runs it over the
-pieces, and about 65 lines are this docstring (the algebra the code implements). The
+pieces, and about 75 lines are this docstring (the algebra the code implements). The
 discretisation (:mod:`workbench.inference.discretisation`), the result containers
 (:mod:`workbench.inference.kalman_results`) and the readable reference filter
 (:mod:`workbench.inference.kalman_reference`) live in their own modules.
@@ -13,7 +13,8 @@ discretisation (:mod:`workbench.inference.discretisation`), the result container
 Given damping C and stiffness K the model of :mod:`workbench.inference.problem` is
 linear-Gaussian in ``(u, u', theta)``, so ``p(y | C, K)`` is one Kalman filter run. This
 module computes it for B pairs at once, fast enough for grids, MCMC and Rao-Blackwellised
-particle filters, plus a plain augmented-state filter as the readable reference.
+particle filters; the readable reference, a plain augmented-state filter
+(:func:`dense_kalman_loglik`), is re-exported here.
 
 Structure used for speed (:func:`piece_filter`, :func:`record_loglik`)
     Inside a piece the force coefficients ``theta`` are constant. Write them as
@@ -106,6 +107,8 @@ __all__ = [
     "DenseResult",
     "PieceResult",
     "RecordResult",
+    "_Dynamics",  # moved to workbench.inference.discretisation; rbpf imports it from here
+    "_dynamics",  # likewise
     "dense_kalman_loglik",
     "initial_state",
     "piece_filter",

@@ -41,6 +41,12 @@ header, comment and blank lines), written ``line N``.
 Writing (:func:`save_record`) produces the CSV format above plus its sidecar, each written
 atomically (temporary file in the same folder, then :func:`os.replace`), with floats in their
 shortest exact text form so that reading back gives identical arrays.
+
+This module keeps :func:`detect_format`, :func:`load_record` and :func:`save_record`. The
+format readers and column names live in :mod:`workbench.records.formats`, the shared
+text-table parsing in :mod:`workbench.records.text_table`, the sidecar in
+:mod:`workbench.records.sidecar` and batch manifests in :mod:`workbench.records.manifest`;
+the public names among them are re-exported here.
 """
 
 from __future__ import annotations
