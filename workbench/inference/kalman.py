@@ -1,9 +1,20 @@
 """Exact likelihood of the linear-Gaussian SMD model given (C, K), batched over many (C, K).
 
+Why this module is long: it is one algorithm, the batched structured piece filter, whose
+parts share one buffer layout and one chunking of the samples -- ``_filter_piece``, the 2x2
+Riccati recursion it drives sample by sample (``_Riccati``), the gains and whitening of a
+chunk of samples at once (``_step_coefficients``), the Cholesky solves of the piece's Gram
+matrix and the one-step predictive -- plus :func:`record_loglik`, which runs it over the
+pieces, and about 75 lines are this docstring (the algebra the code implements). The
+discretisation (:mod:`workbench.inference.discretisation`), the result containers
+(:mod:`workbench.inference.kalman_results`) and the readable reference filter
+(:mod:`workbench.inference.kalman_reference`) live in their own modules.
+
 Given damping C and stiffness K the model of :mod:`workbench.inference.problem` is
 linear-Gaussian in ``(u, u', theta)``, so ``p(y | C, K)`` is one Kalman filter run. This
 module computes it for B pairs at once, fast enough for grids, MCMC and Rao-Blackwellised
-particle filters, plus a plain augmented-state filter as the readable reference.
+particle filters; the readable reference, a plain augmented-state filter
+(:func:`dense_kalman_loglik`), is re-exported here.
 
 Structure used for speed (:func:`piece_filter`, :func:`record_loglik`)
     Inside a piece the force coefficients ``theta`` are constant. Write them as
@@ -51,22 +62,10 @@ Time convention at piece boundaries
     :attr:`PieceResult.x_mean_end` / ``x_cov_end`` are the ``theta``-marginal *filtered*
     state at the piece's last sample (before any prediction), for traces and plots.
 
-Discretisation of ``(u, u')`` over one interval given (C, K) (:func:`transition_matrices`)
-    ``x_{k+1} = Phi x_k + Gamma0 F_k + Gamma1 F_{k+1} + w_k``, ``F`` the force [N]:
-
-    ``"foh"`` (default)
-        Exact with the force a straight line between samples (first-order hold), from the
-        matrix exponential of an augmented 4x4 generator (scaling and squaring, batched).
-        It is the one that fits sampled data: on a steady, noise-free 100 Hz walking record
-        fed with its true u, u', u'' (``tests/test_kalman.py``) the force coefficients come
-        back within 0.2 posterior sd of the truth at the true (C, K), where Euler and the
-        zero-order hold are off by 4-8 sd; on the seed's numerical example at 1 kHz the
-        one-step-ahead u'' innovations at the truth are 8 % of a 1 % observation noise.
-    ``"zoh"``
-        Exact with the force held at ``F_k`` over the interval; ``Gamma1 = 0``.
-    ``"euler"``
-        The seed's ``I + A dt`` (eq. 20): ``Phi = I + A dt``, ``Gamma0 = (0, dt / M)``,
-        ``Gamma1 = 0``. Use it to compare with the seed-faithful particle filter.
+Discretisation of ``(u, u')`` over one interval given (C, K)
+    ``x_{k+1} = Phi x_k + Gamma0 F_k + Gamma1 F_{k+1} + w_k``, ``F`` the force [N], with
+    the first-order hold (default), the zero-order hold or the seed's Euler step: see
+    :mod:`workbench.inference.discretisation` (:func:`transition_matrices`).
 
 Noise
     ``w_k ~ N(0, diag(state_sd^2))`` added to ``(u, u')`` over every interval (including the
@@ -79,14 +78,28 @@ Noise
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
+from workbench.inference.discretisation import (
+    DISCRETISATIONS,
+    _check_discretisation,
+    _Dynamics,
+    _dynamics,
+    _pairs,
+    transition_matrices,
+)
+from workbench.inference.kalman_reference import (
+    dense_kalman_loglik,
+)
+from workbench.inference.kalman_results import (
+    DenseResult,
+    PieceResult,
+    RecordResult,
+)
 from workbench.inference.problem import IdentificationProblem
 
 __all__ = [
@@ -94,6 +107,8 @@ __all__ = [
     "DenseResult",
     "PieceResult",
     "RecordResult",
+    "_Dynamics",  # moved to workbench.inference.discretisation; rbpf imports it from here
+    "_dynamics",  # likewise
     "dense_kalman_loglik",
     "initial_state",
     "piece_filter",
@@ -102,10 +117,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-Discretisation = Literal["foh", "zoh", "euler"]
-
-#: Discretisations offered, default first.
-DISCRETISATIONS: tuple[str, ...] = ("foh", "zoh", "euler")
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
 # The piece filter works through a piece in chunks of samples whose whitened-sensitivity
@@ -116,259 +127,6 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 _CHUNK_DOUBLES = 1 << 18
 # At most this many samples per chunk (small batches: the per-chunk work is amortised).
 _MAX_CHUNK = 64
-
-
-# -- discretisation ---------------------------------------------------------------------
-def transition_matrices(
-    mass_kg: float,
-    damping: ArrayLike,
-    stiffness: ArrayLike,
-    dt_s: float,
-    discretisation: str = "foh",
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Discrete transition of ``(u, u')`` over one sample interval, batched over (C, K).
-
-    ``x_{k+1} = Phi x_k + Gamma0 F_k + Gamma1 F_{k+1}`` for the force ``F`` [N] at the two
-    ends of the interval (module docstring).
-
-    Parameters
-    ----------
-    mass_kg : float
-        Body mass M [kg].
-    damping, stiffness : array_like, shape (B,)
-        C [N s/m] and K [N/m] (scalars are taken as B = 1).
-    dt_s : float
-        Sample interval [s].
-    discretisation : {"foh", "zoh", "euler"}
-        First-order hold (exact for a force linear between samples), zero-order hold, or
-        the seed's Euler ``I + A dt``.
-
-    Returns
-    -------
-    phi : ndarray, shape (B, 2, 2)
-        State transition.
-    gamma0, gamma1 : ndarray, shape (B, 2)
-        Response to 1 N of force at the start and at the end of the interval [m/N, m/(s N)].
-    """
-    c, k = _pairs(damping, stiffness)
-    m = float(mass_kg)
-    dt = float(dt_s)
-    if not (np.isfinite(m) and m > 0 and np.isfinite(dt) and dt > 0):
-        raise UsageError(
-            f"transition_matrices: mass {mass_kg!r} kg and sample interval {dt_s!r} s must be "
-            "positive numbers"
-        )
-    _check_discretisation(discretisation)
-    b = c.size
-    if discretisation == "euler":
-        phi = np.empty((b, 2, 2))
-        phi[:, 0, 0] = 1.0
-        phi[:, 0, 1] = dt
-        phi[:, 1, 0] = -k / m * dt
-        phi[:, 1, 1] = 1.0 - c / m * dt
-        gamma0 = np.zeros((b, 2))
-        gamma0[:, 1] = dt / m
-        return phi, gamma0, np.zeros((b, 2))
-    # Augmented generator on (u, u', F, dF): u'' = (-K u - C u' + F) / M, F' = dF / dt,
-    # dF' = 0. Its exponential over dt maps (x_k, F_k, F_{k+1} - F_k) to x_{k+1}; the F
-    # column is the zero-order-hold response and the dF column the ramp response.
-    aug = np.zeros((b, 4, 4))
-    aug[:, 0, 1] = dt
-    aug[:, 1, 0] = -k / m * dt
-    aug[:, 1, 1] = -c / m * dt
-    aug[:, 1, 2] = dt / m
-    aug[:, 2, 3] = 1.0
-    e = _expm(aug)
-    phi = np.ascontiguousarray(e[:, :2, :2])
-    hold = np.ascontiguousarray(e[:, :2, 2])
-    if discretisation == "zoh":
-        return phi, hold, np.zeros((b, 2))
-    ramp = np.ascontiguousarray(e[:, :2, 3])
-    return phi, hold - ramp, ramp
-
-
-def _expm(mats: FloatArray) -> FloatArray:
-    """Matrix exponential of a batch of small matrices (B, n, n), vectorised over B.
-
-    Scaling and squaring with a Taylor series: ``exp(M) = exp(M / 2^s)^(2^s)`` with
-    ``||M / 2^s||_1 <= 1/4``, where 18 Taylor terms leave a truncation error below
-    ``(1/4)^19 / 19! ~ 1e-29``, far below rounding. (scipy's ``expm`` handles a batch one
-    matrix at a time, which costs milliseconds per matrix and dominated the filter's run
-    time for hundreds of (C, K) pairs.)
-    """
-    norm = float(np.max(np.sum(np.abs(mats), axis=-2))) if mats.size else 0.0
-    squarings = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
-    scaled = mats / 2.0**squarings
-    eye = np.eye(mats.shape[-1])
-    result = eye + scaled
-    term = scaled
-    for order in range(2, 19):
-        term = term @ scaled / order
-        result = result + term
-    for _ in range(squarings):
-        result = result @ result
-    return result
-
-
-def _check_discretisation(discretisation: str) -> None:
-    if discretisation not in DISCRETISATIONS:
-        raise UsageError(
-            f"unknown discretisation {discretisation!r}; use one of {', '.join(DISCRETISATIONS)}"
-        )
-
-
-def _pairs(damping: ArrayLike, stiffness: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
-    k = np.atleast_1d(np.asarray(stiffness, dtype=np.float64))
-    if c.ndim != 1 or k.shape != c.shape:
-        raise UsageError(
-            f"damping and stiffness must be 1-D arrays of equal length B, got shapes {c.shape} "
-            f"and {k.shape}"
-        )
-    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(k))):
-        raise UsageError("damping and stiffness must be finite numbers")
-    return c, k
-
-
-class _Dynamics(NamedTuple):
-    """Per-pair constants of the filter, B on the last axis (fast numpy broadcasting)."""
-
-    k_m: FloatArray  # (B,) K / M
-    c_m: FloatArray  # (B,) C / M
-    phi: FloatArray  # (2, 2, B) Phi[i, j]
-    g0: FloatArray  # (2, B) Gamma0
-    g1: FloatArray  # (2, B) Gamma1
-    h_in: FloatArray  # (3, B) H Gamma1 + d, see _filter_piece
-    has_end_share: bool  # Gamma1 != 0 (first-order hold)
-
-    def take(self, idx: NDArray[np.intp] | NDArray[np.bool_]) -> _Dynamics:
-        """Return the constants of the pairs ``idx`` (an index or mask into the batch)."""
-        return _Dynamics(
-            self.k_m[idx],
-            self.c_m[idx],
-            self.phi[..., idx],
-            self.g0[..., idx],
-            self.g1[..., idx],
-            self.h_in[..., idx],
-            self.has_end_share,
-        )
-
-
-def _dynamics(
-    problem: IdentificationProblem, c: FloatArray, k: FloatArray, discretisation: str
-) -> _Dynamics:
-    phi, g0, g1 = transition_matrices(problem.mass_kg, c, k, problem.dt_s, discretisation)
-    m = problem.mass_kg
-    k_m, c_m = k / m, c / m
-    phi_b = np.ascontiguousarray(phi.transpose(1, 2, 0))
-    g0_b = np.ascontiguousarray(g0.T)
-    g1_b = np.ascontiguousarray(g1.T)
-    h_in = np.empty((3, c.size))
-    h_in[:2] = g1_b
-    h_in[2] = 1.0 / m - k_m * g1_b[0] - c_m * g1_b[1]
-    return _Dynamics(
-        k_m,
-        c_m,
-        phi_b,
-        g0_b,
-        g1_b,
-        h_in,
-        discretisation == "foh",
-    )
-
-
-# -- results ----------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class PieceResult:
-    """What :func:`piece_filter` returns for one piece and B (C, K) pairs.
-
-    Attributes
-    ----------
-    loglik : ndarray, shape (B,)
-        ``log p(y_piece | data before the piece, C, K)`` with the piece's ``theta``
-        integrated out.
-    x_mean_end, x_cov_end : ndarray, shapes (B, 2) and (B, 2, 2)
-        ``theta``-marginal filtered ``(u, u')`` at the piece's last sample.
-    x_mean_next, x_cov_next : ndarray, shapes (B, 2) and (B, 2, 2)
-        Hand-over to the next piece: ``(u, u')`` at the next piece's first sample given the
-        data up to this piece's end, with this piece's share of the boundary interval's force
-        and that interval's process noise (module docstring); pass them to the next
-        :func:`piece_filter` call. For the record's last piece (no next sample) they equal
-        the filtered end.
-    theta_mean, theta_cov : ndarray, shapes (B, m) and (B, m, m)
-        Posterior of the piece's force coefficients given the data up to the piece's end
-        (:func:`piece_filter` always fills ``theta_cov``; internal callers that do not need
-        it may skip it).
-    predicted_obs : ndarray, shape (B, L, 3) or None
-        With ``predictive=True``: the exact one-step-ahead predictive mean
-        ``E[y_k | y_{<k}, C, K]`` of every sample of the piece, with ``theta`` at its
-        posterior given the piece's earlier samples (its prior mean at the first sample).
-    partial_loglik : ndarray, shape (B, L) or None
-        With ``predictive=True``: ``log p(y_{s..k-1} | data before the piece)`` for every
-        sample k of the piece (0 at the first), the weights a particle mixture needs to form
-        its own one-step-ahead prediction inside the piece.
-    """
-
-    loglik: FloatArray
-    x_mean_end: FloatArray
-    x_cov_end: FloatArray
-    x_mean_next: FloatArray
-    x_cov_next: FloatArray
-    theta_mean: FloatArray
-    theta_cov: FloatArray | None
-    predicted_obs: FloatArray | None = None
-    partial_loglik: FloatArray | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class RecordResult:
-    """What :func:`record_loglik` returns for B (C, K) pairs.
-
-    Attributes
-    ----------
-    loglik : ndarray, shape (B,)
-        ``log p(y | C, K)``.
-    piece_loglik : ndarray, shape (B, P)
-        ``log p(y_piece | earlier pieces, C, K)``; sums to ``loglik``.
-    theta_mean, theta_cov : ndarray, shapes (B, P, m) and (B, P, m, m) or None
-        With ``return_pieces=True``: posterior of each piece's force coefficients given the
-        data up to the piece's end (the filtering posterior; see :func:`record_loglik`).
-    x_mean, x_cov : ndarray, shapes (B, P, 2) and (B, P, 2, 2) or None
-        With ``return_pieces=True``: filtered ``(u, u')`` at each piece's last sample.
-    """
-
-    loglik: FloatArray
-    piece_loglik: FloatArray
-    theta_mean: FloatArray | None = None
-    theta_cov: FloatArray | None = None
-    x_mean: FloatArray | None = None
-    x_cov: FloatArray | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class DenseResult:
-    """What :func:`dense_kalman_loglik` returns (one (C, K) pair).
-
-    Attributes
-    ----------
-    loglik : float
-        ``log p(y | C, K)``.
-    piece_loglik : ndarray, shape (P,)
-        Contribution of each piece.
-    state_mean, state_cov : ndarray, shapes (N, 2 + m) and (N, 2 + m, 2 + m)
-        Filtered mean and covariance of ``z = (u, u', theta)`` at every sample.
-    predicted_obs : ndarray, shape (N, 3)
-        One-step-ahead predictive mean ``E[y_k | y_{<k}]``.
-    predicted_obs_cov : ndarray, shape (N, 3, 3)
-        Its covariance (the innovation covariance ``S_k``).
-    """
-
-    loglik: float
-    piece_loglik: FloatArray
-    state_mean: FloatArray
-    state_cov: FloatArray
-    predicted_obs: FloatArray
-    predicted_obs_cov: FloatArray
 
 
 # -- the batched piece filter -------------------------------------------------------------
@@ -933,111 +691,4 @@ def record_loglik(
         theta_cov=theta_cov,
         x_mean=x_mean,
         x_cov=x_cov,
-    )
-
-
-# -- the readable reference ---------------------------------------------------------------
-def dense_kalman_loglik(
-    problem: IdentificationProblem,
-    damping: float,
-    stiffness: float,
-    *,
-    discretisation: str = "foh",
-) -> DenseResult:
-    """Plain augmented-state Kalman filter of ``z = (u, u', theta)`` for one (C, K) pair.
-
-    The reference implementation: one predict and one Joseph-form update per sample on the
-    full ``2 + m`` state, ``theta`` reset to its prior (independent of ``(u, u')``) at every
-    piece start. The interval that crosses a piece boundary is predicted in two parts (old
-    piece's force share, then reset of ``theta``, then the new piece's share), exactly as
-    the model of the module docstring says. Slow (``O(N (2 + m)^3)``) but obviously right.
-
-    Parameters
-    ----------
-    problem : IdentificationProblem
-        The identification problem.
-    damping, stiffness : float
-        C [N s/m] and K [N/m].
-    discretisation : {"foh", "zoh", "euler"}
-        See :func:`transition_matrices`.
-
-    Returns
-    -------
-    DenseResult
-    """
-    c_arr, k_arr = _pairs(damping, stiffness)
-    if c_arr.size != 1:
-        raise UsageError("dense_kalman_loglik takes one (C, K) pair; use record_loglik for many")
-    _check_discretisation(discretisation)
-    c, k = float(c_arr[0]), float(k_arr[0])
-    phi, g0, g1 = (
-        a[0] for a in transition_matrices(problem.mass_kg, c, k, problem.dt_s, discretisation)
-    )
-    mass = problem.mass_kg
-    basis, y = problem.basis, problem.y
-    n, m = problem.n_samples, problem.n_coefficients
-    d = 2 + m
-    mu, sigma = problem.force_prior.mean_n, np.diag(np.square(problem.force_prior.sd_n))
-    r = np.diag(np.square(problem.noise.obs_sd))
-    q = np.zeros((d, d))
-    q[:2, :2] = np.diag(np.square(problem.noise.state_sd))
-    starts = problem.piece_start_mask
-    piece_of = problem.piece_index
-
-    z = np.zeros(d)
-    p = np.zeros((d, d))
-    p[:2, :2] = np.diag(np.square(problem.noise.initial_state_sd))
-    z[2:], p[2:, 2:] = mu, sigma
-
-    out_mean = np.empty((n, d))
-    out_cov = np.empty((n, d, d))
-    pred_y = np.empty((n, 3))
-    pred_s = np.empty((n, 3, 3))
-    piece_ll = np.zeros(problem.n_pieces)
-    eye = np.eye(d)
-    for kk in range(n):
-        if kk > 0:
-            # Old piece's share of the interval plus process noise.
-            f0 = np.eye(d)
-            f0[:2, :2] = phi
-            f0[:2, 2:] = np.outer(g0, basis[kk - 1])
-            z = f0 @ z
-            p = f0 @ p @ f0.T + q
-            if starts[kk]:
-                z[2:] = mu
-                p[2:, :] = 0.0
-                p[:, 2:] = 0.0
-                p[2:, 2:] = sigma
-            # New (or same) piece's share at the interval's end (first-order hold only).
-            f1 = np.eye(d)
-            f1[:2, 2:] = np.outer(g1, basis[kk])
-            z = f1 @ z
-            p = f1 @ p @ f1.T
-        h = np.zeros((3, d))
-        h[0, 0] = h[1, 1] = 1.0
-        h[2, 0], h[2, 1] = -k / mass, -c / mass
-        h[2, 2:] = basis[kk] / mass
-        y_hat = h @ z
-        s = h @ p @ h.T + r
-        s = 0.5 * (s + s.T)
-        chol = np.linalg.cholesky(s)
-        innov = y[kk] - y_hat
-        white = scipy.linalg.solve_triangular(chol, innov, lower=True)
-        piece_ll[piece_of[kk]] += (
-            -0.5 * white @ white - np.sum(np.log(np.diag(chol))) - 1.5 * _LOG_2PI
-        )
-        gain = scipy.linalg.cho_solve((chol, True), h @ p).T  # P H^T S^-1
-        z = z + gain @ innov
-        a = eye - gain @ h
-        p = a @ p @ a.T + gain @ r @ gain.T
-        p = 0.5 * (p + p.T)
-        out_mean[kk], out_cov[kk] = z, p
-        pred_y[kk], pred_s[kk] = y_hat, s
-    return DenseResult(
-        loglik=float(piece_ll.sum()),
-        piece_loglik=piece_ll,
-        state_mean=out_mean,
-        state_cov=out_cov,
-        predicted_obs=pred_y,
-        predicted_obs_cov=pred_s,
     )

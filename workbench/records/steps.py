@@ -5,6 +5,10 @@ into single footfall steps "peak to peak" (in walking, the total vertical GRF ha
 dominant peak per step, just after each heel strike), the pacing (step) frequency is
 estimated from the spectrum and from the footfall times, and the mean force over whole
 steps is checked against the body weight.
+
+The footfall detection lives in :mod:`workbench.records.footfalls` and the spectral pacing
+helpers in :mod:`workbench.records.pacing`; :func:`detect_footfalls` and
+:data:`WALKING_BAND_HZ` are re-exported here.
 """
 
 from __future__ import annotations
@@ -14,10 +18,20 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 from scipy import ndimage, signal
 
 from workbench.errors import InputError, UsageError
+from workbench.records.footfalls import (
+    _footfalls,
+    detect_footfalls,
+)
+from workbench.records.pacing import (
+    _VARIES_SMOOTH_STEPS,
+    WALKING_BAND_HZ,
+    _pacing_from_spectrum,
+    _stride_pacing,
+)
 from workbench.records.preprocess import COMResponse
 from workbench.records.record import G_M_S2, Record
 
@@ -36,361 +50,9 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-#: Pacing (step) frequencies searched in spectra [Hz]: slow walking to brisk walking.
-WALKING_BAND_HZ = (1.0, 3.2)
-
-# --- pacing track (sliding spectra) ---------------------------------------------------
-# 8 s holds at least 8 steps at the slowest pacing, enough to resolve the pacing to a few
-# per cent while following a speed change within a few seconds.
-_TRACK_WINDOW_S = 8.0
-_TRACK_HOP_S = 1.0
-_TRACK_MEDIAN_WINDOWS = 5  # a median over 5 windows removes isolated octave slips
-# A spectral peak f is taken as the second harmonic of f/2 when the comb of odd
-# half-multiples (f/2, 3f/2, ...) holds at least this fraction of the power of the comb of
-# whole multiples (f, 2f, ...). The two cases cannot be told apart from a spectrum alone;
-# this threshold encodes what walking looks like: left/right asymmetry puts peaks at the
-# odd half-multiples of the pacing that are usually a few per cent of the first harmonic's
-# power (the embedded insole record, an extreme, has about 25 %), while at slow pacing the
-# first and third harmonics together are rarely below half the second's power. Beyond
-# these (sub-harmonic amplitude above ~0.7 of the first harmonic, or a second harmonic
-# above ~1.4 times the first and third together), pass the expected pacing.
-_SUBHARMONIC_POWER_RATIO = 0.5
-_COMB_TOLERANCE = 0.03  # relative half-width searched around each multiple
-# --- footfall detection (time warped to step units) -------------------------------------
-_SAMPLES_PER_STEP = 128
-_DETECT_BAND_CYCLES_PER_STEP = (0.7, 1.4)  # keeps the pacing component only
-_REFINE_CUTOFF_CYCLES_PER_STEP = 6.0  # keeps the shape of the peak, not impact ringing
-_REFINE_HALF_WINDOW_STEPS = 0.3
-_MIN_INTERVAL_STEPS = 0.6  # closer peaks are one step's double peak
-_EDGE_GUARD_STEPS = 0.25  # a peak this close to an end cannot be told from a filter edge
-_LOCAL_PROMINENCE_PEAKS = 17
-_MIN_LOCAL_PROMINENCE = 0.2
-_MIN_GLOBAL_PROMINENCE = 0.1
-_ANTIALIAS_HZ = 30.0
 # --- pacing estimate -------------------------------------------------------------------
 _WELCH_SEGMENT_S = 16.0
-_VARIES_SMOOTH_STEPS = 5
 _VARIES_SPREAD = 0.05
-
-
-# ======================================================================================
-# spectra
-# ======================================================================================
-
-
-def _peak_power_near(freq_hz: FloatArray, power: FloatArray, centre_hz: float) -> float:
-    lo, hi = centre_hz * (1 - _COMB_TOLERANCE), centre_hz * (1 + _COMB_TOLERANCE)
-    i0, i1 = np.searchsorted(freq_hz, [lo, hi])
-    i1 = max(i1, i0 + 1)
-    return float(power[i0:i1].max()) if i0 < power.size else 0.0
-
-
-def _comb(freq_hz: FloatArray, power: FloatArray, f0: float, fmax: float, half: bool) -> float:
-    offset = 0.5 if half else 1.0
-    multiples = np.arange(offset, fmax / f0 + 1e-9, 1.0) * f0
-    return sum(_peak_power_near(freq_hz, power, f) for f in multiples)
-
-
-def _parabolic_peak(freq_hz: FloatArray, power: FloatArray, i: int) -> float:
-    """Frequency of the peak at bin ``i``, refined by a parabola through log power."""
-    if 0 < i < power.size - 1 and np.all(power[i - 1 : i + 2] > 0):
-        a, b, c = np.log(power[i - 1 : i + 2])
-        curvature = a - 2 * b + c
-        if curvature < 0:
-            offset = float(np.clip(0.5 * (a - c) / curvature, -0.5, 0.5))
-            return float(freq_hz[i] + offset * (freq_hz[1] - freq_hz[0]))
-    return float(freq_hz[i])
-
-
-def _pacing_from_spectrum(
-    freq_hz: FloatArray, power: FloatArray, band_hz: tuple[float, float]
-) -> float:
-    """Pacing frequency from a power spectrum: main peak, then octave checks.
-
-    The highest peak in the band may be the second harmonic (slow walking, where the
-    double-humped GRF has a weak first harmonic) or, with strong left/right asymmetry, the
-    sub-harmonic at half the pacing. With S(f) the summed peak power at the odd
-    half-multiples f/2, 3f/2, ... and H(f) that at the whole multiples f, 2f, ... (up to
-    4 x the top of the band), the peak f moves down to f/2 when S(f) >= H(f) / 2 (f is an
-    even harmonic of f/2) and up to 2f when S(2f) < H(2f) / 2 (the odd multiples of f are
-    weak: f is a sub-harmonic); each move must stay in the band, at most two moves.
-    """
-    lo, hi = band_hz
-    in_band = np.flatnonzero((freq_hz >= lo) & (freq_hz <= hi))
-    if in_band.size == 0 or not np.any(power[in_band] > 0):
-        return float("nan")
-    fmax = min(float(freq_hz[-1]), 4.0 * hi)
-    f0 = float(freq_hz[in_band[np.argmax(power[in_band])]])
-    ratio = _SUBHARMONIC_POWER_RATIO
-    for _ in range(2):
-        whole = _comb(freq_hz, power, f0, fmax, half=False)
-        if (
-            f0 / 2 >= lo
-            and whole > 0
-            and _comb(freq_hz, power, f0, fmax, half=True) >= (ratio * whole)
-        ):
-            f0 /= 2
-            continue
-        if 2 * f0 <= hi:
-            whole = _comb(freq_hz, power, 2 * f0, fmax, half=False)
-            if whole > 0 and _comb(freq_hz, power, 2 * f0, fmax, half=True) < ratio * whole:
-                f0 *= 2
-                continue
-        break
-    near = np.flatnonzero(
-        (freq_hz >= f0 * (1 - 2 * _COMB_TOLERANCE)) & (freq_hz <= f0 * (1 + 2 * _COMB_TOLERANCE))
-    )
-    return _parabolic_peak(freq_hz, power, int(near[np.argmax(power[near])]))
-
-
-def _search_band(pacing_hz: float | None) -> tuple[float, float]:
-    if pacing_hz is None:
-        return WALKING_BAND_HZ
-    if not (math.isfinite(pacing_hz) and pacing_hz > 0):
-        raise UsageError(f"the pacing frequency must be a positive number in Hz, got {pacing_hz!r}")
-    # Half an octave either side: the hint rules out octave errors but still lets the
-    # pacing drift along the record.
-    return (pacing_hz / math.sqrt(2), pacing_hz * math.sqrt(2))
-
-
-def _pacing_track(
-    acc: FloatArray, sample_rate_hz: float, band_hz: tuple[float, float]
-) -> tuple[FloatArray, FloatArray]:
-    """Local pacing frequency from sliding Hann-windowed periodograms.
-
-    Returns window centre times [s from the first sample] and pacing [Hz] (median-filtered
-    over :data:`_TRACK_MEDIAN_WINDOWS` windows).
-    """
-    # The octave checks look at harmonics up to 4x the top of the band; decimating to
-    # about 10x the top keeps them and bounds the cost for high sample rates.
-    step = max(1, math.floor(sample_rate_hz / (10 * band_hz[1])))
-    if step > 1:
-        acc = _lowpass(acc, 4.5 * band_hz[1], sample_rate_hz)[::step]
-        sample_rate_hz /= step
-    n = acc.size
-    window = min(n, round(_TRACK_WINDOW_S * sample_rate_hz))
-    hop = max(1, round(_TRACK_HOP_S * sample_rate_hz))
-    starts = np.arange(0, n - window + 1, hop)
-    n_fft = 1 << math.ceil(math.log2(8 * window))  # fine grid for the octave comb
-    freq_hz = np.asarray(np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz), dtype=np.float64)
-    taper = np.hanning(window)
-    segments = np.lib.stride_tricks.sliding_window_view(acc, window)[starts]
-    track = np.empty(starts.size)
-    for first in range(0, starts.size, 64):  # in blocks: bounded memory on long records
-        block = segments[first : first + 64]
-        block = (block - block.mean(axis=1, keepdims=True)) * taper
-        power = np.asarray(np.abs(np.fft.rfft(block, n_fft, axis=1)) ** 2, dtype=np.float64)
-        for k, p in enumerate(power):
-            track[first + k] = _pacing_from_spectrum(freq_hz, p, band_hz)
-    centres_s = np.asarray((starts + window / 2) / sample_rate_hz, dtype=np.float64)
-    good = np.isfinite(track)
-    if not good.any():
-        return centres_s, np.full_like(centres_s, math.sqrt(band_hz[0] * band_hz[1]))
-    track = np.interp(centres_s, centres_s[good], track[good])
-    if track.size >= _TRACK_MEDIAN_WINDOWS:
-        track = ndimage.median_filter(track, size=_TRACK_MEDIAN_WINDOWS, mode="nearest")
-    return centres_s, np.asarray(track, dtype=np.float64)
-
-
-# ======================================================================================
-# footfalls
-# ======================================================================================
-
-
-def _as_acceleration(
-    com_or_acc: COMResponse | ArrayLike, sample_rate_hz: float | None
-) -> tuple[FloatArray, float]:
-    if isinstance(com_or_acc, COMResponse):
-        if sample_rate_hz is not None and not math.isclose(
-            sample_rate_hz, com_or_acc.sample_rate_hz, rel_tol=1e-6
-        ):
-            raise UsageError(
-                f"detect_footfalls: sample_rate_hz={sample_rate_hz:g} contradicts the COM "
-                f"response's {com_or_acc.sample_rate_hz:g} Hz; leave it out"
-            )
-        return np.asarray(com_or_acc.acc_m_s2, dtype=np.float64), com_or_acc.sample_rate_hz
-    acc = np.asarray(com_or_acc, dtype=np.float64)
-    if acc.ndim != 1:
-        raise UsageError(f"detect_footfalls: the acceleration must be 1-D, got shape {acc.shape}")
-    if sample_rate_hz is None or not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0):
-        raise UsageError(
-            "detect_footfalls: give the sample rate in Hz with an acceleration array, "
-            f"got {sample_rate_hz!r}"
-        )
-    if not np.isfinite(acc).all():
-        raise UsageError("detect_footfalls: the acceleration contains NaN or infinite values")
-    return acc, float(sample_rate_hz)
-
-
-def _step_phase(pacing_hz: FloatArray, sample_rate_hz: float) -> FloatArray:
-    """Elapsed steps at each sample: the integral of the local pacing over time."""
-    phase = np.zeros_like(pacing_hz)
-    phase[1:] = np.cumsum(0.5 * (pacing_hz[1:] + pacing_hz[:-1])) / sample_rate_hz
-    return phase
-
-
-def _lowpass(x: FloatArray, cutoff: float, rate: float, order: int = 4) -> FloatArray:
-    if cutoff >= 0.5 * rate:
-        return x.copy()
-    sos = signal.butter(order, cutoff, btype="lowpass", fs=rate, output="sos")
-    return signal.sosfiltfilt(sos, x)
-
-
-def _detect_in_phase(acc: FloatArray, sample_rate_hz: float, pacing_hz: FloatArray) -> FloatArray:
-    """Footfall peak times [s from the first sample, fractional] given a local pacing."""
-    n = acc.size
-    time_s = np.arange(n) / sample_rate_hz
-    phase = _step_phase(pacing_hz, sample_rate_hz)
-    total_steps = float(phase[-1])
-    if total_steps < 1.0:
-        return np.empty(0)
-    smooth = _lowpass(acc, _ANTIALIAS_HZ, sample_rate_hz)
-    grid = np.arange(0.0, total_steps, 1.0 / _SAMPLES_PER_STEP)
-    warped = np.interp(grid, phase, smooth)
-    low, high = _DETECT_BAND_CYCLES_PER_STEP
-    sos = signal.butter(2, [low, high], btype="bandpass", fs=_SAMPLES_PER_STEP, output="sos")
-    detector = signal.sosfiltfilt(sos, warped)
-    shape = _lowpass(warped, _REFINE_CUTOFF_CYCLES_PER_STEP, _SAMPLES_PER_STEP)
-
-    peaks, props = signal.find_peaks(
-        detector, distance=round(0.5 * _SAMPLES_PER_STEP), prominence=0.0
-    )
-    prominence = props["prominences"]
-    if peaks.size == 0:
-        return np.empty(0)
-    local = ndimage.median_filter(prominence, size=_LOCAL_PROMINENCE_PEAKS, mode="nearest")
-    keep = (prominence >= _MIN_LOCAL_PROMINENCE * local) & (
-        prominence >= _MIN_GLOBAL_PROMINENCE * np.median(prominence)
-    )
-    peaks = peaks[keep]
-
-    # Move each detection to the dominant peak of the acceleration (kept to the shape of
-    # the step, not its impact ringing) within a third of a step, with sub-sample precision.
-    half = round(_REFINE_HALF_WINDOW_STEPS * _SAMPLES_PER_STEP)
-    refined = np.empty(peaks.size)
-    height = np.empty(peaks.size)
-    for k, p in enumerate(peaks):
-        lo, hi = max(0, p - half), min(shape.size, p + half + 1)
-        j = lo + int(np.argmax(shape[lo:hi]))
-        offset = 0.0
-        if 0 < j < shape.size - 1:
-            a, b, c = shape[j - 1 : j + 2]
-            curvature = a - 2 * b + c
-            if curvature < 0:
-                offset = float(np.clip(0.5 * (a - c) / curvature, -0.5, 0.5))
-        refined[k] = grid[j] + offset / _SAMPLES_PER_STEP
-        height[k] = shape[j]
-
-    # Spurious double peaks: while two footfalls are closer than 0.6 step, drop the lower.
-    order = np.argsort(refined)
-    refined, height = refined[order], height[order]
-    while refined.size > 1:
-        gaps = np.diff(refined)
-        k = int(np.argmin(gaps))
-        if gaps[k] >= _MIN_INTERVAL_STEPS:
-            break
-        drop = k if height[k] < height[k + 1] else k + 1
-        refined = np.delete(refined, drop)
-        height = np.delete(height, drop)
-    inside = (refined >= _EDGE_GUARD_STEPS) & (refined <= total_steps - _EDGE_GUARD_STEPS)
-    return np.interp(refined[inside], phase, time_s)
-
-
-def _track_from_footfalls(
-    times_s: FloatArray, n: int, sample_rate_hz: float, fallback_hz: FloatArray
-) -> FloatArray:
-    """Per-sample pacing from footfall intervals (running median over 5 steps)."""
-    if times_s.size < 4:
-        return fallback_hz
-    durations = np.diff(times_s)
-    inst = ndimage.median_filter(
-        _stride_pacing(durations), size=_VARIES_SMOOTH_STEPS, mode="nearest"
-    )
-    mid = times_s[1:-1]  # the middle footfall of each pair of steps
-    time_s = np.arange(n) / sample_rate_hz
-    track = np.interp(time_s, mid, inst)
-    # Pauses and turns give long "steps"; never let them pull the track more than 30 %
-    # from the spectral one.
-    return np.clip(track, 0.7 * fallback_hz, 1.3 * fallback_hz)
-
-
-def _footfalls(acc: FloatArray, sample_rate_hz: float, pacing_hz: float | None) -> FloatArray:
-    """Footfall times [s from the first sample, fractional]; see :func:`detect_footfalls`."""
-    n = acc.size
-    band = _search_band(pacing_hz)
-    if n < 4 or n / sample_rate_hz < 2.0 / band[0]:
-        return np.empty(0)
-    centres_s, track = _pacing_track(acc, sample_rate_hz, band)
-    spectral_track = np.interp(np.arange(n) / sample_rate_hz, centres_s, track)
-    first = _detect_in_phase(acc, sample_rate_hz, spectral_track)
-    refined_track = _track_from_footfalls(first, n, sample_rate_hz, spectral_track)
-    return _detect_in_phase(acc, sample_rate_hz, refined_track)
-
-
-def detect_footfalls(
-    com_or_acc: COMResponse | ArrayLike,
-    sample_rate_hz: float | None = None,
-    *,
-    pacing_hz: float | None = None,
-) -> IntArray:
-    """Sample indices of the per-step peaks of the COM acceleration.
-
-    In walking, the total vertical GRF (hence the COM acceleration) has one dominant peak
-    per step, just after each heel strike; the seed study cuts records "peak to peak" there.
-    The algorithm copes with pacing that changes along the record, odd force shapes, weak
-    first harmonics (slow walking) and strong left/right asymmetry:
-
-    1. Local pacing: Hann-windowed periodograms of 8 s windows every 1 s; in each, the
-       highest peak in the walking band (1.0-3.2 Hz, or half an octave either side of
-       ``pacing_hz`` when given) with octave checks against the second harmonic and the
-       asymmetry sub-harmonic (see :class:`PacingEstimate`); median over 5 windows.
-    2. Time is warped to elapsed steps (the integral of the local pacing) and the signal
-       resampled at 128 samples per step, so that pacing is about one cycle per step
-       everywhere, however it changes.
-    3. A zero-phase band-pass of 0.7-1.4 cycles per step keeps the pacing component only
-       (not the sub-harmonic of asymmetry, nor the double hump), which has exactly one
-       maximum per step; its peaks at least half a step apart are candidates. Candidates
-       whose prominence is below 0.2 of the median of their 17 neighbours, or 0.1 of the
-       record's median (standing, turning on the spot), are dropped.
-    4. Each candidate moves to the highest point, within 0.3 step, of the acceleration
-       low-passed at 6 cycles per step (the dominant GRF peak of that step, not impact
-       ringing), refined to a fraction of a sample by a parabola.
-    5. Spurious double peaks: while two footfalls are less than 0.6 step apart, the lower
-       one is dropped. Peaks within 0.25 step of either end are dropped (filter edges).
-    6. Steps 2-5 are repeated once with the local pacing taken from the footfalls found
-       (pacing of each pair of steps, running median over 5, held within 30 % of the
-       spectral track), which follows fast changes of pacing better than 8 s spectra.
-
-    Parameters
-    ----------
-    com_or_acc : COMResponse or array_like
-        The COM response (its acceleration is used) or a COM acceleration [m/s^2].
-    sample_rate_hz : float, optional
-        Sample rate [Hz]; required with an array, taken from a COM response otherwise.
-    pacing_hz : float, optional
-        Expected pacing [Hz]; narrows the spectral search to half an octave either side.
-
-    Returns
-    -------
-    ndarray of int
-        Increasing sample indices of the footfall peaks (one more than the whole steps).
-
-    Raises
-    ------
-    UsageError
-        If the sample rate is missing or contradicts the COM response, the acceleration is
-        not one-dimensional and finite, or ``pacing_hz`` is not a positive number.
-    """
-    acc, fs = _as_acceleration(com_or_acc, sample_rate_hz)
-    times = _footfalls(acc, fs, pacing_hz)
-    return _times_to_indices(times, fs, acc.size)
-
-
-def _times_to_indices(times_s: FloatArray, sample_rate_hz: float, n: int) -> IntArray:
-    indices = np.clip(np.rint(times_s * sample_rate_hz).astype(np.intp), 0, max(n - 1, 0))
-    # Two fractional peaks can round to one sample only if they are < 1 sample apart,
-    # which step 5 excludes; unique() keeps the contract (strictly increasing) regardless.
-    return np.unique(indices)
 
 
 # ======================================================================================
@@ -593,18 +255,6 @@ class PacingEstimate:
     varies: bool
     spread: float
     method: str
-
-
-def _stride_pacing(durations_s: FloatArray) -> FloatArray:
-    """Pacing over each pair of consecutive steps, ``2 / (d_j + d_j+1)`` [Hz].
-
-    A left step and a right step together make a stride, so pairing them removes the
-    alternation of an asymmetric gait, which would otherwise bias a median of single steps
-    towards the shorter or the longer side.
-    """
-    if durations_s.size < 2:
-        return 1.0 / durations_s
-    return 2.0 / (durations_s[1:] + durations_s[:-1])
 
 
 def _welch_pacing(com: COMResponse) -> float:

@@ -1,0 +1,253 @@
+"""Shared text-table parsing for the record and manifest readers.
+
+Holds what every text format needs before its own column rules apply: checking that the
+file exists and reading its bytes, decoding UTF-8 (refusing ZIP archives and binary data),
+splitting lines at CR/LF only so that line numbers in messages match a text editor,
+finding the header, detecting the delimiter, normalising column names with a bracketed
+unit, parsing cells as strict decimal numbers, quoting pieces of the file for messages, and
+the ``_Table`` container a format reader returns. Places in messages are 1-based file line
+numbers (``line N``).
+"""
+
+from __future__ import annotations
+
+import csv
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from workbench.errors import InputError
+from workbench.records.record import FloatArray
+
+
+@dataclass
+class _Table:
+    """What a format reader found, before sidecar and keyword metadata are merged."""
+
+    arrays: dict[str, FloatArray]
+    metadata: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+
+
+def _require_file(p: Path, source: str) -> None:
+    if not p.exists():
+        raise InputError(
+            source,
+            "whole file",
+            "the file does not exist",
+            "check the path (relative paths start from the current folder)",
+        )
+    if p.is_dir():
+        raise InputError(source, "whole file", "this is a folder, not a file", "give a record file")
+
+
+def _read_bytes(p: Path, source: str) -> bytes:
+    _require_file(p, source)
+    try:
+        return p.read_bytes()
+    except OSError as exc:
+        raise InputError(
+            source,
+            "whole file",
+            f"the file cannot be read ({exc.strerror or type(exc).__name__})",
+            "check its permissions",
+        ) from None
+
+
+def _empty_file(source: str) -> InputError:
+    return InputError(
+        source, "whole file", "the file is empty", "give a file with a header and data rows"
+    )
+
+
+def _decode(raw: bytes, source: str) -> str:
+    if not raw.strip():
+        raise _empty_file(source)
+    if raw.startswith(b"PK\x03\x04"):
+        raise InputError(
+            source,
+            "whole file",
+            "this is a ZIP archive (an Excel .xlsx workbook?), not a text table",
+            "export the sheet as CSV",
+        )
+    if b"\x00" in raw:
+        raise InputError(
+            source,
+            "whole file",
+            "the file contains binary data (NUL bytes), not a text table",
+            "give a text file (CSV, OpenSim .mot or PhysioNet insole text) or pass --format c3d "
+            "for a C3D file",
+        )
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise InputError(
+            source,
+            f"line {line}",
+            f"the byte 0x{raw[exc.start]:02x} is not UTF-8 text",
+            "save the file as UTF-8 (plain text CSV)",
+        ) from None
+
+
+def _split_lines(text: str) -> list[str]:
+    # Only CR, LF and CRLF end lines, as in any CSV reader and text editor; str.splitlines
+    # would also split at form feeds and Unicode separators and shift the line numbers.
+    lines = re.split(r"\r\n|\r|\n", text)
+    if lines and lines[-1] == "":
+        lines.pop()
+    return lines
+
+
+def _first_content_line(lines: Sequence[str]) -> int | None:
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            return i
+    return None
+
+
+def _parse_number(cell: str) -> float | None:
+    """Strict decimal number (also nan/inf, which validation reports) or None."""
+    text = cell.strip()
+    # float() would also take '1_000' and non-ASCII digits; neither is a number in a data file.
+    if not text or not text.isascii() or "_" in text:
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def _show(text: str, limit: int = 40) -> str:
+    """Quote a piece of the user's file for a message, on one line and not too long."""
+    if len(text) > limit:
+        return repr(text[:limit]) + "..."
+    return repr(text)
+
+
+def _show_list(names: Sequence[str], limit: int = 12) -> str:
+    shown = ", ".join(_show(n) for n in names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
+def _delimiter_name(delimiter: str | None) -> str:
+    return {",": "commas", ";": "semicolons", "\t": "tabs", None: "spaces"}[delimiter]
+
+
+def _detect_delimiter(header: str) -> str | None:
+    counts = {d: header.count(d) for d in ("\t", ";", ",")}
+    best = max(counts, key=lambda d: counts[d])  # ties keep the order tab, semicolon, comma
+    if counts[best] > 0:
+        return best
+    return None if len(header.split()) > 1 else ","
+
+
+def _split_fields(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    if '"' in line:
+        try:
+            return next(csv.reader([line], delimiter=delimiter), [])
+        except csv.Error:
+            return line.split(delimiter)
+    return line.split(delimiter)
+
+
+def _normalise_name(raw: str) -> tuple[str, str | None]:
+    """Column name -> (lower-case name with words joined by '_', unit in brackets or None)."""
+    text = raw.strip().strip("\"'").strip()
+    unit = None
+    match = re.fullmatch(r"(.*?)\s*[\[(]\s*([^\])]*?)\s*[\])]", text)
+    if match:
+        text, unit = match.group(1), re.sub(r"\s+", "", match.group(2)).lower()
+    name = re.sub(r"[\s\-]+", "_", text.strip().lower())
+    return name, unit
+
+
+def _field_count_error(
+    source: str, line: int, found: int, header_line: int, expected: int, delimiter: str | None
+) -> InputError:
+    return InputError(
+        source,
+        f"line {line}",
+        f"the row has {found} fields but the header (line {header_line}) has {expected}",
+        f"separate the values with {_delimiter_name(delimiter)} as in the header and give one "
+        "value per column",
+    )
+
+
+def _parse_rows(
+    lines: Sequence[str],
+    first: int,
+    split: Callable[[str], list[str]],
+    n_fields: int,
+    wanted: Sequence[int],
+    labels: Mapping[int, str],
+    source: str,
+    count_error: Callable[[int, int], InputError],
+    decimal_comma_hint: bool,
+) -> tuple[dict[int, FloatArray], list[int]]:
+    """Parse the numeric cells of columns ``wanted`` from ``lines[first:]``.
+
+    Returns the columns by index and the 1-based file line of each parsed row.
+    """
+    values: dict[int, list[float]] = {j: [] for j in wanted}
+    line_numbers: list[int] = []
+    for i in range(first, len(lines)):
+        line = lines[i]
+        stripped = line.strip()
+        if not stripped or stripped.startswith("#"):
+            continue
+        fields = split(line)
+        if len(fields) != n_fields:
+            raise count_error(i + 1, len(fields))
+        for j in wanted:
+            cell = fields[j]
+            number = _parse_number(cell)
+            if number is None:
+                raise _bad_cell(source, i + 1, labels[j], cell, decimal_comma_hint)
+            values[j].append(number)
+        line_numbers.append(i + 1)
+    return {j: np.asarray(v, dtype=np.float64) for j, v in values.items()}, line_numbers
+
+
+def _bad_cell(
+    source: str, line: int, label: str, cell: str, decimal_comma_hint: bool
+) -> InputError:
+    where = f"line {line}, {label}"
+    if not cell.strip():
+        return InputError(source, where, "the cell is empty", "fill in the value or delete the row")
+    hint = ""
+    if decimal_comma_hint and re.fullmatch(r"\s*[+-]?\d*,\d+\s*", cell):
+        hint = " (write decimals with a point, not a comma)"
+    return InputError(
+        source,
+        where,
+        f"the value {_show(cell)} is not a number",
+        f"correct the value or delete the row{hint}",
+    )
+
+
+def _line_runs(line_numbers: Sequence[int]) -> dict[str, Any]:
+    """Run-length code of sample index -> file line (JSON-friendly, small)."""
+    runs: list[list[int]] = []
+    previous = None
+    for index, line in enumerate(line_numbers):
+        if previous is None or line != previous + 1:
+            runs.append([index, line])
+        previous = line
+    return {"n_samples": len(line_numbers), "runs": runs}
+
+
+def _no_data_rows(source: str, header_line: int) -> InputError:
+    return InputError(
+        source,
+        f"line {header_line}",
+        "the file has a header but no data rows",
+        "add the measured samples below the header",
+    )
