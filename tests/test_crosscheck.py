@@ -211,6 +211,11 @@ def test_rbpf_and_mcmc_agree_on_synthetic_walks(synthetic_crosschecks: list[tupl
             assert key in first
         assert payload["mcmc_diagnostics"]["rhat_max"] < 1.01
         assert payload["mcmc_diagnostics"]["ess_bulk_min"] >= 400
+        # The text summary: one row per step with both means, and the verdict.
+        text = result.summary()
+        assert result.verdict() in text
+        assert len(text.splitlines()) == len(result.steps) + 6
+        assert f"{result.steps[0].mcmc_mean[1]:.0f}" in text
 
 
 @pytest.mark.slow
