@@ -198,3 +198,81 @@ def test_the_simulator_takes_the_model() -> None:
     assert by_model.model.stiffness_n_per_m == pytest.approx(model.stiffness_n_per_m)
     with pytest.raises(UsageError, match="given both"):
         wb.simulate_walking(model=model, damping_ratio=0.2)
+
+
+def test_replace_changes_only_the_part_a_key_belongs_to() -> None:
+    """What the flat form cannot hold survives a change of another key."""
+    base = IdentifySettings(
+        method=wb.Exact(n_draws=100),
+        preprocessing=wb.Preprocessing(highpass_hz=0.2, rescale_to_mass=True),
+        model=wb.SMDModel(mass_kg=70.0, harmonics=5),
+    )
+    changed = base.replace(seed=3, harmonics=6, obs_noise="seed")
+    assert changed.method == wb.Exact(n_draws=100)
+    assert changed.preprocessing == base.preprocessing
+    assert changed.model.mass_kg == 70.0 and changed.model.harmonics == 6
+    assert changed.seed == 3 and changed.noise.obs_noise == "seed"
+    # A method's own options survive a change of another of its options.
+    pf = IdentifySettings(method=wb.PF(n_particles=900, force_proposal="prior"))
+    assert pf.replace(resampling="residual").method == wb.PF(
+        n_particles=900, force_proposal="prior", resampling="residual"
+    )
+
+
+def test_options_of_another_method_are_carried_through_a_switch() -> None:
+    rbpf = IdentifySettings.from_flat(method="rbpf", force_proposal="prior")
+    assert rbpf.to_json()["force_proposal"] == "prior"  # reported as given
+    assert rbpf.replace(method="pf").method == wb.PF(force_proposal="prior")
+    # The particle count is null in the JSON when the method runs its default.
+    assert IdentifySettings().to_json()["particles"] is None
+    assert IdentifySettings.from_flat(particles=64).to_json()["particles"] == 64
+    assert IdentifySettings.from_flat(rescale_to_mass=True).preprocessing.rescale_to_mass
+
+
+def test_the_mass_of_the_settings_model_is_reconciled(walk: wb.Record) -> None:
+    heavy = IdentifySettings(model=wb.SMDModel(mass_kg=2 * MASS_KG, harmonics=4))
+    with pytest.raises(UsageError, match="give the mass once"):
+        wb.identify(walk, settings=heavy)
+    massless = walk.replace(mass_kg=None)
+    res = wb.identify(
+        massless.slice(0.0, 6.0),
+        settings=IdentifySettings(model=wb.SMDModel(mass_kg=MASS_KG, harmonics=4)),
+        method=wb.RBPF(n_particles=16),
+        force_check=False,
+    )
+    assert res.mass_kg == MASS_KG
+
+
+def test_the_fitted_model_walks(result: wb.IdentificationResult) -> None:
+    fitted = result.fitted_model
+    assert fitted.pacing_hz == pytest.approx(result.problem.pacing_hz)
+    assert fitted.force_coefficients_n is not None
+    np.testing.assert_allclose(
+        fitted.force_coefficients_n, result.piece_coefficients_mean[:, :9].mean(axis=0)
+    )
+    walk = wb.simulate_walking(model=fitted, duration_s=3.0, sample_rate_hz=100, seed=1)
+    assert walk.record.mass_kg == MASS_KG
+
+
+def test_one_piece_models_keep_the_inspection_where_the_record_has_footfalls(
+    walk: wb.Record,
+) -> None:
+    """The footfall-free path is taken only when the record has no usable footfalls."""
+    heavy_force = walk.replace(grf_n=1.12 * walk.grf_n)
+    whole = wb.SMDModel(harmonics=4, pieces="whole", pacing_hz=1.8)
+    res = wb.identify(heavy_force, whole, method=wb.RBPF(n_particles=16), force_check=False)
+    assert any(
+        "static balance" in w or "body weight" in w for w in res.extra["inspection_warnings"]
+    )
+    from workbench.synth.simulate import seed_numerical_example
+
+    bench = seed_numerical_example(duration_s=3.0).record
+    model = wb.SMDModel(harmonics=10, pieces="whole", time_basis="absolute", pacing_hz=0.5)
+    res = wb.identify(
+        bench,
+        model,
+        method=wb.Exact(n_draws=200),
+        preprocessing=wb.Preprocessing(highpass_hz=0.0),
+        force_check=False,
+    )
+    assert any("one piece at the stated pacing" in w for w in res.extra["inspection_warnings"])

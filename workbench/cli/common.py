@@ -243,7 +243,7 @@ def identify_settings(args: argparse.Namespace) -> Any:
     -------
     IdentifySettings
     """
-    from workbench.inference.settings import IdentifySettings, Preprocessing
+    from workbench.inference.settings import IdentifySettings
 
     def flag(name: str) -> Any:
         return getattr(args, name, None)
@@ -264,16 +264,11 @@ def identify_settings(args: argparse.Namespace) -> Any:
         "force_proposal": flag("force_proposal"),
         "force_check": False if flag("no_force_check") else None,
         "effects": flag("effects"),
+        "rescale_to_mass": True if flag("rescale_to_mass") else None,
     }
     if flag("config"):
-        settings = IdentifySettings.from_toml(args.config, **overrides)
-    else:
-        settings = IdentifySettings().replace(**overrides)
-    if flag("rescale_to_mass"):
-        settings = settings.replace(
-            preprocessing=Preprocessing(settings.preprocessing.highpass_hz, rescale_to_mass=True)
-        )
-    return settings
+        return IdentifySettings.from_toml(args.config, **overrides)
+    return IdentifySettings().replace(**overrides)
 
 
 def floats(text: str) -> tuple[float, ...]:

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.errors import UsageError
+from workbench.errors import InputError, UsageError
 from workbench.inference.methods import Method
 from workbench.inference.noise import apply_noise_setting
 from workbench.inference.problem import (
@@ -82,15 +82,25 @@ class _Prepared:
             insp = record
         else:
             model, pre = settings.model, settings.preprocessing
-            if model.pieces == "whole" and model.pacing_hz is not None and not pre.rescale_to_mass:
+            try:
+                insp = inspect_record(
+                    record, highpass_hz=pre.highpass_hz, rescale=pre.rescale_to_mass
+                )
+            except InputError as err:
+                one_piece = model.pieces == "whole" and model.pacing_hz is not None
+                if not one_piece or pre.rescale_to_mass or record.mass_kg is None:
+                    raise
                 # One force for the whole record at a stated pacing needs no footfalls: a
                 # benchmark record (the seed's numerical example, a short or non-walking
-                # input) is identified as it is.
-                record.require_mass()
+                # input) is identified as it is, and the report says what was not checked.
                 com = preprocess(record, highpass_hz=pre.highpass_hz)
                 warnings = tuple(str(w) for w in record.metadata.get("warnings", []))
-                return cls(record, com, None, warnings)
-            insp = inspect_record(record, highpass_hz=pre.highpass_hz, rescale=pre.rescale_to_mass)
+                note = (
+                    f"{err} It was identified as one piece at the stated pacing of "
+                    f"{model.pacing_hz:g} Hz, without the static-balance and walking checks "
+                    "that need footfalls."
+                )
+                return cls(record, com, None, (*warnings, note))
         return cls(insp.record, insp.com, insp.steps, tuple(insp.warnings), insp.pacing.pacing_hz)
 
 
@@ -262,7 +272,7 @@ def identify(
         preprocessing=preprocessing,
         force_check=force_check,
     )
-    insp = _Prepared.of(_with_mass(record, model), settings)
+    insp = _Prepared.of(_with_mass(record, settings.model), settings)
     problem = compile_problem(insp, settings)
     if adjust_problem is not None:
         problem = adjust_problem(problem)

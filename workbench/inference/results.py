@@ -223,7 +223,12 @@ class IdentificationResult:
 
     @property
     def fitted_model(self) -> SMDModel:
-        """The identified pedestrian model: posterior-mean K and C, effects at their means."""
+        """The identified pedestrian model: posterior-mean K and C, effects at their means.
+
+        Its force is the pacing of the problem and the mean over pieces of the posterior-mean
+        Fourier coefficients (on the problem's time basis), so the model can walk on a
+        simulated record or a footbridge.
+        """
         base = self.model if self.model is not None else SMDModel(harmonics=self.problem.harmonics)
         est = self.estimates
         effects = base.effects
@@ -239,11 +244,15 @@ class IdentificationResult:
                 )
                 for e in effects
             )
+        n_force = 2 * self.problem.harmonics + 1
         return base.replace(
             mass_kg=self.mass_kg,
             stiffness_n_per_m=est["stiffness_n_per_m"],
             damping_ns_per_m=est["damping_ns_per_m"],
             effects=effects,
+            harmonics=self.problem.harmonics,
+            pacing_hz=float(self.problem.pacing_hz),
+            force_coefficients_n=tuple(self.piece_coefficients_mean[:, :n_force].mean(axis=0)),
         )
 
     @property

@@ -103,7 +103,20 @@ FLAT_KEYS = (
     "observe",
     "force_proposal",
     "effects",
+    "rescale_to_mass",
 )
+#: The flat keys of each part (the rest, ``seed`` and ``force_check``, are the settings').
+MODEL_KEYS = ("harmonics", "pacing_hz", "time_basis", "pieces", "effects")
+METHOD_KEYS = ("method", "particles", "resampling", "ess_threshold", "force_proposal")
+NOISE_KEYS = ("obs_noise", "state_noise_fraction", "prior", "observe")
+PREPROCESSING_KEYS = ("highpass_hz", "rescale_to_mass")
+#: Method options by flat key -> the attribute of the method objects that take them.
+_METHOD_OPTION = {
+    "particles": "n_particles",
+    "resampling": "resampling",
+    "ess_threshold": "ess_threshold",
+    "force_proposal": "force_proposal",
+}
 
 
 @dataclass(frozen=True)
@@ -275,6 +288,7 @@ _FLAT_DEFAULTS: dict[str, Any] = {
     "observe": "all",
     "force_proposal": "regression",
     "effects": (),
+    "rescale_to_mass": False,
 }
 
 
@@ -296,6 +310,10 @@ class IdentifySettings:
         Seed of every random draw.
     force_check : bool, default True
         Run the force-model check after the method (costs two mode searches).
+    method_options : tuple of (str, value) pairs, default ()
+        Flat method options the current method does not take (``force_proposal`` given
+        with ``method="rbpf"``), kept so that a switch of method (:meth:`replace`) carries
+        them and the flat form reports them, as it always has.
 
     Notes
     -----
@@ -309,6 +327,7 @@ class IdentifySettings:
     preprocessing: Preprocessing = dataclasses.field(default_factory=Preprocessing)
     seed: int = 0
     force_check: bool = True
+    method_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
         seed = self.seed
@@ -341,28 +360,48 @@ class IdentifySettings:
                 f"{', '.join(FLAT_KEYS)}"
             )
         values = {**_FLAT_DEFAULTS, **{k: v for k, v in flat.items() if v is not None}}
+        method = _method_from_flat(values)
+        carried = tuple(
+            (key, values[key])
+            for key, attribute in _METHOD_OPTION.items()
+            if key != "particles"
+            and not hasattr(method, attribute)
+            and values[key] != _FLAT_DEFAULTS[key]
+        )
         return cls(
             model=_model_from_flat(values),
-            method=_method_from_flat(values),
+            method=method,
             noise=NoiseSettings(
                 obs_noise=values["obs_noise"],
                 state_noise_fraction=values["state_noise_fraction"],
                 prior=values["prior"],
                 observe=values["observe"],
             ),
-            preprocessing=Preprocessing(highpass_hz=float(values["highpass_hz"])),
+            preprocessing=Preprocessing(
+                highpass_hz=float(values["highpass_hz"]),
+                rescale_to_mass=bool(values["rescale_to_mass"]),
+            ),
             seed=values["seed"],
             force_check=bool(values["force_check"]),
+            method_options=carried,
         )
 
     def flat(self) -> dict[str, Any]:
         """Return the settings as flat keys (effects as an :class:`Effects` object).
 
-        ``particles`` is the count the method runs (None for the exact posterior).
+        ``particles`` is None when the method runs its default count (and for the exact
+        posterior), the count otherwise.
         """
         method = self.method
         model = self.model
         particles = getattr(method, "n_particles", None)
+        if particles == getattr(type(method), "n_particles", None):
+            particles = None
+        carried = dict(self.method_options)
+
+        def option(key: str) -> Any:
+            return getattr(method, _METHOD_OPTION[key], carried.get(key, _FLAT_DEFAULTS[key]))
+
         return {
             "method": method.name,
             "particles": particles,
@@ -374,20 +413,23 @@ class IdentifySettings:
             "time_basis": model.time_basis,
             "pieces": model.pieces,
             "prior": self.noise.prior,
-            "resampling": getattr(method, "resampling", _FLAT_DEFAULTS["resampling"]),
-            "ess_threshold": getattr(method, "ess_threshold", _FLAT_DEFAULTS["ess_threshold"]),
+            "resampling": option("resampling"),
+            "ess_threshold": option("ess_threshold"),
             "seed": self.seed,
             "force_check": self.force_check,
             "observe": self.noise.observe,
-            "force_proposal": getattr(method, "force_proposal", _FLAT_DEFAULTS["force_proposal"]),
+            "force_proposal": option("force_proposal"),
             "effects": model.effects,
+            "rescale_to_mass": self.preprocessing.rescale_to_mass,
         }
 
     def replace(self, **changes: Any) -> IdentifySettings:
         """Return a copy with flat keys or parts changed (``None`` values are ignored).
 
-        Flat keys (``method="pf"``, ``harmonics=6``) rebuild the parts they belong to; a
-        change of method without ``particles`` takes the new method's default count. Parts
+        Flat keys (``method="pf"``, ``harmonics=6``) change only the part they belong to;
+        everything else, including what the flat form does not hold (a model's mass, an
+        ``Exact``'s draws), is kept. A change of method without ``particles`` takes the new
+        method's default count; its other options come from the flat form. Parts
         (``model=...``, ``method=RBPF(...)``, ``noise=...``, ``preprocessing=...``) replace
         them whole.
         """
@@ -400,19 +442,37 @@ class IdentifySettings:
         out = self
         if changes:
             flat = self.flat()
-            if changes.get("method", flat["method"]) != flat["method"]:
+            switching = changes.get("method", flat["method"]) != flat["method"]
+            if switching:
                 flat["particles"] = None
-                flat["force_proposal"] = None
             rebuilt = IdentifySettings.from_flat(**{**flat, **changes})
-            model = dataclasses.replace(
-                self.model,
-                harmonics=rebuilt.model.harmonics,
-                effects=rebuilt.model.effects,
-                time_basis=rebuilt.model.time_basis,
-                pieces=rebuilt.model.pieces,
-                pacing_hz=rebuilt.model.pacing_hz,
+            touched = set(changes)
+            model = self.model
+            if touched & set(MODEL_KEYS):
+                model = dataclasses.replace(
+                    model, **{k: getattr(rebuilt.model, k) for k in MODEL_KEYS}
+                )
+            method = self.method
+            if switching:
+                method = rebuilt.method
+            elif touched & set(METHOD_KEYS):
+                method = method.replace(
+                    **{
+                        attribute: getattr(rebuilt.method, attribute)
+                        for key, attribute in _METHOD_OPTION.items()
+                        if key in touched and hasattr(method, attribute)
+                    }
+                )
+            preprocessing = self.preprocessing
+            if touched & set(PREPROCESSING_KEYS):
+                preprocessing = rebuilt.preprocessing
+            out = dataclasses.replace(
+                rebuilt,
+                model=model,
+                method=method,
+                noise=rebuilt.noise if touched & set(NOISE_KEYS) else self.noise,
+                preprocessing=preprocessing,
             )
-            out = dataclasses.replace(rebuilt, model=model)
         return dataclasses.replace(out, **parts) if parts else out
 
     # -- derived ------------------------------------------------------------------------------
