@@ -340,8 +340,7 @@ def _check_sampling(
             f"against a median of {median:.6g} s ({100.0 * deviation[k]:.3g} % off, "
             f"tolerance {100.0 * tolerance:.3g} %)",
             "pass resample=True (--resample on the command line) to interpolate linearly onto "
-            "a uniform grid at the "
-            "median rate, or fix the time column",
+            "a uniform grid at the median rate, or fix the time column",
         )
     longest = int(np.argmax(steps))
     if steps[longest] > MAX_RESAMPLE_GAP_INTERVALS * median:
@@ -497,8 +496,7 @@ def _check_force_samples(record: Record, allow_negative: bool, warnings: list[st
                 problem,
                 "check the zero offset and sign of the force channels, or pass "
                 "allow_negative_force=True (--allow-negative-force on the command line) for a "
-                "synthetic "
-                "benchmark force that dips below zero",
+                "synthetic benchmark force that dips below zero",
             )
         _add_warning(
             warnings,
