@@ -152,3 +152,25 @@ def test_demo_warnings_name_the_record_once():
     assert len(bullets) == len(insp.warnings)
     assert all(b.startswith("insole: ") for b in bullets)
     assert not any(b.startswith("insole: insole: ") for b in bullets)
+
+
+def test_library_errors_name_the_parameter_and_the_command_line_the_flag(tmp_path, capsys):
+    from workbench.errors import UsageError
+    from workbench.population.batch import run_batch
+    from workbench.sensitivity.design import parse_factors
+
+    # A Python caller reads the parameter of the function it called ...
+    with pytest.raises(UsageError, match=r"^'factors': 'bogus' is not a sensitivity factor"):
+        parse_factors("obs_noise_ddu,bogus")
+    with pytest.raises(UsageError, match=r"^'workers' must be at least 1, got 0") as err:
+        run_batch(tmp_path / "manifest.csv", tmp_path / "out", workers=0)
+    assert "--" not in str(err.value)
+    # ... and the same mistake on the command line reads the flag.
+    argv = ["sensitivity", tmp_path / "rec.csv", "--out", tmp_path / "s", "--factors", "bogus"]
+    code, _, err_text = run_cli(argv, capsys)
+    assert code == 2 and "--factors: 'bogus' is not a sensitivity factor" in err_text
+    assert "'factors'" not in err_text
+    argv = ["batch", tmp_path / "manifest.csv", "--out", tmp_path / "b", "--workers", "0"]
+    code, _, err_text = run_cli(argv, capsys)
+    assert code == 2 and "--workers must be at least 1, got 0" in err_text
+    assert "'workers'" not in err_text

@@ -50,14 +50,16 @@ def _dask(
         from distributed import Client, as_completed
     except ImportError:
         raise UsageError(
-            "--scheduler needs Dask distributed; install it with pip install 'workbench[dask]'"
+            "'scheduler' needs Dask distributed; install it with pip install 'workbench[dask]'",
+            parameter="scheduler",
         ) from None
     try:
         client = Client(address, timeout="20s")
     except (OSError, TimeoutError) as err:
         raise UsageError(
-            f"--scheduler {address}: cannot reach a Dask scheduler there ({err}); start one "
-            "(dask scheduler) or check the address"
+            f"'scheduler' {address}: cannot reach a Dask scheduler there ({err}); start one "
+            "(dask scheduler) or check the address",
+            parameter="scheduler",
         ) from None
     try:
         futures = client.map(fn, list(tasks), key=list(keys))
@@ -99,7 +101,9 @@ def run_tasks(
         The results, in the order the runs finish.
     """
     if isinstance(workers, bool) or int(workers) != workers or workers < 1:
-        raise UsageError(f"--workers must be a whole number of at least 1, got {workers!r}")
+        raise UsageError(
+            f"'workers' must be a whole number of at least 1, got {workers!r}", parameter="workers"
+        )
     if scheduler:
         names = list(keys) if keys is not None else [f"{label}-{i}" for i in range(len(tasks))]
         return _dask(fn, tasks, scheduler, names)

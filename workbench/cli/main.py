@@ -86,6 +86,15 @@ FLAG_FOR_PARAMETER = {
     "observe": "--observe",
     "force_proposal": "--force-proposal",
     "seed": "--seed",
+    "workers": "--workers",
+    "scheduler": "--scheduler",
+    "resume": "--resume",
+    "factors": "--factors",
+    "levels": "--levels",
+    "design": "--design",
+    "replicates": "--replicates",
+    "mode": "--mode",
+    "effects": "--effects",
 }
 
 

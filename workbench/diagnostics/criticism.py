@@ -612,12 +612,16 @@ def compare(
     added = candidate_effects([*first, *candidate_effects(effects or ())])
     names = [e.name for e in added]
     if not names:
-        raise UsageError("compare: give at least one effect, e.g. --effects gait_asymmetry")
+        raise UsageError(
+            "compare: give at least one effect in 'effects', e.g. gait_asymmetry",
+            parameter="effects",
+        )
     cv, untestable = _build_cv(data, added, harmonics, folds, step_variation, response_modulation)
     if untestable:
         raise UsageError(
             f"compare: effect '{untestable[0]}' cannot be tested on {data.source} (for "
-            "base_motion the record needs a ground_acc column); drop it from --effects"
+            "base_motion the record needs a ground_acc column); drop it from 'effects'",
+            parameter="effects",
         )
     rows = [_row(cv, [], "baseline", None)]
     for i in range(len(names)):

@@ -87,8 +87,8 @@ class CrossingSpec:
             rate = self.arrival_rate_per_s
             if not (np.isfinite(rate) and rate > 0):
                 raise UsageError(
-                    "a crowd stream needs a positive --density (pedestrians per m^2) or --flow "
-                    "(pedestrians per s)"
+                    "a crowd stream needs a positive density_per_m2 (pedestrians per m^2, "
+                    "--density on the command line) or flow_per_s (pedestrians per s, --flow)"
                 )
             if not (np.isfinite(self.duration_s) and self.duration_s > 0):
                 raise UsageError(f"the duration must be positive, got {self.duration_s}")
@@ -261,7 +261,9 @@ def run_monte_carlo(
     if int(n_crossings) != n_crossings or n_crossings < 1:
         raise UsageError(f"the number of crossings must be a positive integer, got {n_crossings}")
     if int(workers) != workers or workers < 1:
-        raise UsageError(f"--workers must be a positive integer, got {workers}")
+        raise UsageError(
+            f"'workers' must be a positive integer, got {workers}", parameter="workers"
+        )
     chunks = [
         list(range(i, min(i + chunk_size, n_crossings))) for i in range(0, n_crossings, chunk_size)
     ]

@@ -372,9 +372,13 @@ def crosscheck(
     from tqdm import tqdm
 
     if mode not in MODES:
-        raise UsageError(f"--mode must be one of {', '.join(MODES)}, got {mode!r}")
+        raise UsageError(
+            f"'mode' must be one of {', '.join(MODES)}, got {mode!r}", parameter="mode"
+        )
     if prior not in PRIORS:
-        raise UsageError(f"--prior must be one of {', '.join(PRIORS)}, got {prior!r}")
+        raise UsageError(
+            f"'prior' must be one of {', '.join(PRIORS)}, got {prior!r}", parameter="prior"
+        )
     if output.piece_mean is None or output.piece_sd is None:
         raise UsageError(f"a {output.method} result has no per-step values; cross-check rbpf or pf")
     if output.piece_mean.shape[0] != problem.n_pieces:

@@ -190,7 +190,10 @@ def _check_args(
     if not isinstance(problem, IdentificationProblem):
         raise UsageError(f"run_pf needs an IdentificationProblem, got {type(problem).__name__}")
     if isinstance(n_particles, bool) or int(n_particles) != n_particles or int(n_particles) < 2:
-        raise UsageError(f"--particles must be a whole number of at least 2, got {n_particles!r}")
+        raise UsageError(
+            f"'n_particles' must be a whole number of at least 2, got {n_particles!r}",
+            parameter="n_particles",
+        )
     if resampling not in SCHEMES:
         raise UsageError(
             f"unknown resampling scheme {resampling!r}; use one of {', '.join(SCHEMES)}"

@@ -439,7 +439,10 @@ def build_problem(
     if observe not in OBSERVED_CHANNELS:
         raise UsageError(f"observe must be 'all' or 'acc', got {observe!r}")
     if int(harmonics) < 1:
-        raise UsageError(f"--harmonics must be a whole number of at least 1, got {harmonics!r}")
+        raise UsageError(
+            f"'harmonics' must be a whole number of at least 1, got {harmonics!r}",
+            parameter="harmonics",
+        )
     harmonics = int(harmonics)
     if time_basis not in ("step_phase", "absolute"):
         raise UsageError(f"time basis must be 'step_phase' or 'absolute', got {time_basis!r}")

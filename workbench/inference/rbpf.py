@@ -639,7 +639,10 @@ def _check_args(
     if not isinstance(problem, IdentificationProblem):
         raise UsageError("run_rbpf needs an IdentificationProblem (see build_problem)")
     if isinstance(n_particles, bool) or int(n_particles) != n_particles or n_particles < 2:
-        raise UsageError(f"--particles must be a whole number of at least 2, got {n_particles!r}")
+        raise UsageError(
+            f"'n_particles' must be a whole number of at least 2, got {n_particles!r}",
+            parameter="n_particles",
+        )
     if resampling not in SCHEMES:
         raise UsageError(
             f"unknown resampling scheme {resampling!r}; use one of {', '.join(SCHEMES)}"

@@ -508,7 +508,7 @@ class IdentifySettings:
                 path,
                 "whole file",
                 "the settings file does not exist",
-                "check the path given to --config",
+                "check the path given (--config on the command line)",
             ) from None
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
             raise InputError(

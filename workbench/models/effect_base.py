@@ -338,7 +338,8 @@ class Effect:
             raise UsageError(
                 f"effect {self.name!r} is nonlinear in its parameters; identification accepts "
                 "linear effects and those that override identification_columns() (such as "
-                "heel_impact); give it regressors() or leave it out of --effects"
+                "heel_impact); give it regressors() or leave it out of 'effects'",
+                parameter="effects",
             )
         t = np.asarray(t_s, dtype=np.float64)
         r = np.asarray(self.regressors(u, v, t, context), dtype=np.float64)

@@ -352,7 +352,7 @@ def run_batch(
     t0 = time.perf_counter()
     settings = settings or IdentifySettings()
     if int(workers) < 1:
-        raise UsageError(f"--workers {workers}: give at least 1 worker")
+        raise UsageError(f"'workers' must be at least 1, got {workers}", parameter="workers")
     entries = load_manifest(manifest)
     out = Path(out_dir)
     rec_dir = out / "records"
@@ -362,16 +362,18 @@ def run_batch(
     if meta_path.exists() or (rec_dir.exists() and any(rec_dir.glob("*.json"))):
         if not resume:
             raise UsageError(
-                f"--out {out}: the folder already holds a batch; pass --resume to continue it, "
-                "or choose an empty folder"
+                f"the output folder {out} already holds a batch; pass 'resume' to continue it, "
+                "or choose an empty folder",
+                parameter="resume",
             )
         old = _read_json(meta_path)
         # Compare as JSON reads it back (tuples become lists, for example).
         stored_form = json.loads(json.dumps(_clean_json(settings_json)))
         if old is not None and old.get("settings") != stored_form:
             raise UsageError(
-                f"--resume: the batch in {out} was run with other identification settings; "
-                "use the same flags, or a new --out folder"
+                f"'resume': the batch in {out} was run with other identification settings; "
+                "use the same settings, or a new output folder",
+                parameter="resume",
             )
     rec_dir.mkdir(parents=True, exist_ok=True)
     for stale in rec_dir.glob(".*.tmp"):  # a killed run's half-written file

@@ -130,7 +130,7 @@ def _read_csv(p: Path, source: str) -> _Table:
                 f"({_DISPLAY_UNITS[canonical]})",
                 f"convert the column to {_DISPLAY_UNITS[canonical]} and name it "
                 f"'{canonical}' (for forces in kN or kgf you may instead name it '{canonical}' "
-                "and pass --force-unit)",
+                "and pass force_unit=..., or --force-unit on the command line)",
             )
         if canonical in found:
             raise InputError(

@@ -132,7 +132,8 @@ def _check_walking(record: Record, steps: Steps, pacing: PacingEstimate) -> None
             "whole record",
             f"the force repeats at {pacing.pacing_hz:.3g} Hz, outside the {lo_hz:g}-{hi_hz:g} "
             "Hz of walking, so these are not footfalls",
-            "check that the record is walking; if the pacing is known, pass --pacing HZ",
+            "check that the record is walking; if the pacing is known, pass pacing_hz=... "
+            "(--pacing HZ on the command line)",
         )
 
 
@@ -200,7 +201,8 @@ def inspect_record(
             warnings.append(
                 f"{record.name}: the stated pacing {record.pacing_hz:.3f} Hz differs from the "
                 f"{pacing.pacing_hz:.3f} Hz measured from footfalls by {100 * rel:.0f} %; check "
-                "the metadata or drop --pacing to use the measured value."
+                "the metadata or drop the stated pacing (pacing_hz, --pacing on the command "
+                "line) to use the measured value."
             )
     if pacing.varies:
         inst = np.asarray(pacing.instantaneous_hz, dtype=float)

@@ -165,7 +165,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
             f"the file is a table of numbers without a header, with {len(tokens)} columns "
             f"(the PhysioNet insole format has {_INSOLE_COLUMNS})",
             "add a header line naming the columns 'time' and 'grf' to read it as CSV, or pass "
-            "the format with --format (fmt=... in Python)",
+            "the format as fmt=... (--format on the command line)",
         )
     return "csv"
 

@@ -93,7 +93,8 @@ def com_acceleration(record: Record) -> FloatArray:
             record.source,
             "metadata 'mass_kg'",
             f"the body mass is {mass_kg:g} kg, which is not a positive number",
-            "give the subject's body mass in kilograms with --mass KG or in the JSON sidecar",
+            "give the subject's body mass in kilograms as mass_kg=... (--mass KG on the "
+            "command line) or in the JSON sidecar",
         )
     grf = np.asarray(record.grf_n, dtype=np.float64)
     bad = ~np.isfinite(grf)

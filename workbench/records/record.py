@@ -120,7 +120,8 @@ class Record:
                 self.source,
                 "metadata",
                 "no body mass was given",
-                'pass --mass KG or add "mass_kg" to the JSON sidecar or the manifest',
+                'pass mass_kg=... (--mass KG on the command line) or add "mass_kg" to the '
+                "JSON sidecar or the manifest",
             )
         return self.mass_kg
 

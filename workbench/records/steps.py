@@ -409,7 +409,8 @@ def static_balance_warning(ratio: float, source: str, tolerance: float = 0.05) -
         f"{source}: the mean GRF over whole steps is {ratio:.2f} times the body weight M g "
         f"({abs(ratio - 1) * 100:.0f} % {direction}, tolerance {tolerance * 100:.0f} %), so "
         "the body mass is wrong, the force sensor is mis-calibrated or drifting, or a force "
-        "plate or foot is missing; check the mass, or pass --rescale-to-mass to scale the "
+        "plate or foot is missing; check the mass, or pass rescale_to_mass=True "
+        "(--rescale-to-mass on the command line) to scale the "
         "force so that its mean over whole steps equals M g (this assumes a pure sensor gain "
         "error and a correct mass)."
     )

@@ -79,8 +79,8 @@ def _decode(raw: bytes, source: str) -> str:
             source,
             "whole file",
             "the file contains binary data (NUL bytes), not a text table",
-            "give a text file (CSV, OpenSim .mot or PhysioNet insole text) or pass --format c3d "
-            "for a C3D file",
+            "give a text file (CSV, OpenSim .mot or PhysioNet insole text) or, for a C3D file, "
+            'pass fmt="c3d" (--format c3d on the command line)',
         )
     try:
         return raw.decode("utf-8-sig")

@@ -339,8 +339,8 @@ def _check_sampling(
             f"the sampling is irregular: the interval before this row is {steps[k]:.6g} s "
             f"against a median of {median:.6g} s ({100.0 * deviation[k]:.3g} % off, "
             f"tolerance {100.0 * tolerance:.3g} %)",
-            "pass --resample (resample=True) to interpolate linearly onto a uniform grid at the "
-            "median rate, or fix the time column",
+            "pass resample=True (--resample on the command line) to interpolate linearly onto "
+            "a uniform grid at the median rate, or fix the time column",
         )
     longest = int(np.argmax(steps))
     if steps[longest] > MAX_RESAMPLE_GAP_INTERVALS * median:
@@ -495,8 +495,8 @@ def _check_force_samples(record: Record, allow_negative: bool, warnings: list[st
                 _where(record, low, "grf_n"),
                 problem,
                 "check the zero offset and sign of the force channels, or pass "
-                "--allow-negative-force (allow_negative_force=True in Python) for a synthetic "
-                "benchmark force that dips below zero",
+                "allow_negative_force=True (--allow-negative-force on the command line) for a "
+                "synthetic benchmark force that dips below zero",
             )
         _add_warning(
             warnings,
@@ -540,16 +540,16 @@ def _check_force_level(record: Record) -> None:
             record.source,
             where,
             f"{stated}, which looks like kilograms-force rather than newtons",
-            f"multiply the force columns by {G_M_S2:g} or load the file with --force-unit kgf "
-            '(force_unit="kgf" in Python)',
+            f"multiply the force columns by {G_M_S2:g} or load the file with "
+            'force_unit="kgf" (--force-unit kgf on the command line)',
         )
     if KN_RATIO_RANGE[0] <= ratio <= KN_RATIO_RANGE[1]:
         raise InputError(
             record.source,
             where,
             f"{stated}, which looks like kilonewtons rather than newtons",
-            "multiply the force columns by 1000 or load the file with --force-unit kN "
-            '(force_unit="kN" in Python)',
+            "multiply the force columns by 1000 or load the file with "
+            'force_unit="kN" (--force-unit kN on the command line)',
         )
     raise InputError(
         record.source,

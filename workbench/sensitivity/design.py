@@ -280,12 +280,14 @@ def _levels(name: str, base: IdentifySettings, values: Sequence[float | int | st
     return out
 
 
-def _factor(name: str) -> Factor:
+def _factor(name: str, parameter: str = "factors") -> Factor:
     try:
         return FACTORS[name]
     except KeyError:
         raise UsageError(
-            f"--factors: {name!r} is not a sensitivity factor; choose from {', '.join(FACTORS)}"
+            f"'{parameter}': {name!r} is not a sensitivity factor; choose from "
+            f"{', '.join(FACTORS)}",
+            parameter=parameter,
         ) from None
 
 
@@ -295,11 +297,15 @@ def parse_factors(text: str | None) -> list[str]:
         return list(FACTORS)
     names = [t.strip() for t in text.split(",") if t.strip()]
     if not names:
-        raise UsageError("--factors is empty; give names such as obs_noise,harmonics")
+        raise UsageError(
+            "'factors' is empty; give names such as obs_noise,harmonics", parameter="factors"
+        )
     for n in names:
-        _factor(n)
+        _factor(n, "factors")
     if len(set(names)) != len(names):
-        raise UsageError(f"--factors {text!r} names a factor twice; name each once")
+        raise UsageError(
+            f"'factors' {text!r} names a factor twice; name each once", parameter="factors"
+        )
     return names
 
 
@@ -313,31 +319,36 @@ def parse_levels(items: Sequence[str], base: IdentifySettings) -> dict[str, list
     for item in items:
         name, eq, values = item.partition("=")
         name = name.strip()
-        factor = _factor(name)
+        factor = _factor(name, "levels")
         raw = [v.strip() for v in values.split(",") if v.strip()]
         if not eq or not raw:
             raise UsageError(
-                f"--levels {item!r} is not of the form NAME=V1,V2; write for example "
-                "--levels obs_noise_ddu=0.5,1,2"
+                f"'levels' {item!r} is not of the form NAME=V1,V2; write for example "
+                "obs_noise_ddu=0.5,1,2",
+                parameter="levels",
             )
         parsed: list[float | int | str] = []
         for v in raw:
             if factor.kind == "choice":
                 if v not in _CHOICES[name]:
                     raise UsageError(
-                        f"--levels {name}: {v!r} is not a choice; use {', '.join(_CHOICES[name])}"
+                        f"'levels' {name}: {v!r} is not a choice; use {', '.join(_CHOICES[name])}",
+                        parameter="levels",
                     )
                 parsed.append(v)
                 continue
             try:
                 num = float(v)
             except ValueError:
-                raise UsageError(f"--levels {name}: {v!r} is not a number") from None
+                raise UsageError(
+                    f"'levels' {name}: {v!r} is not a number", parameter="levels"
+                ) from None
             ok = num > 0 if factor.kind in ("scale", "integer") else num >= 0
             if not (np.isfinite(num) and ok) or (factor.kind == "integer" and num != int(num)):
                 raise UsageError(
-                    f"--levels {name}: {v!r} must be a "
-                    + ("positive whole number" if factor.kind == "integer" else "positive number")
+                    f"'levels' {name}: {v!r} must be a "
+                    + ("positive whole number" if factor.kind == "integer" else "positive number"),
+                    parameter="levels",
                 )
             parsed.append(int(num) if factor.kind == "integer" else num)
         out[name] = _levels(name, base, parsed)
@@ -418,7 +429,9 @@ def build_design(
     (DesignPoint, list of DesignPoint)
     """
     if design not in DESIGNS:
-        raise UsageError(f"--design {design!r} is not known; choose oat or factorial")
+        raise UsageError(
+            f"'design' {design!r} is not known; choose oat or factorial", parameter="design"
+        )
     defaults = {n: next(lv.label for lv in lvls if lv.is_default) for n, lvls in levels.items()}
     default_values = {
         n: next(lv.value for lv in lvls if lv.is_default) for n, lvls in levels.items()

@@ -63,7 +63,9 @@ def make_tasks(
 ) -> list[SensitivityTask]:
     """Every (record, point, replicate) of a study, with its seed."""
     if replicates < 1:
-        raise UsageError(f"--replicates must be at least 1, got {replicates}")
+        raise UsageError(
+            f"'replicates' must be at least 1, got {replicates}", parameter="replicates"
+        )
     tasks = []
     for key, record in records:
         for p in points:

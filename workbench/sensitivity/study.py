@@ -299,7 +299,7 @@ def run_sensitivity(
     if design == "factorial" and len(points) * replicates * len(records) > 2000:
         raise UsageError(
             f"the factorial design has {len(points)} points x {replicates} replicates per "
-            "record; name fewer factors with --factors or fewer levels with --levels"
+            "record; name fewer factors or give fewer levels"
         )
     tasks = make_tasks(records, points, base, replicates, seed)
     rows = run_tasks(tasks, workers=workers, scheduler=scheduler, progress=progress)
