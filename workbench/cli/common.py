@@ -17,6 +17,7 @@ __all__ = [
     "CURRENT_ARGV",
     "Parser",
     "add_allow_negative_force",
+    "add_rigid_floor_flag",
     "emit",
     "floats",
     "identify_settings",
@@ -265,10 +266,22 @@ def identify_settings(args: argparse.Namespace) -> Any:
         "force_check": False if flag("no_force_check") else None,
         "effects": flag("effects"),
         "rescale_to_mass": True if flag("rescale_to_mass") else None,
+        "surface": "rigid" if flag("rigid_floor") else None,
     }
     if flag("config"):
         return IdentifySettings.from_toml(args.config, **overrides)
     return IdentifySettings().replace(**overrides)
+
+
+def add_rigid_floor_flag(parser: Any) -> None:
+    """Add ``--rigid-floor`` (ignore a measured surface motion) to a parser or group."""
+    parser.add_argument(
+        "--rigid-floor",
+        action="store_true",
+        help="ignore the record's ground_acc column: identify as on a rigid floor instead of "
+        "letting the measured surface motion act through K and C (the default), to see "
+        "what the surface adds",
+    )
 
 
 def floats(text: str) -> tuple[float, ...]:

@@ -6,7 +6,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from workbench.cli.common import emit, load, positive_int, record_options, safe_key
+from workbench.cli.common import (
+    add_rigid_floor_flag,
+    emit,
+    load,
+    positive_int,
+    record_options,
+    safe_key,
+)
 from workbench.errors import UsageError
 
 __all__ = ["add_crosscheck_parser"]
@@ -39,6 +46,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         "observe": args.observe,
         "seed": args.seed,
         "force_check": False,
+        "surface": "rigid" if args.rigid_floor else None,
     }
     settings = IdentifySettings().replace(**overrides)
     if settings.model.pieces != "steps":
@@ -165,6 +173,7 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "walker (all: exact, cost growing with the step index), or the last N per walker "
         "with a normal fit before them (approximate)",
     )
+    add_rigid_floor_flag(p)
     p.add_argument("--max-steps", type=positive_int, metavar="N", help="check the first N steps")
     p.add_argument("--ensembles", type=positive_int, default=4, metavar="N", help="(4)")
     p.add_argument("--walkers", type=positive_int, metavar="N", help="per ensemble (32)")

@@ -6,7 +6,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from workbench.cli.common import emit, identify_settings, load, record_options, safe_key
+from workbench.cli.common import (
+    add_rigid_floor_flag,
+    emit,
+    identify_settings,
+    load,
+    record_options,
+    safe_key,
+)
 from workbench.errors import UsageError
 
 __all__ = ["add_identify_parser"]
@@ -127,6 +134,7 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="effects to identify with the model (e.g. gait_asymmetry,cubic_stiffness); their "
         "coefficients are shared by the whole record and reported under 'effects'",
     )
+    add_rigid_floor_flag(p)
     p.add_argument(
         "--crosscheck",
         action="store_true",

@@ -6,7 +6,12 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from workbench.cli.common import add_allow_negative_force, emit, identify_settings
+from workbench.cli.common import (
+    add_allow_negative_force,
+    add_rigid_floor_flag,
+    emit,
+    identify_settings,
+)
 from workbench.errors import UsageError
 
 __all__ = ["add_population_parser"]
@@ -176,6 +181,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--config", metavar="TOML", help="identification settings file")
     p.add_argument("--seed", type=int, help="batch seed (default 0)")
+    add_rigid_floor_flag(p)
     add_allow_negative_force(p)
     p.set_defaults(handler=_cmd_batch)
 

@@ -8,6 +8,7 @@ from typing import Any
 
 from workbench.cli.common import (
     add_allow_negative_force,
+    add_rigid_floor_flag,
     emit,
     identify_settings,
     warn_accepted_negative_force,
@@ -118,6 +119,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument("--prior", choices=["modal", "seed"])
     g.add_argument("--observe", choices=["all", "acc"])
     g.add_argument("--no-force-check", action="store_true")
+    add_rigid_floor_flag(g)
     g.add_argument("--config", metavar="TOML", help="identification settings file")
     r = p.add_argument_group("record")
     r.add_argument("--mass", type=float, metavar="KG", help="body mass [kg]")

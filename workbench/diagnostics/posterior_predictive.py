@@ -172,10 +172,14 @@ def record_statistics(result: IdentificationResult, force_n: FloatArray) -> dict
 def _implied_force(
     result: IdentificationResult, damping: FloatArray, stiffness: FloatArray
 ) -> FloatArray:
-    """``F = M u'' + C u' + K u`` of the measured record for each (C, K), shape (R, N)."""
+    """``F = M u'' + C u' + K u`` of the measured record for each (C, K), shape (R, N).
+
+    On a moving surface ``u``, ``u'`` are relative to it and ``u''`` is absolute (the GRF).
+    """
     p = result.problem
+    acc = p.absolute_y[:, 2]
     return np.asarray(
-        p.mass_kg * p.y[:, 2] + damping[:, None] * p.y[:, 1] + stiffness[:, None] * p.y[:, 0],
+        p.mass_kg * acc + damping[:, None] * p.y[:, 1] + stiffness[:, None] * p.y[:, 0],
         dtype=np.float64,
     )
 

@@ -14,12 +14,18 @@ The steps, with the decisions they take:
    ``"seed"`` is the seed's box);
 3. set the observation noise (``auto``: maximum marginal likelihood, the default; ``seed``:
    10 % of the RMS of u, u', u''; or a fraction);
-4. with effects in the model, their columns join the force basis as coefficients shared by
+4. on a record that measures its surface's motion (``ground_acc``), the spring and damper
+   act on the motion relative to it unless the model says ``surface="rigid"``
+   (:mod:`workbench.records.surface`, docs/science.md 6); the result's ``extra["surface"]``
+   (``--json`` ``surface``) says which surface model was used and how much of the
+   information on C and K came from the surface
+   (:mod:`workbench.inference.surface_information`);
+5. with effects in the model, their columns join the force basis as coefficients shared by
    the whole record (:mod:`workbench.inference.effect_terms`), and the result's
    ``extra["effects"]`` (``--json`` ``effects``) reports their posterior;
-5. run the method (:mod:`workbench.inference.methods`: ``RBPF`` by default, ``PF``
+6. run the method (:mod:`workbench.inference.methods`: ``RBPF`` by default, ``PF``
    seed-faithful, ``Exact``);
-6. assess identifiability from the posterior: contraction against the prior, C-K correlation
+7. assess identifiability from the posterior: contraction against the prior, C-K correlation
    and the joint correlation of C and K with the force coefficients, then the force-model
    check and the prior-edge and collapse checks, each of which can only downgrade it.
 """
@@ -47,6 +53,7 @@ from workbench.records.inspection import Inspection, inspect_record
 from workbench.records.preprocess import COMResponse, preprocess
 from workbench.records.record import Record
 from workbench.records.steps import Steps
+from workbench.records.surface import surface_motion
 
 __all__ = ["compile_problem", "identify", "identify_problem"]
 
@@ -132,6 +139,13 @@ def compile_problem(
     pacing = model.pacing_hz
     if pacing is None and model.pieces == "whole":
         pacing = insp.pacing.pacing_hz if isinstance(insp, Inspection) else insp.measured_pacing_hz
+    surface = None
+    if model.surface == "coupled":
+        surface = surface_motion(
+            insp.record,
+            highpass_hz=insp.com.highpass_hz,
+            order=insp.com.filter_order,
+        )
     return build_problem(
         insp.com,
         insp.steps if model.pieces == "steps" else None,
@@ -142,6 +156,7 @@ def compile_problem(
         state_fraction=settings.state_fraction,
         observe=settings.noise.observe,
         prior=prior,
+        surface=surface,
     )
 
 
@@ -282,6 +297,14 @@ def identify(
     base = problem
     terms = None
     effects = settings.model.effects
+    if problem.surface is not None and any(e.name == "base_motion" for e in effects):
+        raise UsageError(
+            f"{insp.record.source}: the model already couples the measured surface motion "
+            "through K and C, so 'base_motion' would count it twice; leave base_motion out, or "
+            "identify on a rigid floor (surface='rigid', --rigid-floor) to fit it as a free "
+            "effect",
+            parameter="effects",
+        )
     if effects:
         from workbench.inference.effect_terms import effect_terms, with_effects
 
@@ -300,6 +323,9 @@ def identify(
         post = effect_posterior(base, terms, result.draws, result.weights, seed=settings.seed)
         post["pilot"] = pilot
         extra["effects"] = post
+    from workbench.inference.surface_information import surface_report
+
+    extra["surface"] = surface_report(result, problem, insp.record, settings.model.surface)
     result = result.replace(extra=extra)
     if settings.force_check:
         result = apply_force_model_check(result, problem)

@@ -211,7 +211,12 @@ class _ForceInput(NamedTuple):
 
 def _force_input(problem: IdentificationProblem) -> _ForceInput:
     fp = problem.force_prior
-    return _ForceInput(problem.basis @ fp.mean_n, problem.basis * fp.sd_n)
+    base = problem.basis @ fp.mean_n
+    known = problem.surface_force_n
+    if known is not None:
+        # A moving surface's inertial load is a known input (problem module docstring).
+        base = base + known
+    return _ForceInput(base, problem.basis * fp.sd_n)
 
 
 def _filter_piece(

@@ -69,6 +69,10 @@ def dense_kalman_loglik(
     )
     mass = problem.mass_kg
     basis, y = problem.basis, problem.y
+    # A moving surface's inertial load is a known force input (problem module docstring).
+    known = problem.surface_force_n
+    if known is None:
+        known = np.zeros(problem.n_samples)
     n, m = problem.n_samples, problem.n_coefficients
     d = 2 + m
     mu, sigma = problem.force_prior.mean_n, np.diag(np.square(problem.force_prior.sd_n))
@@ -96,6 +100,7 @@ def dense_kalman_loglik(
             f0[:2, :2] = phi
             f0[:2, 2:] = np.outer(g0, basis[kk - 1])
             z = f0 @ z
+            z[:2] += g0 * known[kk - 1]
             p = f0 @ p @ f0.T + q
             if starts[kk]:
                 z[2:] = mu
@@ -106,12 +111,14 @@ def dense_kalman_loglik(
             f1 = np.eye(d)
             f1[:2, 2:] = np.outer(g1, basis[kk])
             z = f1 @ z
+            z[:2] += g1 * known[kk]
             p = f1 @ p @ f1.T
         h = np.zeros((3, d))
         h[0, 0] = h[1, 1] = 1.0
         h[2, 0], h[2, 1] = -k / mass, -c / mass
         h[2, 2:] = basis[kk] / mass
         y_hat = h @ z
+        y_hat[2] += known[kk] / mass
         s = h @ p @ h.T + r
         s = 0.5 * (s + s.T)
         chol = np.linalg.cholesky(s)

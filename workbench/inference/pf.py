@@ -278,6 +278,15 @@ def _liu_west(
         table[:] = z
 
 
+def _piece_force(
+    basis: FloatArray, table: FloatArray, known_force: FloatArray, b0: int, b1: int
+) -> FloatArray:
+    """Force of every table row on samples ``b0..b1 - 1``, shape (samples, rows) [N]."""
+    force = basis[b0:b1] @ table.T
+    force += known_force[b0:b1, None]
+    return np.ascontiguousarray(force)
+
+
 class _RegressionProposal:
     """Gaussian proposal of a piece's force coefficients given each particle's (C, K).
 
@@ -318,8 +327,11 @@ class _RegressionProposal:
         bs = b * self.s  # basis in the prior's whitened coordinates
         lam, vec = np.linalg.eigh(bs.T @ bs)
         lam = np.clip(lam, 0.0, None)
-        # Whitened right-hand sides of M y'' + K y + C y' minus the prior mean's force.
-        base = bs.T @ (mass * y[:, 2] - b @ self.mu)
+        # Whitened right-hand sides of M y'' + K y + C y' minus the prior mean's force (and
+        # minus a moving surface's known load).
+        known = prob.surface_force_n
+        offset = b @ self.mu if known is None else b @ self.mu + known[start:end]
+        base = bs.T @ (mass * y[:, 2] - offset)
         per_k = bs.T @ y[:, 0]
         per_c = bs.T @ y[:, 1]
         sigma2 = self.inflation * (
@@ -427,6 +439,9 @@ def run_pf(
     inv_mass = 1.0 / mass
     dt = float(problem.dt_s)
     basis = np.ascontiguousarray(problem.basis, dtype=np.float64)
+    # A moving surface's inertial load is a known force input (problem module docstring).
+    known = problem.surface_force_n
+    known_force = np.zeros(n_samples) if known is None else np.ascontiguousarray(known)
     y = np.ascontiguousarray(problem.y, dtype=np.float64)
     noise = problem.noise
     obs_sd = np.asarray(noise.obs_sd, dtype=np.float64)
@@ -527,7 +542,7 @@ def run_pf(
 
     def acceleration(row: int) -> None:
         """``acc = (-K u - C u' + b_row theta) / M`` for the current particles (numpy)."""
-        np.take(table @ basis[row], pointer, out=acc)
+        np.take(table @ basis[row] + known_force[row], pointer, out=acc)
         np.subtract(acc, kk * u, out=acc)
         np.subtract(acc, c * v, out=acc)
         np.multiply(acc, inv_mass, out=acc)
@@ -632,7 +647,7 @@ def run_pf(
                         counters[1:] = np.where(random_walk, n_part, counters[1:])
                         skip = True
                     draw_theta(piece)
-                force = np.ascontiguousarray(basis[b0:b1] @ table.T)
+                force = _piece_force(basis, table, known_force, b0, b1)
                 k = b0
                 while k < b1:
                     k_last, status = advance(k, b1, skip, b0, y, force, *kernel_args)
@@ -650,7 +665,7 @@ def run_pf(
                     if is_end[k_last]:
                         piece_summary(piece)
                     if status == STATUS_RESAMPLE and resample(k_last):
-                        force = np.ascontiguousarray(basis[b0:b1] @ table.T)
+                        force = _piece_force(basis, table, known_force, b0, b1)
                     k, skip = k_last + 1, False
                 bar.update(b1 - b0)
                 b0 = b1

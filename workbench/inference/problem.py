@@ -31,6 +31,15 @@ The generative model given (C, K) is linear-Gaussian in ``(u, u', theta)``:
 
 with ``x = (u, u')``; how ``Phi`` and ``Gamma`` are discretised is each algorithm's documented
 choice (the seed's Euler ``I + A dt`` for ``method="pf"``).
+
+On a moving surface (``surface`` set, docs/science.md 6) the spring and damper act on the
+motion relative to the surface, ``M u'' + C (u' - z') + K (u - z) = F_bio``. In the
+surface's frame, ``r = u - z``, that is the same model with the known inertial load
+``-M z''`` added to the force, ``M r'' + C r' + K r = F_bio - M z''``: the problem's ``y`` then
+holds ``(r, r', r'')`` and every method adds :attr:`IdentificationProblem.surface_force_n`
+to ``b_k theta``. The load does not depend on (C, K), so the model stays linear-Gaussian
+given (C, K) and no method needs anything else; the measured deck motion enters the
+likelihood through the response it drives in ``r``, which pins K and C.
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ from workbench.models.force import FourierForce
 from workbench.records.preprocess import COMResponse
 from workbench.records.record import G_M_S2
 from workbench.records.steps import Steps
+from workbench.records.surface import SurfaceMotion
 
 __all__ = [
     "KALMAN_STATE_FRACTION",
@@ -293,6 +303,9 @@ class IdentificationProblem:
     effect_names : tuple of str
         Names of effect columns that follow the ``2 n + 1`` Fourier columns of ``basis``
         (:mod:`workbench.inference.effect_terms`); empty without effects.
+    surface : SurfaceMotion or None
+        The walking surface's motion on the problem's samples when it acts through K and C
+        (``y`` is then relative to it, module docstring); None on a rigid floor.
     """
 
     mass_kg: float
@@ -312,6 +325,22 @@ class IdentificationProblem:
     rms: FloatArray = dataclasses.field(default_factory=lambda: np.ones(3))
     observe: str = "all"
     effect_names: tuple[str, ...] = ()
+    surface: SurfaceMotion | None = None
+
+    @property
+    def surface_force_n(self) -> FloatArray | None:
+        """Known load ``-M z''`` of the surface's motion in its own frame [N]; None if rigid."""
+        if self.surface is None:
+            return None
+        return np.asarray(-self.mass_kg * self.surface.acc_m_s2, dtype=np.float64)
+
+    @property
+    def absolute_y(self) -> FloatArray:
+        """Observations in the fixed frame: ``(u, u', u'')`` (``y`` plus the surface's motion)."""
+        if self.surface is None:
+            return self.y
+        s = self.surface
+        return self.y + np.column_stack([s.disp_m, s.vel_m_s, s.acc_m_s2])
 
     def obs_sd_for(self, fraction: float) -> FloatArray:
         """Observation sd of (u, u', u'') for a noise fraction of the observed channels' RMS.
@@ -400,6 +429,7 @@ def build_problem(
     prior: StiffnessDampingPrior | None = None,
     force_prior: ForcePrior | None = None,
     observe: str = "all",
+    surface: SurfaceMotion | None = None,
 ) -> IdentificationProblem:
     """Build the identification problem of a preprocessed record.
 
@@ -431,6 +461,9 @@ def build_problem(
         Default: :meth:`ForcePrior.default`.
     observe : {"all", "acc"}, default "all"
         Observe u, u', u'' (the seed) or only u'' (:data:`OBSERVED_CHANNELS`).
+    surface : SurfaceMotion, optional
+        The walking surface's motion on ``com``'s time base: the spring and damper then act
+        on the motion relative to it (module docstring). None: a rigid floor.
 
     Returns
     -------
@@ -471,6 +504,16 @@ def build_problem(
     time_s = t[sl]
     y = np.column_stack([com.disp_m[sl], com.vel_m_s[sl], com.acc_m_s2[sl]])
     n = time_s.size
+    # The noise fractions refer to the measured (absolute) response, whatever the frame.
+    rms = np.sqrt(np.mean(np.square(y), axis=0))
+    if surface is not None:
+        if surface.time_s.shape != t.shape:
+            raise UsageError(
+                f"{com.source}: the surface motion has {surface.time_s.size} samples but the "
+                f"record has {t.size}; give the surface acceleration on the record's time base"
+            )
+        surface = surface.window(first, last)
+        y = y - np.column_stack([surface.disp_m, surface.vel_m_s, surface.acc_m_s2])
     piece_of = np.repeat(np.arange(starts.size - 1), np.diff(starts))
     force = FourierForce(harmonics)
     if time_basis == "absolute":
@@ -481,7 +524,6 @@ def build_problem(
         local_t = time_s - time_s[starts[:-1]][piece_of]
         phase = 2.0 * np.pi * piece_pacing[piece_of] * local_t
         basis = force.basis(time_s, pacing_hz, phase_rad=phase)
-    rms = np.sqrt(np.mean(np.square(y), axis=0))
     if np.any(rms <= 0) or n < 3:
         raise UsageError(f"{com.source}: the COM response is zero; there is nothing to identify")
     problem = IdentificationProblem(
@@ -501,6 +543,7 @@ def build_problem(
         source=com.source,
         rms=rms,
         observe=observe,
+        surface=surface,
     )
     source = "seed" if obs_fraction == SEED_OBS_FRACTION else "fixed"
     return problem.with_noise(

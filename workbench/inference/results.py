@@ -292,7 +292,11 @@ class IdentificationResult:
         return self.piece_blf.mean(axis=0) * self.mass_kg * G_M_S2
 
     def fitted_acceleration(self) -> FloatArray:
-        """Predict u'' from the measured u, u' and the estimated model [m/s^2]."""
+        """Predict u'' from the measured u, u' and the estimated model [m/s^2].
+
+        On a moving surface ``u``, ``u'`` in the spring and damper are relative to it (the
+        problem's ``y``) and the prediction is the absolute ``u''`` that the GRF measures.
+        """
         p = self.problem
         est = self.estimates
         u, v = p.y[:, 0], p.y[:, 1]
@@ -302,7 +306,7 @@ class IdentificationResult:
     @property
     def resid_grf_n(self) -> FloatArray:
         """GRF residual ``M (u''_measured - u''_fitted)`` [N]."""
-        return self.mass_kg * (self.problem.y[:, 2] - self.fitted_acceleration())
+        return self.mass_kg * (self.problem.absolute_y[:, 2] - self.fitted_acceleration())
 
     def test_serial_correlation(self, lags: int | list[int] | None = None) -> pd.DataFrame:
         """Ljung-Box test of the GRF residuals (statsmodels ``acorr_ljungbox``).
@@ -473,8 +477,9 @@ class IdentificationResult:
         }
         out["warnings"] = self.warnings
         out["settings"] = self.settings
-        if "effects" in self.extra:
-            out["effects"] = self.extra["effects"]
+        for key in ("surface", "effects"):
+            if key in self.extra:
+                out[key] = self.extra[key]
         return out
 
     def summary(self) -> str:
@@ -507,6 +512,7 @@ class IdentificationResult:
         lines += [
             "",
             f"identifiability: {self.identifiability.get('sentence', 'not assessed')}",
+            *([f"surface: {self.extra['surface']['sentence']}"] if "surface" in self.extra else []),
             f"log-likelihood {self.loglik:.2f}; Ljung-Box p of GRF residuals "
             f"{float(lb['lb_pvalue'].iloc[0]):.3g} at lag {int(lb.index[0])}",
         ]
@@ -542,9 +548,10 @@ class IdentificationResult:
         posterior = {k: v[idx][None, :] for k, v in self._derived_draws().items()}
         p = self.problem
         w = self.weights / self.weights.sum()
+        y = p.absolute_y  # what was measured, whatever frame the model used
         return az.from_dict(
             posterior=posterior,
-            observed_data={"u_m": p.y[:, 0], "u_dot_m_s": p.y[:, 1], "u_ddot_m_s2": p.y[:, 2]},
+            observed_data={"u_m": y[:, 0], "u_dot_m_s": y[:, 1], "u_ddot_m_s2": y[:, 2]},
             constant_data={"mass_kg": np.array([p.mass_kg]), "pacing_hz": np.array([p.pacing_hz])},
             dims={"u_m": ["time"], "u_dot_m_s": ["time"], "u_ddot_m_s2": ["time"]},
             coords={"time": p.time_s},
@@ -577,7 +584,7 @@ class IdentificationResult:
             "piece_coefficients_mean": (("piece", "coefficient"), self.piece_coefficients_mean),
             "piece_coefficients_sd": (("piece", "coefficient"), self.piece_coefficients_sd),
             "biomechanical_force_n": (("time",), self.biomechanical_force_n()),
-            "observations": (("time", "response"), p.y),
+            "observations": (("time", "response"), p.absolute_y),
         }
         coords: dict[str, Any] = {
             "parameter": ["damping_ns_per_m", "stiffness_n_per_m"],

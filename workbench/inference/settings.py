@@ -104,9 +104,10 @@ FLAT_KEYS = (
     "force_proposal",
     "effects",
     "rescale_to_mass",
+    "surface",
 )
 #: The flat keys of each part (the rest, ``seed`` and ``force_check``, are the settings').
-MODEL_KEYS = ("harmonics", "pacing_hz", "time_basis", "pieces", "effects")
+MODEL_KEYS = ("harmonics", "pacing_hz", "time_basis", "pieces", "effects", "surface")
 METHOD_KEYS = ("method", "particles", "resampling", "ess_threshold", "force_proposal")
 NOISE_KEYS = ("obs_noise", "state_noise_fraction", "prior", "observe")
 PREPROCESSING_KEYS = ("highpass_hz", "rescale_to_mass")
@@ -231,6 +232,11 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
         raise UsageError(
             f"'pieces' must be 'steps' or 'whole', got {flat['pieces']!r}", parameter="pieces"
         )
+    if flat["surface"] not in ("coupled", "rigid"):
+        raise UsageError(
+            f"'surface' must be 'coupled' or 'rigid', got {flat['surface']!r}",
+            parameter="surface",
+        )
     effects = parse_effect_specs(flat["effects"], where="'effects'")
     return SMDModel(
         harmonics=harmonics,
@@ -238,6 +244,7 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
         time_basis=flat["time_basis"],
         pieces=flat["pieces"],
         pacing_hz=flat["pacing_hz"],
+        surface=flat["surface"],
     )
 
 
@@ -289,6 +296,7 @@ _FLAT_DEFAULTS: dict[str, Any] = {
     "force_proposal": "regression",
     "effects": (),
     "rescale_to_mass": False,
+    "surface": "coupled",
 }
 
 
@@ -421,6 +429,7 @@ class IdentifySettings:
             "force_proposal": option("force_proposal"),
             "effects": model.effects,
             "rescale_to_mass": self.preprocessing.rescale_to_mass,
+            "surface": model.surface,
         }
 
     def replace(self, **changes: Any) -> IdentifySettings:

@@ -112,6 +112,10 @@ class StepModel:
         fcol = np.zeros((self.length + 1, self.q + 1))
         fcol[: self.length, 2 : self.q] = basis * problem.force_prior.sd_n
         fcol[: self.length, self.q] = basis @ problem.force_prior.mean_n
+        known = problem.surface_force_n
+        if known is not None:
+            # A moving surface's inertial load: a known input (problem module docstring).
+            fcol[: self.length, self.q] += known[start:end]
         self._force_pairs = np.stack([fcol[:-1], fcol[1:]], axis=1)
         # Layout of the rows of :meth:`responses`: per sample (u, u', F, F, u'').
         y_rows = np.zeros((self.length, 5))

@@ -1,7 +1,9 @@
 """The spring-mass-damper (SMD) pedestrian model as a plain description.
 
 ``M u'' + C u' + K u + sum_e effect_e(u, u', t) = F_bio(t)`` with u the COM displacement
-(positive up, from static equilibrium) and ``GRF = M g + M u''`` (docs/science.md 1).
+(positive up, from static equilibrium) and ``GRF = M g + M u''`` (docs/science.md 1). On a
+moving surface with displacement z the spring and damper act on ``u - z`` and ``u' - z'``
+(``surface="coupled"``, docs/science.md 6).
 
 An :class:`SMDModel` only describes the system: parameters may be unset (to be identified)
 and nothing here fits or filters. Algorithms take a model, as in the ``particles`` library.
@@ -25,12 +27,14 @@ from workbench.models import conversions
 from workbench.models.effects import Effect, EffectContext, Effects, as_effects
 from workbench.models.force import FourierForce
 
-__all__ = ["PIECE_MODES", "TIME_BASES", "SMDModel"]
+__all__ = ["PIECE_MODES", "SURFACE_MODELS", "TIME_BASES", "SMDModel"]
 
 #: Clocks of the force's Fourier basis (see :mod:`workbench.models.force`).
 TIME_BASES = ("step_phase", "absolute")
 #: Whether the force coefficients are redrawn at every step or shared by the whole record.
 PIECE_MODES = ("steps", "whole")
+#: How a measured surface motion enters: through the spring and damper, or ignored.
+SURFACE_MODELS = ("coupled", "rigid")
 
 FloatArray = NDArray[np.float64]
 
@@ -82,6 +86,11 @@ class SMDModel:
         A known biomechanical force ``a0, a1, b1, ..., an, bn`` [N] (``2 n + 1`` values, the
         order of :class:`~workbench.models.force.FourierForce`), e.g. a sampled walker on a
         footbridge; None while unknown.
+    surface : {"coupled", "rigid"}, optional
+        ``"coupled"`` (the default): when the record measures the walking surface's motion
+        (a ``ground_acc`` column), the spring and damper act on the motion relative to it,
+        ``M u'' + C (u' - z') + K (u - z) = F_bio``; on a rigid floor this is the plain
+        model. ``"rigid"``: ignore any surface motion (to see what it adds).
 
     Examples
     --------
@@ -99,6 +108,7 @@ class SMDModel:
     pieces: str = "steps"
     pacing_hz: float | None = None
     force_coefficients_n: tuple[float, ...] | None = None
+    surface: str = "coupled"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mass_kg", _optional_float(self.mass_kg, "mass_kg", positive=True))
@@ -124,6 +134,12 @@ class SMDModel:
             raise UsageError(
                 f"SMDModel: pieces {self.pieces!r} is not known; use one of "
                 f"{', '.join(PIECE_MODES)}"
+            )
+        if self.surface not in SURFACE_MODELS:
+            raise UsageError(
+                f"SMDModel: surface {self.surface!r} is not known; use one of "
+                f"{', '.join(SURFACE_MODELS)}",
+                parameter="surface",
             )
         object.__setattr__(
             self, "pacing_hz", _optional_float(self.pacing_hz, "pacing_hz", positive=True)
@@ -166,8 +182,8 @@ class SMDModel:
         effects : optional
             Effects, as in the constructor.
         **force
-            ``time_basis``, ``pieces``, ``pacing_hz``, ``force_coefficients_n`` as in the
-            constructor.
+            ``time_basis``, ``pieces``, ``pacing_hz``, ``force_coefficients_n``, ``surface``
+            as in the constructor.
 
         Returns
         -------
@@ -409,7 +425,11 @@ class SMDModel:
             if value is not None:
                 parts.append(f"{name}={value:.6g}")
         parts.append(f"harmonics={self.harmonics}")
-        for name, default in (("time_basis", "step_phase"), ("pieces", "steps")):
+        for name, default in (
+            ("time_basis", "step_phase"),
+            ("pieces", "steps"),
+            ("surface", "coupled"),
+        ):
             if getattr(self, name) != default:
                 parts.append(f"{name}={getattr(self, name)!r}")
         if self.pacing_hz is not None:
@@ -432,6 +452,7 @@ class SMDModel:
             "harmonics": self.harmonics,
             "time_basis": self.time_basis,
             "pieces": self.pieces,
+            "surface": self.surface,
             "pacing_hz": self.pacing_hz,
             "force_coefficients_n": (
                 None if self.force_coefficients_n is None else list(self.force_coefficients_n)

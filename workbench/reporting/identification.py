@@ -80,7 +80,8 @@ def force_figure(result: IdentificationResult, *, window_s: float = 6.0) -> Figu
     mid = t[0] + 0.5 * (t[-1] - t[0])
     keep = np.abs(t - mid) <= window_s / 2
     ax_t.plot(t[keep], force[keep], lw=1.0, label="identified F_bio")
-    ax_t.plot(t[keep], result.mass_kg * p.y[keep, 2], lw=0.8, alpha=0.7, label="M u'' (measured)")
+    grf = result.mass_kg * p.absolute_y[keep, 2]
+    ax_t.plot(t[keep], grf, lw=0.8, alpha=0.7, label="M u'' (measured)")
     for s in p.piece_starts[:-1]:
         if keep[s]:
             ax_t.axvline(t[s], color="C3", lw=0.5, alpha=0.5)

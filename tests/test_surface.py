@@ -1,0 +1,206 @@
+"""The walking surface in the model: M u'' + C (u' - z') + K (u - z) = F_bio (science.md 6)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+import workbench as wb
+from workbench.cli import main
+from workbench.errors import UsageError
+from workbench.inference import kalman as kf
+from workbench.inference.problem import ForcePrior, build_problem
+from workbench.inference.surface_frf import surface_transmissibility
+from workbench.records.inspection import inspect_record
+from workbench.records.io import save_record
+from workbench.records.preprocess import preprocess
+from workbench.records.surface import surface_motion
+from workbench.synth.simulate import simulate_walking
+
+MASS, FN, ZETA, PACING = 70.0, 2.8, 0.30, 1.8
+DECK_HZ, DECK_AMP = 3.1, 0.5
+
+
+def _deck(t: np.ndarray) -> np.ndarray:
+    return DECK_AMP * np.sin(2 * np.pi * DECK_HZ * np.asarray(t))
+
+
+@pytest.fixture(scope="module")
+def periodic_deck_walk():
+    """A 20 s walk whose force the whole-record basis describes exactly, on a 3.1 Hz deck."""
+    return simulate_walking(
+        mass_kg=MASS,
+        natural_frequency_hz=FN,
+        damping_ratio=ZETA,
+        pacing_hz=PACING,
+        duration_s=20.0,
+        sample_rate_hz=200.0,
+        noise_sd_n=2.0,
+        step_duration_sd=0.0,
+        amplitude_sd=0.0,
+        phase_sd_rad=0.0,
+        ground_acc_m_s2=_deck,
+        start="steady",
+        seed=3,
+    )
+
+
+WHOLE = wb.SMDModel(harmonics=3, pieces="whole", time_basis="absolute", pacing_hz=PACING)
+
+
+def test_the_problem_is_relative_to_the_surface_with_its_inertial_load(periodic_deck_walk):
+    insp = inspect_record(periodic_deck_walk.record)
+    surface = surface_motion(insp.record)
+    rigid = build_problem(insp.com, insp.steps)
+    deck = build_problem(insp.com, insp.steps, surface=surface)
+    assert deck.surface is not None and rigid.surface is None
+    lo = int(insp.steps.boundaries[0])
+    n = deck.n_samples
+    z = np.column_stack([surface.disp_m, surface.vel_m_s, surface.acc_m_s2])[lo : lo + n]
+    np.testing.assert_allclose(deck.absolute_y, rigid.y, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(deck.y, rigid.y - z, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(deck.surface_force_n, -MASS * z[:, 2])
+    # The noise refers to the measured (absolute) response whatever the frame.
+    np.testing.assert_array_equal(deck.rms, rigid.rms)
+    assert rigid.surface_force_n is None
+
+
+def test_the_surface_is_integrated_like_the_body(periodic_deck_walk):
+    rec = periodic_deck_walk.record
+    surface = surface_motion(rec)
+    # The same chain on the surface acceleration written as a GRF gives the same numbers.
+    as_grf = rec.replace(grf_n=MASS * (wb.G_M_S2 + rec.ground_acc_m_s2))
+    com = preprocess(as_grf)
+    np.testing.assert_allclose(surface.acc_m_s2, com.acc_m_s2, atol=1e-12)
+    np.testing.assert_allclose(surface.vel_m_s, com.vel_m_s, atol=1e-12)
+    np.testing.assert_allclose(surface.disp_m, com.disp_m, atol=1e-12)
+    assert surface_motion(rec.replace(ground_acc_m_s2=None)) is None
+
+
+@pytest.mark.parametrize("discretisation", ["foh", "euler"])
+def test_deck_loglik_equals_the_dense_filter(periodic_deck_walk, discretisation):
+    insp = inspect_record(periodic_deck_walk.record)
+    problem = build_problem(insp.com, insp.steps, harmonics=3, surface=surface_motion(insp.record))
+    truth = periodic_deck_walk.truth
+    c, k = truth["damping_ns_per_m"], truth["stiffness_n_per_m"]
+    dense = kf.dense_kalman_loglik(problem, c, k, discretisation=discretisation)
+    fast = kf.record_loglik(problem, [c], [k], discretisation=discretisation)
+    assert fast.loglik[0] == pytest.approx(dense.loglik, rel=1e-7)
+
+
+def test_the_relative_frame_equals_the_fixed_frame_with_the_surface_as_input(periodic_deck_walk):
+    """An independent check of the change of frame.
+
+    In the fixed frame the surface acts as the force ``K z + C z'``: two basis columns whose
+    coefficients are held at (K, C). The likelihood of the absolute observations under that
+    model must equal the relative frame's, up to the discretisation of the two inputs.
+    """
+    insp = inspect_record(periodic_deck_walk.record)
+    surface = surface_motion(insp.record)
+    whole = {"pieces": "whole", "pacing_hz": PACING, "harmonics": 3}
+    deck = build_problem(insp.com, None, surface=surface, **whole)
+    truth = periodic_deck_walk.truth
+    for c, k in ((truth["damping_ns_per_m"], truth["stiffness_n_per_m"]), (900.0, 15000.0)):
+        fixed = build_problem(insp.com, None, **whole)
+        fixed = fixed.with_noise(deck.noise)
+        zcols = np.column_stack([surface.disp_m, surface.vel_m_s])
+        fp = fixed.force_prior
+        fixed = dataclasses.replace(
+            fixed,
+            basis=np.ascontiguousarray(np.column_stack([fixed.basis, zcols])),
+            force_prior=ForcePrior(
+                np.concatenate([fp.mean_n, [k, c]]),
+                np.concatenate([fp.sd_n, [1e-9 * k, 1e-9 * c]]),
+            ),
+        )
+        ll_rel = kf.record_loglik(deck, [c], [k]).loglik[0]
+        ll_abs = kf.record_loglik(fixed, [c], [k]).loglik[0]
+        # Scale: how much the likelihood changes for a 10 % change of K.
+        scale = abs(ll_rel - kf.record_loglik(deck, [c], [1.1 * k]).loglik[0])
+        assert abs(ll_rel - ll_abs) < 0.01 * scale
+
+
+@pytest.mark.slow
+def test_a_deck_pins_c_and_k_and_the_methods_agree(periodic_deck_walk):
+    rec = periodic_deck_walk.record
+    exact = wb.identify(rec, WHOLE, method=wb.Exact(), seed=0, force_check=False)
+    truth = periodic_deck_walk.truth
+    ci = exact.interval()
+    for name in ("natural_frequency_hz", "damping_ratio"):
+        lo, hi = ci[name]
+        assert lo <= truth[name] <= hi, (name, truth[name], ci[name])
+    assert exact.posterior_sd["natural_frequency_hz"] < 0.02 * FN
+    surface = exact.extra["surface"]
+    assert surface["model"] == "coupled"
+    info = surface["information"]["damping_ns_per_m"]
+    assert info["local_sd_with_surface"] < info["local_sd_rigid_floor"]
+    sd = exact.posterior_sd
+    for method in (wb.RBPF(256),):
+        other = wb.identify(rec, WHOLE, method=method, seed=1, force_check=False)
+        for name in ("natural_frequency_hz", "damping_ratio"):
+            gap = abs(other.estimates[name] - exact.estimates[name])
+            assert gap < 0.5 * sd[name], (method.name, name, gap, sd[name])
+    # The same record with the surface ignored: the deck's response becomes force, and the
+    # posterior misses the truth or is wide; a confident wrong answer is what must not happen.
+    rigid = wb.identify(rec, WHOLE.replace(surface="rigid"), method=wb.Exact(), force_check=False)
+    assert rigid.extra["surface"]["model"] == "ignored (rigid floor)"
+    lo, hi = rigid.interval()["natural_frequency_hz"]
+    assert not (lo <= truth["natural_frequency_hz"] <= hi)
+
+
+def test_transmissibility_recovers_c_and_k_from_the_deck_alone(periodic_deck_walk):
+    insp = inspect_record(periodic_deck_walk.record)
+    problem = build_problem(insp.com, insp.steps, surface=surface_motion(insp.record))
+    frf = surface_transmissibility(problem)
+    assert frf is not None
+    truth = periodic_deck_walk.truth
+    for name in ("natural_frequency_hz", "damping_ratio"):
+        lo, hi = frf.interval_95[name]
+        assert lo <= truth[name] <= hi, (name, truth[name], frf.interval_95[name])
+    assert np.all(np.abs(frf.frequency_hz - DECK_HZ) < 0.5)
+    rigid = build_problem(insp.com, insp.steps)
+    assert surface_transmissibility(rigid) is None
+
+
+def test_base_motion_is_not_counted_twice(periodic_deck_walk):
+    model = WHOLE + wb.effects.BaseMotion()
+    with pytest.raises(UsageError, match="count it twice"):
+        wb.identify(periodic_deck_walk.record, model, method=wb.Exact(), force_check=False)
+
+
+def _run(argv, capsys):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return json.loads(out)
+
+
+def test_rigid_floor_flag_and_the_surface_section(tmp_path, periodic_deck_walk, capsys):
+    path = tmp_path / "deck.csv"
+    save_record(periodic_deck_walk.record.replace(mass_kg=MASS), path)
+    common = [
+        "identify",
+        str(path),
+        "--pieces",
+        "whole",
+        "--time-basis",
+        "absolute",
+        "--pacing",
+        str(PACING),
+        "--harmonics",
+        "3",
+        "--method",
+        "exact",
+        "--no-force-check",
+        "--json",
+    ]
+    coupled = _run(common, capsys)
+    rigid = _run([*common, "--rigid-floor"], capsys)
+    assert coupled["surface"]["model"] == "coupled"
+    assert coupled["settings"]["surface"] == "coupled"
+    assert rigid["surface"]["model"] == "ignored (rigid floor)"
+    assert rigid["settings"]["surface"] == "rigid"
+    assert coupled["surface"]["transmissibility"]["estimates"]["natural_frequency_hz"] > 0
