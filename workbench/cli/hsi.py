@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -66,6 +68,35 @@ def _structure(args: argparse.Namespace) -> Any:
     return structure_from_json(obj, str(args.structure))
 
 
+def _check_records_args(args: argparse.Namespace) -> None:
+    if args.records_crossings is None:
+        args.records_crossings = 1
+    elif args.records is None:
+        raise UsageError(
+            "--records-crossings says how many crossings --records DIR writes; add --records DIR"
+        )
+    if args.records_crossings < 1:
+        raise UsageError(
+            f"--records-crossings {args.records_crossings}: give at least one crossing"
+        )
+    if args.records_crossings > args.crossings:
+        raise UsageError(
+            f"--records-crossings {args.records_crossings} is more than the "
+            f"{args.crossings} simulated crossings; lower it or raise --crossings"
+        )
+
+
+@contextlib.contextmanager
+def _flag(parameter: str, flag: str) -> Iterator[None]:
+    """Name ``flag`` in a library usage error about ``parameter``."""
+    try:
+        yield
+    except UsageError as err:
+        if err.parameter != parameter:
+            raise
+        raise UsageError(err.naming({parameter: flag})) from None
+
+
 def _cmd_hsi(args: argparse.Namespace) -> int:
     from workbench.hsi.loads import setra_crowd_load
     from workbench.hsi.metrics import SETRA_LIMITS_M_S2
@@ -84,6 +115,7 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         raise UsageError(f"--at {args.at:g} m is off the {structure.span_m:g} m span")
     if args.crowd == "single" and (args.density is not None or args.flow is not None):
         raise UsageError("--density and --flow describe a crowd; add --crowd stream")
+    _check_records_args(args)
     spec = CrossingSpec(
         structure=structure,
         sampler=sampler,
@@ -96,6 +128,12 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         static_weight=args.static_weight,
         response_x_m=args.at,
     )
+    if args.records is not None:
+        from workbench.hsi.record_files import check_records_folder
+
+        # A folder that cannot take the records must fail before the Monte Carlo runs.
+        with _flag("folder", "--records"):
+            check_records_folder(args.records)
     t0 = time.perf_counter()
     results = run_monte_carlo(
         spec,
@@ -142,6 +180,14 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
             "load_n_per_m2": setra.load_n_per_m2,
             "peak_acceleration_m_s2": setra.peak_acceleration_m_s2,
         }
+    if args.records is not None:
+        from workbench.hsi.record_files import write_crossing_records
+
+        with _flag("folder", "--records"):
+            written = write_crossing_records(
+                spec, args.seed, args.records, crossings=args.records_crossings
+            )
+        out["records"] = {**written.to_json(), "crossings": args.records_crossings}
     if args.out:
         from workbench.reporting.hsi import write_hsi_outputs
 
@@ -179,6 +225,14 @@ def _text(o: dict[str, Any]) -> str:
             f"{o['setra']['peak_acceleration_m_s2']:.3f} m/s^2"
         )
     lines.append(f"  {o['crossings_per_s']:.1f} crossings/s")
+    if "records" in o:
+        r = o["records"]
+        where = r["manifest"] or f"{r['folder']} (no manifest: nothing to list)"
+        lines.append(
+            f"  wrote {r['records']} walker record(s) of the first {r['crossings']} "
+            f"crossing(s): {where}"
+        )
+        lines.extend(f"  skipped {k['record']}: {k['reason']}" for k in r["skipped"])
     lines.extend(f"  wrote {f}" for f in o.get("files", []))
     return "\n".join(lines)
 
@@ -263,4 +317,16 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler")
     p.add_argument("--out", metavar="DIR", help="write crossings.csv, figures, summary.json")
+    p.add_argument(
+        "--records",
+        metavar="DIR",
+        help="write the record a sensor on each walker would give (time, grf, ground_acc "
+        "under the feet; interaction) with its truth and a batch manifest, DIR/manifest.csv",
+    )
+    p.add_argument(
+        "--records-crossings",
+        type=int,
+        metavar="N",
+        help="--records covers every walker of the first N crossings (1)",
+    )
     p.set_defaults(handler=_cmd_hsi)

@@ -13,6 +13,9 @@ entry points load lazily from here::
   ``simulate`` would be shadowed by the submodule of that name);
 - ``Walker``, ``pedestrian_models``, ``walkers``: :mod:`workbench.hsi.pedestrians`;
 - ``coupled_modes``: :func:`workbench.hsi.modes.coupled_modes`;
+- ``walker_records``, ``walker_responses``, ``write_walker_records``: the record a sensor
+  on each walker would give (GRF and the deck under its feet, with the truth),
+  :mod:`workbench.hsi.records` and :mod:`workbench.hsi.record_files`;
 - ``ModalStructure``, ``simply_supported_beam``: :mod:`workbench.hsi.structure`.
 """
 
@@ -28,7 +31,10 @@ __all__ = [
     "pedestrian_models",
     "simply_supported_beam",
     "simulate_pedestrians",
+    "walker_records",
+    "walker_responses",
     "walkers",
+    "write_walker_records",
 ]
 
 #: ``name -> (module, attribute)`` of the lazily loaded names.
@@ -40,6 +46,9 @@ _LAZY: dict[str, tuple[str, str]] = {
     "coupled_modes": ("workbench.hsi.modes", "coupled_modes"),
     "ModalStructure": ("workbench.hsi.structure", "ModalStructure"),
     "simply_supported_beam": ("workbench.hsi.structure", "simply_supported_beam"),
+    "walker_records": ("workbench.hsi.records", "walker_records"),
+    "walker_responses": ("workbench.hsi.records", "walker_responses"),
+    "write_walker_records": ("workbench.hsi.record_files", "write_walker_records"),
 }
 
 

@@ -32,6 +32,14 @@ coupled system exactly: the pedestrian unknowns are eliminated (each couples onl
 modes), leaving one ``J x J`` solve per scenario, so the cost grows linearly with the number
 of pedestrians. Scenarios are integrated side by side (vectorised), which is what makes
 Monte Carlo runs fast.
+
+Per-walker histories (``keep_walkers=True``, :class:`WalkerHistory`) store what the step
+solved for, not differences of it: the end-of-step ``y_p, y_p', y_p''``, the modal ``q, q',
+q''`` and the deck under each walker ``w_p, w_p', w_p''`` with ``phi_jp`` at the walker's
+end-of-step position. The Newmark update makes the end-of-step state satisfy the equation
+of motion exactly, so ``M_p y_p'' = F_p - C_p (y_p' - w_p') - K_p (y_p - w_p)`` holds at
+every stored sample to rounding; these are what :mod:`workbench.hsi.records` turns into the
+records a sensor on the walker would give.
 """
 
 from __future__ import annotations
@@ -57,6 +65,7 @@ __all__ = [
     "CrowdBatch",
     "HsiHistory",
     "Model",
+    "WalkerHistory",
     "integrate",
     "simulate_pedestrians",
 ]
@@ -65,6 +74,8 @@ Model = Literal["interaction", "moving_force", "biomechanical_force"]
 MODELS: tuple[Model, ...] = ("interaction", "moving_force", "biomechanical_force")
 #: Largest number of time steps times scenarios times pedestrians one call integrates.
 MAX_WORK = 2_000_000_000
+#: Largest number of floats the per-walker histories of one call may hold (2 GB).
+MAX_KEPT_VALUES = 250_000_000
 
 
 @dataclass(frozen=True)
@@ -160,6 +171,56 @@ class CrowdBatch:
         return np.sum(amp.real, axis=-1) + offset, np.sum((1j * w * amp).real, axis=-1)
 
 
+@dataclass(frozen=True, eq=False)
+class WalkerHistory:
+    """What every walker and the modes did at every step (``integrate(keep_walkers=True)``).
+
+    All values are the end-of-step quantities of the Newmark step (module docstring), so
+    ``mass_kg * acc_m_s2 = F - C (vel_m_s - base_vel_m_s) - K (disp_m - base_disp_m)`` at
+    every sample to rounding (with the biomechanical force ``batch.force(t)``); the base
+    motion is that of the walker's equation: the deck under the walker with interaction,
+    zero for the force-only models (their walkers walk on rigid ground).
+
+    Attributes
+    ----------
+    batch : CrowdBatch
+        The scenarios' pedestrians (who they are, where they start, how fast they walk).
+    structure : ModalStructure
+        The modes they walked on.
+    static_weight : bool
+        Whether the walkers' weight loaded the deck.
+    disp_m, vel_m_s, acc_m_s2 : array (B, P, N)
+        Walker COM ``y_p, y_p', y_p''`` (upwards from the static position; absolute).
+    base_disp_m, base_vel_m_s, base_acc_m_s2 : array (B, P, N)
+        ``w_p = sum_j phi_j(x_p(t)) q_j`` and its rates (zero off the deck).
+    modal_disp_m, modal_vel_m_s, modal_acc_m_s2 : array (B, J, N)
+        Modal coordinates ``q_j, q_j', q_j''``.
+    """
+
+    batch: CrowdBatch
+    structure: ModalStructure
+    static_weight: bool
+    disp_m: NDArray[np.float64]
+    vel_m_s: NDArray[np.float64]
+    acc_m_s2: NDArray[np.float64]
+    base_disp_m: NDArray[np.float64]
+    base_vel_m_s: NDArray[np.float64]
+    base_acc_m_s2: NDArray[np.float64]
+    modal_disp_m: NDArray[np.float64]
+    modal_vel_m_s: NDArray[np.float64]
+    modal_acc_m_s2: NDArray[np.float64]
+
+    def positions_m(self, time_s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Walker positions ``(B, P, N)`` [m] at ``time_s`` (``-1``, off the deck, for padding).
+
+        The same arithmetic as the integrator's (:meth:`CrowdBatch.positions`), so the mode
+        shapes evaluated here are the ones each step used.
+        """
+        t = np.asarray(time_s, float)
+        x = self.batch.x0_m[..., None] + self.batch.speed_m_s[..., None] * t
+        return np.where(self.batch.active[..., None], x, -1.0)
+
+
 @dataclass(frozen=True)
 class HsiHistory:
     """Deck acceleration histories of a batch of scenarios.
@@ -172,6 +233,8 @@ class HsiHistory:
     response_x_m : array (R,)
     model : str
     dt_s : float
+    walkers : WalkerHistory or None
+        Per-walker and modal histories, when integrated with ``keep_walkers=True``.
     """
 
     time_s: NDArray[np.float64]
@@ -179,6 +242,7 @@ class HsiHistory:
     response_x_m: NDArray[np.float64]
     model: str
     dt_s: float
+    walkers: WalkerHistory | None = None
 
 
 def integrate(
@@ -190,6 +254,7 @@ def integrate(
     model: Model = "interaction",
     response_x_m: ArrayLike | None = None,
     static_weight: bool = False,
+    keep_walkers: bool = False,
 ) -> HsiHistory:
     """Integrate a batch of scenarios from a deck at rest, walkers in steady state.
 
@@ -211,11 +276,14 @@ def integrate(
     static_weight : bool
         Add the walkers' weight ``M g`` as a moving load (it only adds a slow, quasi-static
         deflection; off by default, as in the usual load models).
+    keep_walkers : bool
+        Also keep every walker's and every mode's history (:class:`WalkerHistory`; off by
+        default: ``6 P + 3 J`` floats per scenario and step).
 
     Returns
     -------
     HsiHistory
-        Acceleration histories at the response points.
+        Acceleration histories at the response points (and ``walkers`` if kept).
     """
     if model not in MODELS:
         raise UsageError(f"unknown model {model!r}; use one of {', '.join(MODELS)}")
@@ -227,6 +295,12 @@ def integrate(
         raise UsageError(
             f"{n} steps of {b} scenario(s) with {p} pedestrians is too much work; shorten the "
             "duration, lengthen the time step or split the Monte Carlo"
+        )
+    if keep_walkers and (n + 1) * b * (6 * p + 3 * structure.n_modes) > MAX_KEPT_VALUES:
+        raise UsageError(
+            f"keeping the histories of {b} scenario(s) with {p} pedestrians over {n} steps "
+            "needs more than 2 GB; keep the walkers of fewer scenarios at a time or shorten "
+            "the duration"
         )
     xr = np.atleast_1d(
         np.asarray(structure.span_m / 2 if response_x_m is None else response_x_m, float)
@@ -247,9 +321,10 @@ def integrate(
         vq: NDArray[np.float64],
         xy: NDArray[np.float64],
         vy: NDArray[np.float64],
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         # Solves (M + h/2 C + h^2/4 K) a = f(t) - C v - K x for the end-of-step
-        # accelerations, given the Newmark predictors x, v (h = 0: the equation of motion).
+        # accelerations, given the Newmark predictors x, v (h = 0: the equation of motion);
+        # also returns the mode shapes under the walkers it used.
         phi = structure.shapes(batch.positions(t))  # (B, P, J)
         force = batch.force(t)
         e = 0.5 * h * cp + 0.25 * h * h * kp
@@ -276,14 +351,17 @@ def integrate(
             a_y = g_p / d
             load = mp * a_y if model == "moving_force" else force
             a_q = (base_q - np.einsum("bpj,bp->bj", phi, load + weight)) / s_q
-        return a_q, a_y
+        return a_q, a_y, phi
 
     xq = np.zeros((b, n_j))
     vq = np.zeros((b, n_j))
     xy, vy = batch.steady_state(0.0)
-    aq, ay = accelerations(0.0, 0.0, xq, vq, xy, vy)
+    aq, ay, phi = accelerations(0.0, 0.0, xq, vq, xy, vy)
     acc = np.empty((b, xr.size, n + 1))
     acc[:, :, 0] = aq @ phi_r.T
+    kept = _Kept(b, p, n_j, n + 1, coupled) if keep_walkers else None
+    if kept is not None:
+        kept.store(0, phi, xq, vq, aq, xy, vy, ay)
     h = float(dt_s)
     for step in range(1, n + 1):
         t = step * h
@@ -291,13 +369,53 @@ def integrate(
         pvq = vq + 0.5 * h * aq
         pxy = xy + h * vy + 0.25 * h * h * ay
         pvy = vy + 0.5 * h * ay
-        aq, ay = accelerations(h, t, pxq, pvq, pxy, pvy)
+        aq, ay, phi = accelerations(h, t, pxq, pvq, pxy, pvy)
         xq = pxq + 0.25 * h * h * aq
         vq = pvq + 0.5 * h * aq
         xy = pxy + 0.25 * h * h * ay
         vy = pvy + 0.5 * h * ay
         acc[:, :, step] = aq @ phi_r.T
-    return HsiHistory(np.arange(n + 1, dtype=np.float64) * h, acc, xr, model, h)
+        if kept is not None:
+            kept.store(step, phi, xq, vq, aq, xy, vy, ay)
+    walkers = None if kept is None else kept.history(batch, structure, static_weight)
+    return HsiHistory(np.arange(n + 1, dtype=np.float64) * h, acc, xr, model, h, walkers)
+
+
+class _Kept:
+    """Preallocated per-walker and modal histories, filled step by step by :func:`integrate`."""
+
+    def __init__(self, b: int, p: int, j: int, n: int, coupled: bool) -> None:
+        self.coupled = coupled
+        self.walker = np.zeros((6, b, p, n))  # y, y', y'', w, w', w''
+        self.modal = np.zeros((3, b, j, n))  # q, q', q''
+
+    def store(
+        self,
+        step: int,
+        phi: NDArray[np.float64],
+        xq: NDArray[np.float64],
+        vq: NDArray[np.float64],
+        aq: NDArray[np.float64],
+        xy: NDArray[np.float64],
+        vy: NDArray[np.float64],
+        ay: NDArray[np.float64],
+    ) -> None:
+        """Store the end-of-step state of ``step`` (``phi`` the shapes that step used)."""
+        for k, q in enumerate((xq, vq, aq)):
+            self.modal[k, :, :, step] = q
+            if self.coupled:
+                # The walker's base as its equation saw it; a force-only walker's stays 0.
+                self.walker[3 + k, :, :, step] = np.einsum("bpj,bj->bp", phi, q)
+        for k, y in enumerate((xy, vy, ay)):
+            self.walker[k, :, :, step] = y
+
+    def history(
+        self, batch: CrowdBatch, structure: ModalStructure, static_weight: bool
+    ) -> WalkerHistory:
+        """Freeze the arrays into a :class:`WalkerHistory`."""
+        for arr in (self.walker, self.modal):
+            arr.setflags(write=False)
+        return WalkerHistory(batch, structure, static_weight, *self.walker, *self.modal)
 
 
 def simulate_pedestrians(
@@ -312,6 +430,7 @@ def simulate_pedestrians(
     model: Model = "interaction",
     response_x_m: ArrayLike | None = None,
     static_weight: bool = False,
+    keep_walkers: bool = False,
 ) -> HsiHistory:
     """Simulate one scenario: pedestrians walking over (or standing on) the deck.
 
@@ -335,7 +454,7 @@ def simulate_pedestrians(
         Instead of walking, pedestrians stand (bounce) at these positions.
     duration_s : float, optional
         Default: until the last walker leaves the deck.
-    dt_s, model, response_x_m, static_weight
+    dt_s, model, response_x_m, static_weight, keep_walkers
         As :func:`integrate`.
 
     Returns
@@ -387,4 +506,5 @@ def simulate_pedestrians(
         model=model,
         response_x_m=response_x_m,
         static_weight=static_weight,
+        keep_walkers=keep_walkers,
     )
