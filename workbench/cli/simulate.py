@@ -44,9 +44,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             "file name ending in .csv or .mot"
         )
     effects = [parse_effect(e) for e in args.effect]
-    ground = None
+    ground: Any = _deck(args)
     if args.ground_acc_amplitude:
-        amp, freq = args.ground_acc_amplitude, args.ground_acc_hz
+        amp, freq = args.ground_acc_amplitude, _ground_acc_hz(args)
 
         def ground(t: np.ndarray) -> np.ndarray:
             return amp * np.sin(2 * np.pi * freq * np.asarray(t))
@@ -72,11 +72,13 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             "the effect parameters or the load factors"
         ) from None
     truth = dict(sim.truth)
-    if ground is not None:
+    if args.ground_acc_amplitude:
+        # The peak-amplitude sinusoid of the original flags keeps its original description;
+        # a --deck describes itself in the simulation's truth.
         truth["ground_motion"] = {
             "kind": "sine",
             "amplitude_m_s2": args.ground_acc_amplitude,
-            "frequency_hz": args.ground_acc_hz,
+            "frequency_hz": _ground_acc_hz(args),
         }
     record = sim.record.replace(metadata={**sim.record.metadata, "truth": truth})
     truth_path = out.with_name(out.stem + ".truth.json")
@@ -102,6 +104,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         "natural_frequency_hz": truth.get("natural_frequency_hz"),
         "damping_ratio": truth.get("damping_ratio"),
         "effects": [e.name for e in effects],
+        "ground_motion": truth.get("ground_motion"),
         "seed": args.seed,
     }
     from workbench.population.laws import SEED_PACING_RANGE_HZ
@@ -123,6 +126,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             f"({record.mass_kg:g} kg, f_n {result['natural_frequency_hz']:.3f} Hz, "
             f"zeta {result['damping_ratio']:.3f}"
             + (f", effects {', '.join(result['effects'])}" if effects else "")
+            + (f", on a {args.deck} deck of {args.deck_rms:g} m/s^2 RMS" if args.deck else "")
             + f")\nrecord  {record_path}\nsidecar {sidecar_path}\ntruth   {truth_path}"
         )
         for w in result.get("warnings", []):
@@ -180,16 +184,117 @@ def _check_simulate_args(args: argparse.Namespace) -> None:
         ("--step-duration-sd", args.step_duration_sd),
         ("--amplitude-sd", args.amplitude_sd),
         ("--phase-sd-rad", args.phase_sd_rad),
-        ("--ground-acc-amplitude", args.ground_acc_amplitude),
+        ("--ground-acc-amplitude", args.ground_acc_amplitude or 0.0),
     ):
         if not (np.isfinite(value) and value >= 0):
             raise UsageError(f"{flag} must be zero or a positive number, got {value:g}")
-    if args.ground_acc_amplitude and not (
-        np.isfinite(args.ground_acc_hz) and args.ground_acc_hz > 0
-    ):
+    freq = _ground_acc_hz(args)
+    if args.ground_acc_amplitude and not (np.isfinite(freq) and freq > 0):
+        raise UsageError(f"--ground-acc-hz must be a positive frequency, got {freq:g}")
+    _check_deck_args(args)
+
+
+#: The deck flags, the deck kinds they apply to and what they set (for error messages).
+_DECK_FLAGS = {
+    "deck_rms": ("--deck-rms", ("sine", "sweep", "narrowband"), "the RMS acceleration [m/s^2]"),
+    "deck_hz": ("--deck-hz", ("sine", "sweep", "narrowband"), "the frequency [Hz]"),
+    "deck_hz_end": ("--deck-hz-end", ("sweep",), "the end frequency of the sweep [Hz]"),
+    "deck_bandwidth_hz": ("--deck-bandwidth-hz", ("narrowband",), "the bandwidth [Hz]"),
+}
+#: Library parameter of a deck -> its flag (a deck's own error then names the flag).
+_DECK_PARAMETER_FLAGS = {
+    "rms_m_s2": "--deck-rms",
+    "frequency_hz": "--deck-hz",
+    "start_hz": "--deck-hz",
+    "centre_hz": "--deck-hz",
+    "end_hz": "--deck-hz-end",
+    "bandwidth_hz": "--deck-bandwidth-hz",
+    "period_s": "--duration",
+}
+
+
+def _ground_acc_hz(args: argparse.Namespace) -> float:
+    # None means the flag was not given (so --deck can tell it apart); its default is 2 Hz.
+    return 2.0 if args.ground_acc_hz is None else float(args.ground_acc_hz)
+
+
+def _check_deck_args(args: argparse.Namespace) -> None:
+    kind = args.deck
+    given = {key: getattr(args, key) for key in _DECK_FLAGS if getattr(args, key) is not None}
+    if kind is None:
+        if given:
+            flag = _DECK_FLAGS[next(iter(given))][0]
+            raise UsageError(
+                f"{flag} describes a vibrating deck; add --deck sine, sweep or narrowband, or "
+                f"drop {flag}"
+            )
+        return
+    if args.ground_acc_amplitude is not None or args.ground_acc_hz is not None:
         raise UsageError(
-            f"--ground-acc-hz must be a positive frequency, got {args.ground_acc_hz:g}"
+            "--deck and --ground-acc-amplitude/--ground-acc-hz both set the surface motion; "
+            "give one of them (--deck with --deck-rms and --deck-hz, or the peak-amplitude "
+            "sinusoid of the --ground-acc flags)"
         )
+    for key, (flag, kinds, meaning) in _DECK_FLAGS.items():
+        value = given.get(key)
+        if kind not in kinds:
+            if value is not None:
+                raise UsageError(
+                    f"{flag} applies to --deck {' or '.join(kinds)} only, not --deck {kind}; "
+                    f"drop it"
+                )
+            continue
+        if value is None:
+            raise UsageError(f"--deck {kind} needs {flag}, {meaning}")
+        if not (np.isfinite(value) and value > 0):
+            raise UsageError(f"{flag} must be a positive number, {meaning}, got {value:g}")
+    if kind == "sweep" and args.deck_hz_end == args.deck_hz:
+        raise UsageError(
+            f"--deck-hz-end equals --deck-hz ({args.deck_hz:g} Hz), which is no sweep; give "
+            "a different end frequency or use --deck sine"
+        )
+    if kind == "narrowband" and args.deck_bandwidth_hz >= args.deck_hz:
+        raise UsageError(
+            f"--deck-bandwidth-hz {args.deck_bandwidth_hz:g} must be below --deck-hz "
+            f"{args.deck_hz:g} for a resonance; a tenth of it is typical of a lively deck"
+        )
+    record_s = round(args.duration * args.sample_rate_hz) / args.sample_rate_hz
+    if kind == "narrowband" and args.deck_hz * record_s < 1.0:
+        raise UsageError(
+            f"--deck-hz {args.deck_hz:g} gives less than one cycle over the {record_s:g} s "
+            "record, too few for a narrow-band deck; raise --deck-hz or --duration"
+        )
+    top = _deck(args).highest_frequency_hz
+    nyquist = args.sample_rate_hz / 2.0
+    if top >= nyquist:
+        raise UsageError(
+            f"the deck reaches {top:.4g} Hz, at or above half the sample rate "
+            f"({nyquist:g} Hz), so the ground_acc column could not hold it; lower --deck-hz "
+            "(and --deck-hz-end or --deck-bandwidth-hz) or raise --sample-rate-hz"
+        )
+
+
+def _deck(args: argparse.Namespace) -> Any:
+    """Build the deck the ``--deck`` flags describe (None without ``--deck``), over the record."""
+    if args.deck is None:
+        return None
+    from workbench.synth.decks import NarrowBandDeck, SineDeck, SweptSineDeck
+
+    # The record's own length (whole samples), so a sweep ends at its end and a narrow-band
+    # deck's RMS over the record is exactly --deck-rms.
+    record_s = round(args.duration * args.sample_rate_hz) / args.sample_rate_hz
+    try:
+        if args.deck == "sine":
+            return SineDeck(args.deck_rms, args.deck_hz)
+        if args.deck == "sweep":
+            return SweptSineDeck(args.deck_rms, args.deck_hz, args.deck_hz_end, record_s)
+        # Its own stream of the seed, so the deck's phases are not the steps' random numbers.
+        deck_seed = int(np.random.default_rng([args.seed, 0xDEC4]).integers(2**32))
+        return NarrowBandDeck(
+            args.deck_rms, args.deck_hz, args.deck_bandwidth_hz, deck_seed, period_s=record_s
+        )
+    except UsageError as err:
+        raise UsageError(err.naming(_DECK_PARAMETER_FLAGS)) from None
 
 
 def _simulate(args: argparse.Namespace, effects: list[Any], ground: Any) -> Any:
@@ -263,16 +368,36 @@ def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--ground-acc-amplitude",
         type=float,
-        default=0.0,
         metavar="M_S2",
-        help="amplitude of a sinusoidal vertical surface acceleration (0: rigid ground)",
+        help="peak amplitude of a sinusoidal vertical surface acceleration (0: rigid ground)",
     )
     p.add_argument(
         "--ground-acc-hz",
         type=float,
-        default=2.0,
         metavar="HZ",
         help="frequency of the surface motion (2 Hz)",
+    )
+    p.add_argument(
+        "--deck",
+        choices=["sine", "sweep", "narrowband"],
+        help="a vibrating deck under the walker instead of the --ground-acc sinusoid: a sine, "
+        "a linear sweep over the record, or a lively deck's narrow-band random response",
+    )
+    p.add_argument(
+        "--deck-rms", type=float, metavar="M_S2", help="RMS vertical acceleration of the deck"
+    )
+    p.add_argument(
+        "--deck-hz",
+        type=float,
+        metavar="HZ",
+        help="the sine's frequency, the sweep's start or the narrow-band deck's centre",
+    )
+    p.add_argument("--deck-hz-end", type=float, metavar="HZ", help="the sweep's end frequency")
+    p.add_argument(
+        "--deck-bandwidth-hz",
+        type=float,
+        metavar="HZ",
+        help="the narrow-band deck's half-power bandwidth (damping ratio = bandwidth / 2 centre)",
     )
     p.add_argument(
         "--effect",

@@ -1,9 +1,19 @@
 """Forward simulation of SMD pedestrians: synthetic GRF records with a known truth.
 
 See :mod:`workbench.synth.simulate` for the physics, the step-phase force model and the
-integration scheme.
+integration scheme, :mod:`workbench.synth.ground` for the surface motion and
+:mod:`workbench.synth.decks` for ready-made vibrating decks.
 """
 
+from workbench.synth.decks import (
+    DECK_WALK_RANGES,
+    NarrowBandDeck,
+    SineDeck,
+    SweptSineDeck,
+    deck_from_json,
+    deck_walk,
+)
+from workbench.synth.ground import surface_motion
 from workbench.synth.simulate import (
     POPULATION_DAMPING_RATIO,
     POPULATION_NATURAL_FREQUENCY_HZ,
@@ -18,14 +28,21 @@ from workbench.synth.simulate import (
 )
 
 __all__ = [
+    "DECK_WALK_RANGES",
     "POPULATION_DAMPING_RATIO",
     "POPULATION_NATURAL_FREQUENCY_HZ",
+    "NarrowBandDeck",
     "Simulation",
+    "SineDeck",
+    "SweptSineDeck",
+    "deck_from_json",
+    "deck_walk",
     "hidden_effect_walk",
     "population_damping_ratio",
     "population_natural_frequency_hz",
     "seed_numerical_example",
     "simulate_smd",
     "simulate_walking",
+    "surface_motion",
     "varied_walk",
 ]

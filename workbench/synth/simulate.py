@@ -1,18 +1,19 @@
 """Forward simulation of SMD pedestrians: synthetic GRF records with a known truth.
 
 Why this module is long: it holds the two entry points and the ready-made walks built on
-them, and neither can leave. :func:`simulate_walking` alone is about 315 lines (its
+them, and neither can leave. :func:`simulate_walking` alone is about 325 lines (its
 parameters are the walk's description, documented one by one, then the argument checks,
 the step-to-step variability and the truth, all of which must stay in one reproducible
 order of random draws), :func:`simulate_smd` about 130. The ready-made walks
 (:func:`seed_numerical_example`, :func:`varied_walk`, :func:`hidden_effect_walk`, about
-240 lines) call the entry points and are imported from this module, so a module of their
-own would import back the module that re-exports them (an import cycle). Both entry points
-choose their integration scheme through ``_integrate`` here, which calls ``_integrate_fine``
-by this module's name so that replacing it (as the tests do) selects the ODE solver.
-Everything else -- argument checks, ground motion, the two integration schemes, the
-step-phase force, the default walker and the truth bookkeeping -- lives in its own module
-of :mod:`workbench.synth`.
+260 lines) call the entry points and are imported from this module, so a module of their
+own would import back the module that re-exports them (an import cycle); walks on
+vibrating decks, which nothing here re-exports, live in :mod:`workbench.synth.decks`. Both
+entry points choose their integration scheme through ``_integrate`` here, which calls
+``_integrate_fine`` by this module's name so that replacing it (as the tests do) selects
+the ODE solver. Everything else -- argument checks, ground motion, the two integration
+schemes, the step-phase force, the default walker and the truth bookkeeping -- lives in its
+own module of :mod:`workbench.synth`.
 
 Two entry points:
 
@@ -54,7 +55,9 @@ from workbench.synth.checks import (
 )
 from workbench.synth.ground import (
     GroundInput,
+    _describe,
     _Ground,
+    _highest_frequency_hz,
 )
 from workbench.synth.integrators import (
     _integrate_fine,
@@ -150,7 +153,9 @@ def simulate_smd(
     initial_disp_m, initial_vel_m_s : float, optional
         ``u`` [m] and ``u'`` [m/s] at ``time_s[0]`` (default: at rest at equilibrium).
     ground_acc_m_s2 : callable or array_like, optional
-        Acceleration of the walking surface (see :mod:`workbench.synth.ground`).
+        Acceleration of the walking surface (see :mod:`workbench.synth.ground`), for
+        example a deck of :mod:`workbench.synth.decks`; one that describes itself
+        (``to_json()``) is named in the truth's ``ground_motion``.
     context : EffectContext, optional
         Passed to the effects (mass, K and C are filled in from the model).
     pacing_hz : float, optional
@@ -227,7 +232,7 @@ def simulate_smd(
         "force": force_kind,
         "initial_disp_m": u0,
         "initial_vel_m_s": v0,
-        "ground_motion": None if ground is None else "prescribed ground acceleration",
+        "ground_motion": _describe(ground_acc_m_s2),
         "noise_sd_n": noise,
         "seed": seed_used,
         "sample_rate_hz": float(1.0 / np.median(np.diff(t))),
@@ -322,8 +327,11 @@ def simulate_walking(
     sample_rate_hz : float, optional
         Sample rate of the record [Hz].
     ground_acc_m_s2 : callable or array_like, optional
-        Vertical acceleration of the walking surface (a vectorised function of time, or one
-        value per sample); the spring and damper then act on the relative motion.
+        Vertical acceleration of the walking surface [m/s^2] (a vectorised function of
+        time, or one value per sample); the spring and damper then act on the relative
+        motion. A deck of :mod:`workbench.synth.decks` is named in the truth's
+        ``ground_motion`` by its ``to_json()`` (other inputs as "prescribed ground
+        acceleration"), and its highest frequency widens the fast scheme's band.
     effects : Effect, Effects or iterable, optional
         Extra terms with their true parameter values, e.g. ``CubicStiffness(k3_n_per_m3=1e5)``.
     start : {"rest", "steady"}, optional
@@ -515,8 +523,13 @@ def simulate_walking(
         context,
         starts,
         float(np.sum(np.abs(mean_coef))),
-        # Highest harmonic at the fastest step allowed, plus the spline's slow modulation.
-        bandwidth_hz=(n + 1) * fp / (1.0 - 3.0 * sd_d),
+        # Highest harmonic at the fastest step allowed, plus the spline's slow modulation;
+        # a surface motion that states a higher frequency (a fast sweep) widens the band,
+        # up to what the record can hold.
+        bandwidth_hz=max(
+            (n + 1) * fp / (1.0 - 3.0 * sd_d),
+            min(_highest_frequency_hz(ground_acc_m_s2), fs / 2.0),
+        ),
     )
     force = np.asarray(force_fn(time_s), dtype=np.float64)
 
@@ -544,7 +557,7 @@ def simulate_walking(
         "start": start,
         "initial_disp_m": u0,
         "initial_vel_m_s": v0,
-        "ground_motion": None if ground is None else "prescribed ground acceleration",
+        "ground_motion": _describe(ground_acc_m_s2),
         "seed": seed_used,
     }
     return _finish(
@@ -655,6 +668,29 @@ def _drawn_or(drawn: float, given: float | None) -> float:
     return drawn if given is None else float(given)
 
 
+def _draw_walk_details(
+    rng: np.random.Generator, ranges: Mapping[str, Any], duration_s: tuple[float, float]
+) -> dict[str, Any]:
+    """Draw a varied walk's details as :func:`simulate_walking` keyword arguments.
+
+    The order of the draws is fixed (a seed must keep giving the same record): amplitude
+    variability, duration, sample rate, noise, pacing, mass, step-duration variability,
+    phase variability. :func:`varied_walk` and :func:`~workbench.synth.decks.deck_walk`
+    share it with their own ``ranges`` (keys as in :data:`VARIED_WALK_RANGES`).
+    """
+
+    def draw(key: str) -> float:
+        lo, hi = ranges[key]
+        return float(rng.uniform(lo, hi))
+
+    details: dict[str, Any] = {"amplitude_sd": draw("amplitude_sd")}
+    details["duration_s"] = float(rng.uniform(*duration_s))
+    details["sample_rate_hz"] = float(rng.choice(ranges["sample_rate_hz"]))
+    for key in ("noise_sd_n", "pacing_hz", "mass_kg", "step_duration_sd", "phase_sd_rad"):
+        details[key] = draw(key)
+    return details
+
+
 def varied_walk(
     seed: int,
     effects: Effect | Effects | Iterable[Effect | str] | Callable[[float], Any] = (),
@@ -662,6 +698,7 @@ def varied_walk(
     duration_s: tuple[float, float] = (20.0, 120.0),
     ground_amplitude_m_s2: float = 0.0,
     ground_frequency_hz: float = 2.7,
+    ground_acc_m_s2: GroundInput = None,
     amplitude_sd: float | None = None,
     step_duration_sd: float | None = None,
     phase_sd_rad: float | None = None,
@@ -687,6 +724,10 @@ def varied_walk(
         Amplitude of a sinusoidal surface acceleration [m/s^2] (0: rigid ground).
     ground_frequency_hz : float, optional
         Its frequency [Hz].
+    ground_acc_m_s2 : callable or array_like, optional
+        Any other surface acceleration [m/s^2], for example a deck of
+        :mod:`workbench.synth.decks` (named in the truth); not together with
+        ``ground_amplitude_m_s2``.
     amplitude_sd : float, optional
         Step-to-step variability of the force amplitudes instead of the drawn one.
     step_duration_sd, phase_sd_rad : float, optional
@@ -697,32 +738,28 @@ def varied_walk(
     -------
     Simulation
     """
-    rng = np.random.default_rng([seed, 0x5EED])
-    r = VARIED_WALK_RANGES
-
-    def draw(key: str) -> float:
-        lo, hi = r[key]
-        return float(rng.uniform(lo, hi))
-
-    sd_a = draw("amplitude_sd")
-    ground = None
+    ground: GroundInput = ground_acc_m_s2
     if ground_amplitude_m_s2:
+        if ground_acc_m_s2 is not None:
+            raise UsageError(
+                "varied_walk: 'ground_acc_m_s2' and 'ground_amplitude_m_s2' both set the "
+                "surface motion; pass one of them",
+                parameter="ground_acc_m_s2",
+            )
         amp, w = float(ground_amplitude_m_s2), 2.0 * np.pi * float(ground_frequency_hz)
 
         def ground(t: ArrayLike) -> FloatArray:
             return np.asarray(amp * np.sin(w * np.asarray(t)), dtype=np.float64)
 
-    duration = float(rng.uniform(*duration_s))
-    hidden = effects(duration) if callable(effects) else effects
+    details = _draw_walk_details(
+        np.random.default_rng([seed, 0x5EED]), VARIED_WALK_RANGES, duration_s
+    )
+    details["step_duration_sd"] = _drawn_or(details["step_duration_sd"], step_duration_sd)
+    details["amplitude_sd"] = _drawn_or(details["amplitude_sd"], amplitude_sd)
+    details["phase_sd_rad"] = _drawn_or(details["phase_sd_rad"], phase_sd_rad)
+    hidden = effects(details["duration_s"]) if callable(effects) else effects
     return simulate_walking(
-        duration_s=duration,
-        sample_rate_hz=float(rng.choice(r["sample_rate_hz"])),
-        noise_sd_n=draw("noise_sd_n"),
-        pacing_hz=draw("pacing_hz"),
-        mass_kg=draw("mass_kg"),
-        step_duration_sd=_drawn_or(draw("step_duration_sd"), step_duration_sd),
-        amplitude_sd=_drawn_or(sd_a, amplitude_sd),
-        phase_sd_rad=_drawn_or(draw("phase_sd_rad"), phase_sd_rad),
+        **details,
         start="steady",
         effects=hidden,
         ground_acc_m_s2=ground,
