@@ -120,7 +120,6 @@ class IdentificationResult:
         """Return a copy with some fields changed (results are immutable)."""
         return dataclasses.replace(self, **changes)
 
-    # ------------------------------------------------------------------ estimates
     @property
     def mass_kg(self) -> float:
         """Body mass [kg]."""
@@ -281,7 +280,6 @@ class IdentificationResult:
         pb = self.piece_blf
         return pb.std(axis=0, ddof=1) if pb.shape[0] > 1 else np.zeros(pb.shape[1])
 
-    # ------------------------------------------------------------------ reconstruction
     def biomechanical_force_n(self) -> FloatArray:
         """Reconstructed biomechanical force at every sample (seed fig. 9) [N]."""
         p = self.problem
@@ -292,11 +290,7 @@ class IdentificationResult:
         return self.piece_blf.mean(axis=0) * self.mass_kg * G_M_S2
 
     def fitted_acceleration(self) -> FloatArray:
-        """Predict u'' from the measured u, u' and the estimated model [m/s^2].
-
-        On a moving surface ``u``, ``u'`` in the spring and damper are relative to it (the
-        problem's ``y``) and the prediction is the absolute ``u''`` that the GRF measures.
-        """
+        """Predict the absolute u'' (the GRF's) from the model and u, u' [m/s^2] (``y``)."""
         p = self.problem
         est = self.estimates
         u, v = p.y[:, 0], p.y[:, 1]
@@ -328,7 +322,6 @@ class IdentificationResult:
             lags = [step, 2 * step]
         return acorr_ljungbox(self.resid_grf_n, lags=lags)
 
-    # ------------------------------------------------------------------ diagnostics
     @property
     def min_ess_fraction(self) -> float | None:
         """Smallest ESS along the run as a fraction of the particle count (filters only)."""
@@ -445,7 +438,6 @@ class IdentificationResult:
             out.append(sentence)
         return out
 
-    # ------------------------------------------------------------------ output
     def to_json(self) -> dict[str, Any]:
         """Return the JSON object of ``workbench identify --json`` (docs/contracts.md)."""
         est, sd, ci = self.estimates, self.posterior_sd, self.interval()
