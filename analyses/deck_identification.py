@@ -1,6 +1,6 @@
 """What the coupled surface recovers, and where the per-step force model still gets in the way.
 
-Run: ``python analyses/deck_identification.py`` (about 6 minutes on one core). Prints
+Run: ``python analyses/deck_identification.py``. Prints
 
 1. a periodic walk on a 3.1 Hz deck (the whole-record force basis describes its force
    exactly): the exact posterior with the surface coupled and with it ignored;

@@ -160,6 +160,9 @@ def test_transmissibility_recovers_c_and_k_from_the_deck_alone(periodic_deck_wal
     for name in ("natural_frequency_hz", "damping_ratio"):
         lo, hi = frf.interval_95[name]
         assert lo <= truth[name] <= hi, (name, truth[name], frf.interval_95[name])
+    # Informative, not the prior box's spread: a 0.5 m/s^2 deck fixes f_n to about 1 %.
+    assert frf.posterior_sd["natural_frequency_hz"] < 0.02 * FN
+    assert frf.posterior_sd["damping_ratio"] < 0.1 * ZETA
     assert np.all(np.abs(frf.frequency_hz - DECK_HZ) < 0.5)
     rigid = build_problem(insp.com, insp.steps)
     assert surface_transmissibility(rigid) is None

@@ -34,6 +34,7 @@ __all__ = [
     "com_acceleration",
     "highpass",
     "integrate",
+    "motion_from_acceleration",
     "preprocess",
 ]
 
@@ -425,6 +426,25 @@ class COMResponse:
         return (t >= t[0] + self.edge_s) & (t <= t[-1] - self.edge_s)
 
 
+def motion_from_acceleration(
+    acc: ArrayLike, sample_rate_hz: float, highpass_hz: float, order: int = DEFAULT_FILTER_ORDER
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """High-passed acceleration, velocity and displacement (the chain of :func:`preprocess`).
+
+    The body's response and the walking surface's (:mod:`workbench.records.surface`) go
+    through this one chain, so their difference carries the same filter.
+    """
+    acc = np.asarray(acc, dtype=np.float64)
+    dt_s = 1.0 / sample_rate_hz
+    if highpass_hz == 0:
+        vel = integrate(acc, dt_s)
+        return acc, vel, integrate(vel, dt_s)
+    acc = highpass(acc, sample_rate_hz, highpass_hz, order)
+    vel = highpass(integrate(acc, dt_s), sample_rate_hz, highpass_hz, order)
+    disp = highpass(integrate(vel, dt_s), sample_rate_hz, highpass_hz, order)
+    return acc, vel, disp
+
+
 def preprocess(
     record: Record,
     *,
@@ -501,14 +521,7 @@ def preprocess(
     acc = com_acceleration(record)
     fs = record.sample_rate_hz
     _check_filter_args(fs, highpass_hz, order)
-    dt_s = record.dt_s
-    if highpass_hz == 0:
-        vel = integrate(acc, dt_s)
-        disp = integrate(vel, dt_s)
-    else:
-        acc = highpass(acc, fs, highpass_hz, order)
-        vel = highpass(integrate(acc, dt_s), fs, highpass_hz, order)
-        disp = highpass(integrate(vel, dt_s), fs, highpass_hz, order)
+    acc, vel, disp = motion_from_acceleration(acc, fs, highpass_hz, order)
     return COMResponse(
         time_s=record.time_s,
         acc_m_s2=acc,

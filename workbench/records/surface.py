@@ -22,8 +22,7 @@ from workbench.errors import InputError
 from workbench.records.preprocess import (
     DEFAULT_FILTER_ORDER,
     DEFAULT_HIGHPASS_HZ,
-    highpass,
-    integrate,
+    motion_from_acceleration,
 )
 from workbench.records.record import Record
 
@@ -104,13 +103,5 @@ def surface_motion(
             "fill or cut the gap in the ground_acc column, or drop the column to identify "
             "the walk as on a rigid floor",
         )
-    dt_s = record.dt_s
-    if highpass_hz == 0:
-        vel = integrate(acc, dt_s)
-        disp = integrate(vel, dt_s)
-    else:
-        fs = record.sample_rate_hz
-        acc = highpass(acc, fs, highpass_hz, order)
-        vel = highpass(integrate(acc, dt_s), fs, highpass_hz, order)
-        disp = highpass(integrate(vel, dt_s), fs, highpass_hz, order)
+    acc, vel, disp = motion_from_acceleration(acc, record.sample_rate_hz, highpass_hz, order)
     return SurfaceMotion(np.asarray(record.time_s, dtype=np.float64), acc, vel, disp)
