@@ -16,7 +16,10 @@ The steps, with the decisions they take:
    10 % of the RMS of u, u', u''; or a fraction);
 4. on a record that measures its surface's motion (``ground_acc``), the spring and damper
    act on the motion relative to it unless the model says ``surface="rigid"``
-   (:mod:`workbench.records.surface`, docs/science.md 6); the result's ``extra["surface"]``
+   (:mod:`workbench.records.surface`, docs/science.md 6); with the default
+   ``surface="coupled"`` C and K are read from the deck's transmissibility and the force
+   given them (:mod:`workbench.inference.surface_route`; the force-model check does not
+   apply there), with ``"joint"`` from the time history; the result's ``extra["surface"]``
    (``--json`` ``surface``) says which surface model was used and how much of the
    information on C and K came from the surface
    (:mod:`workbench.inference.surface_information`);
@@ -140,7 +143,7 @@ def compile_problem(
     if pacing is None and model.pieces == "whole":
         pacing = insp.pacing.pacing_hz if isinstance(insp, Inspection) else insp.measured_pacing_hz
     surface = None
-    if model.surface == "coupled":
+    if model.surface in ("coupled", "joint"):
         surface = surface_motion(
             insp.record,
             highpass_hz=insp.com.highpass_hz,
@@ -194,13 +197,20 @@ def identify_problem(
     -------
     IdentificationResult
     """
-    common: dict[str, Any] = {
+    common = _common(problem, settings, noise_info)
+    return settings.method.run(problem, seed=settings.seed, progress=progress, common=common)
+
+
+def _common(
+    problem: IdentificationProblem, settings: IdentifySettings, noise_info: dict[str, Any] | None
+) -> dict[str, Any]:
+    """Return the result entries every route shares: noise, settings and model."""
+    return {
         "noise": noise_info
         or {"obs_fraction": problem.noise.obs_fraction, "source": problem.noise.source},
         "settings": settings.to_json(),
         "model": settings.model.replace(mass_kg=problem.mass_kg),
     }
-    return settings.method.run(problem, seed=settings.seed, progress=progress, common=common)
 
 
 def _with_mass(record: Record | Inspection, model: SMDModel | None) -> Record | Inspection:
@@ -315,7 +325,18 @@ def identify(
             highpass_hz=settings.preprocessing.highpass_hz,
         )
         problem, pilot = with_effects(problem, terms)
-    result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
+    result = None
+    if settings.model.surface == "coupled" and problem.surface is not None and not effects:
+        from workbench.inference.surface_route import identify_through_surface
+
+        result = identify_through_surface(
+            problem,
+            seed=settings.seed,
+            common=_common(problem, settings, info.to_json()),
+            requested_method=settings.method.name,
+        )
+    if result is None:
+        result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
     extra = {**result.extra, "inspection_warnings": list(insp.warnings)}
     if terms is not None:
         from workbench.inference.effect_terms import effect_posterior
@@ -327,7 +348,7 @@ def identify(
 
     extra["surface"] = surface_report(result, problem, insp.record, settings.model.surface)
     result = result.replace(extra=extra)
-    if settings.force_check:
+    if settings.force_check and "surface_route" not in extra:
         result = apply_force_model_check(result, problem)
     return downgrade_untrustworthy(result)
 

@@ -313,24 +313,38 @@ class Exact(Method):
         """Compute the grid posterior of a compiled problem (see :meth:`Method.run`)."""
         from workbench.inference.exact import exact_posterior
 
-        post = exact_posterior(problem)
-        draws = post.sample(int(self.n_draws), np.random.default_rng(seed))
-        force = post.force
-        if force is None:  # pragma: no cover - only with an injected likelihood
-            raise RuntimeError("the exact posterior returned no force coefficients")
-        report = post.identifiability
-        return IdentificationResult(
-            method="exact",
-            draws=draws,
-            weights=np.full(draws.shape[0], 1.0 / draws.shape[0]),
-            piece_coefficients_mean=force.mean,
-            piece_coefficients_sd=force.sd,
-            loglik=float(post.log_evidence),
-            identifiability=report.to_json() if report is not None else {},
-            extra={"exact": post.to_json()},
-            problem=problem,
-            **(common or {}),
-        )
+        return exact_result(exact_posterior(problem), problem, int(self.n_draws), seed, common)
+
+
+def exact_result(
+    post: Any,
+    problem: IdentificationProblem,
+    n_draws: int,
+    seed: int,
+    common: dict[str, Any] | None = None,
+) -> IdentificationResult:
+    """Turn an :class:`~workbench.inference.exact_results.ExactPosterior` into a result.
+
+    ``n_draws`` draws from the grid posterior (seeded) stand for it in the result; the force
+    coefficients are the grid mixture's.
+    """
+    draws = post.sample(int(n_draws), np.random.default_rng(seed))
+    force = post.force
+    if force is None:  # pragma: no cover - only with an injected likelihood and no force
+        raise RuntimeError("the exact posterior returned no force coefficients")
+    report = post.identifiability
+    return IdentificationResult(
+        method="exact",
+        draws=draws,
+        weights=np.full(draws.shape[0], 1.0 / draws.shape[0]),
+        piece_coefficients_mean=force.mean,
+        piece_coefficients_sd=force.sd,
+        loglik=float(post.log_evidence),
+        identifiability=report.to_json() if report is not None else {},
+        extra={"exact": post.to_json()},
+        problem=problem,
+        **(common or {}),
+    )
 
 
 _BY_NAME: dict[str, type[Method]] = {"rbpf": RBPF, "pf": PF, "exact": Exact}

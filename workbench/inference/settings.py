@@ -70,7 +70,7 @@ from workbench.errors import InputError, UsageError
 from workbench.inference.methods import METHODS, PF, RBPF, Method, as_method
 from workbench.inference.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
-from workbench.models.smd import SMDModel
+from workbench.models.smd import SURFACE_MODELS, SMDModel
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
 __all__ = [
@@ -232,9 +232,9 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
         raise UsageError(
             f"'pieces' must be 'steps' or 'whole', got {flat['pieces']!r}", parameter="pieces"
         )
-    if flat["surface"] not in ("coupled", "rigid"):
+    if flat["surface"] not in SURFACE_MODELS:
         raise UsageError(
-            f"'surface' must be 'coupled' or 'rigid', got {flat['surface']!r}",
+            f"'surface' must be one of {', '.join(SURFACE_MODELS)}, got {flat['surface']!r}",
             parameter="surface",
         )
     effects = parse_effect_specs(flat["effects"], where="'effects'")

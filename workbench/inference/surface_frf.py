@@ -1,28 +1,52 @@
-"""The surface's transmissibility: C and K from the part of the GRF the deck drives.
+"""The surface's transmissibility: the likelihood of (C, K) from the response the deck drives.
 
 A frequency-response test of an occupied structure (docs/science.md 6): the measured
 surface acceleration ``z''`` is an input, and the body's acceleration answers it through the
-spring and damper, ``u''(w) = T(w) z''(w)`` with the transmissibility
+spring and damper, ``u''(w) = T(w) z''(w) + (gait part)`` with the transmissibility
 
-    T(w) = (K + i w C) / (K - w^2 M + i w C),
+    T(w) = (K + i w C) / (K - w^2 M + i w C).
 
-while the gait adds its own force, which at frequencies away from the pacing harmonics is
-small and not coherent with the deck. So the cross-spectral (H1) estimate of the apparent
-mass ``H(w) = S_{z'' Mu''}(w) / S_{z'' z''}(w) = M T(w)`` at the frequencies where the deck
-moves gives C and K directly: ``K + i w C = -w^2 M T / (1 - T)``.
+The gait's own force is not coherent with the deck, so at the frequencies where the deck
+moves and away from the gait's harmonic lines it is noise. The likelihood of (C, K) is built
+on the whole record's discrete Fourier transform:
 
-Uncertainty: the H1 estimate from ``n_d`` Welch averages (half overlap) with coherence
-``g^2`` has a complex error of variance ``|H|^2 (1 - g^2) / (g^2 n_d)`` (Bendat and Piersol,
-*Random Data*, 9.2), split equally between its real and imaginary parts. The log-likelihood
-of (C, K) is the sum over the deck's bins of the complex-normal misfit, divided by the
-window's equivalent noise bandwidth in bins (2.0), because neighbouring bins share the same
-data; the posterior on a grid over the prior box (uniform prior), zoomed onto its peak,
-gives means, sd and 95 % intervals. Bins within a quarter of the pacing of a gait harmonic
-are left out: there the gait's own force dominates and is coherent over the record.
+Spectra
+    ``Z`` the plain DFT of ``z''``, ``Y`` the DFT of ``u''`` tapered by the periodic 4-term
+    Blackman-Harris window (side lobes at -92 dB keep the strong gait lines inside four bins
+    of themselves). That window is a sum of four cosines, so its DFT has exactly seven
+    non-zero lines ``c_d`` (d = -3..3) and the tapered DFT of the deck-driven response is
+    *exactly* ``Yd_j = sum_d c_d T(f_{j-d}) Z_{j-d}`` for the record's periodic extension
+    (a line of ``z''`` at a record harmonic answers with ``T`` at that line's frequency);
+    the only approximation is the response to the wrap-around at the record's ends, which
+    decays within a second and which the taper suppresses. No spectral averaging and no
+    assignment of a bin to an "effective" frequency is involved, which is what biased a
+    Welch estimate by a few per cent on narrow-band decks.
+Bins used
+    Where the tapered deck spectrum has at least ``POWER_FRACTION`` of its peak power, above
+    ``MIN_HZ``, and outside a guard around every gait harmonic ``k f_p`` of four bins (the
+    window's main lobe) plus ``HARMONIC_SPREAD`` times ``k f_p`` (step-to-step variation of
+    the pacing spreads the lines).
+Noise
+    The gait part of ``Y`` at a used bin is complex normal with a variance ``s_j^2`` that
+    varies smoothly with frequency. It is estimated from the residual ``Y - Yd`` at the
+    maximum-likelihood (C, K) over every bin (used or not, gait lines excluded) within
+    ``NOISE_HALF_WIDTH_HZ`` of the bin, with a degrees-of-freedom correction for the two
+    fitted parameters. The maximum likelihood itself comes from a first pass whose noise is
+    the median power of ``Y`` in bins near the used ones where the deck is quiet.
+Likelihood
+    A Student-t misfit with ``STUDENT_DOF`` (4) degrees of freedom per bin,
+    ``log p = -sum_j (nu + 2) / 2 log(1 + |Y_j - Yd_j(C, K)|^2 / (s_j^2 nu / 2)) / ENBW``
+    over the used bins, divided by the window's equivalent noise bandwidth (2.0 bins)
+    because neighbouring tapered bins share the same data. The heavy tails keep a bin whose
+    noise level is underestimated -- next to a gait line, where the level changes fast --
+    from deciding the answer (a Gaussian misfit made such bins overconfident on decks near
+    the gait's harmonics). It is vectorised over (C, K) and costs microseconds per pair, so
+    the exact grid posterior
+    (:func:`workbench.inference.exact.exact_posterior`) runs on it.
 
-This estimate uses only what the deck drives, so the force model cannot absorb it; it is the
-check of, and on realistic walks the better source for, the information the surface carries
-(docs/validation/deck.md).
+This uses only what the deck drives, so the step force cannot absorb it: on realistic walks
+it is where the surface's information on C and K is read from (docs/validation/deck.md). A
+deck at a harmonic of the pacing gives no bins; a weak deck gives a wide posterior.
 """
 
 from __future__ import annotations
@@ -35,80 +59,226 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from workbench.inference.problem import IdentificationProblem
-from workbench.inference.weighted import weighted_quantile
 
-__all__ = ["SurfaceTransmissibility", "surface_transmissibility"]
+__all__ = ["DeckSpectra", "SurfaceTransmissibility", "deck_spectra", "surface_transmissibility"]
 
 FloatArray = NDArray[np.float64]
 
-#: Welch segment length [s] and window: 0.1 Hz bins, and a Blackman-Harris window whose
-#: side lobes (-92 dB) keep the strong, coherent gait harmonics out of the deck's bins (a
-#: Hann window's -31 dB leaked enough of the second harmonic into a deck 0.5 Hz away to bias
-#: f_n by 3 % on a periodic walk).
-SEGMENT_S = 10.0
-WINDOW = "blackmanharris"
-#: Bins used: surface power above this fraction of its peak.
+#: Bins used: tapered deck power above this fraction of its peak.
 POWER_FRACTION = 0.1
-#: Bins closer than this fraction of the pacing to a gait harmonic are left out.
-HARMONIC_GUARD = 0.25
-#: Half-width of the Blackman-Harris window's main lobe [bins].
-MAIN_LOBE_BINS = 4
-#: Equivalent noise bandwidth of the window [bins]: neighbouring bins share data.
+#: Lowest frequency used [Hz] (below it the high-pass filter and drift dominate).
+MIN_HZ = 0.5
+#: Guard around the gait harmonic k f_p: four bins plus this fraction of k f_p.
+HARMONIC_SPREAD = 0.02
+#: Half-width of the frequency window over which the gait noise's level is estimated [Hz].
+NOISE_HALF_WIDTH_HZ = 0.15
+#: Bins near the used ones where the deck is this quiet (fraction of its peak power) serve
+#: the first pass's noise level.
+QUIET_FRACTION = 0.01
+#: Degrees of freedom of the per-bin Student-t misfit (module docstring).
+STUDENT_DOF = 4.0
+#: Equivalent noise bandwidth of the Blackman-Harris window [bins].
 WINDOW_ENBW_BINS = 2.0
-#: Grid nodes per axis of the posterior over (C, K), and zoom rounds (each zooms to the
-#: posterior mean +- 6 sd, so a sharp peak is resolved).
-GRID_NODES = 81
-ZOOM_ROUNDS = 4
+#: The periodic 4-term Blackman-Harris window's cosine coefficients (scipy's).
+_BH = (0.35875, 0.48829, 0.14128, 0.01168)
+#: Its DFT divided by the record length: the seven lines c_d, d = -3..3.
+_TAPER_LINES = np.array(
+    [-_BH[3] / 2, _BH[2] / 2, -_BH[1] / 2, _BH[0], -_BH[1] / 2, _BH[2] / 2, -_BH[3] / 2]
+)
+_OFFSETS = np.arange(-3, 4)
+
+
+@dataclass(frozen=True, eq=False)
+class DeckSpectra:
+    """The record's spectra at the bins the deck drives, and their likelihood of (C, K).
+
+    Attributes
+    ----------
+    mass_kg : float
+        Body mass [kg].
+    frequency_hz : ndarray
+        Frequencies of the bins used [Hz].
+    body : ndarray (complex)
+        Tapered DFT of the body acceleration at those bins.
+    sources : ndarray (complex), shape (J, 7)
+        ``c_d Z_{j-d}``: the taper lines times the deck's DFT around each bin.
+    source_omega : ndarray, shape (J, 7)
+        Angular frequency of each of those lines [rad/s].
+    noise_var : ndarray
+        Variance of the gait part at each bin (module docstring).
+    deck_power : ndarray
+        Tapered deck power at each bin (for plots and reports).
+    """
+
+    mass_kg: float
+    frequency_hz: FloatArray
+    body: NDArray[np.complex128]
+    sources: NDArray[np.complex128]
+    source_omega: FloatArray
+    noise_var: FloatArray
+    deck_power: FloatArray
+
+    def deck_driven(self, damping: Any, stiffness: Any) -> NDArray[np.complex128]:
+        """Tapered DFT of the deck-driven body acceleration at the bins, (B, J)."""
+        c = np.asarray(damping, dtype=np.float64).reshape(-1, 1, 1)
+        k = np.asarray(stiffness, dtype=np.float64).reshape(-1, 1, 1)
+        w = self.source_omega[None]
+        num = k + 1j * w * c
+        return np.sum(num / (num - w * w * self.mass_kg) * self.sources[None], axis=-1)
+
+    def loglik(self, problem: Any, damping: Any, stiffness: Any) -> FloatArray:
+        """``log p(Y | C, K)`` up to a constant, (B,): the exact method's likelihood hook."""
+        resid = self.body[None] - self.deck_driven(damping, stiffness)
+        power = (resid.real**2 + resid.imag**2) / self.noise_var[None]
+        nu = STUDENT_DOF
+        return -np.sum((nu + 2.0) / 2.0 * np.log1p(power / (nu / 2.0)), axis=-1) / WINDOW_ENBW_BINS
+
+    @property
+    def apparent_mass_kg(self) -> NDArray[np.complex128]:
+        """``M Y / Z_tapered`` at the bins: the measured apparent mass, for plots [kg]."""
+        tapered = np.sum(self.sources, axis=1)
+        return self.mass_kg * self.body / tapered
+
+
+def _gait_guard(freq: FloatArray, pacing_hz: float, bin_hz: float) -> NDArray[np.bool_]:
+    order = np.maximum(np.round(freq / pacing_hz), 1.0)
+    centre = order * pacing_hz
+    return np.abs(freq - centre) < 4.0 * bin_hz + HARMONIC_SPREAD * centre
+
+
+def _best_pair(spectra: DeckSpectra, lo: FloatArray, hi: FloatArray) -> tuple[float, float]:
+    """Maximum-likelihood (C, K) in the prior box: a 121^2 grid, then a 41^2 zoom."""
+    a, b = lo, hi
+    best = (float(lo[0]), float(lo[1]))
+    for n in (121, 41):
+        cc, kk = np.meshgrid(np.linspace(a[0], b[0], n), np.linspace(a[1], b[1], n))
+        ll = spectra.loglik(None, cc.ravel(), kk.ravel())
+        i = int(np.argmax(ll))
+        best = (float(cc.ravel()[i]), float(kk.ravel()[i]))
+        half = 2.0 * (b - a) / (n - 1)
+        a = np.maximum(lo, np.array(best) - half)
+        b = np.minimum(hi, np.array(best) + half)
+    return best
+
+
+def deck_spectra(problem: IdentificationProblem) -> DeckSpectra | None:
+    """Build the transmissibility likelihood of a coupled problem (module docstring).
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        A problem with the surface coupled (``problem.surface`` set).
+
+    Returns
+    -------
+    DeckSpectra or None
+        None without a surface, or when the deck has no power away from the gait harmonics.
+    """
+    if problem.surface is None or problem.n_samples < 64:
+        return None
+    x = problem.surface.acc_m_s2
+    y = problem.absolute_y[:, 2]
+    n = x.size
+    taper = signal.windows.blackmanharris(n, sym=False)
+    deck = np.fft.rfft(x)
+    deck_tapered = np.fft.rfft(taper * x)
+    body = np.fft.rfft(taper * y)
+    freq = np.asarray(np.fft.rfftfreq(n, problem.dt_s), dtype=np.float64)
+    guard = _gait_guard(freq, float(problem.pacing_hz), float(freq[1])) | (freq < MIN_HZ)
+    guard[:4] = guard[-4:] = True  # the seven-line sums need neighbours on both sides
+    power = np.abs(deck_tapered) ** 2
+    used = np.flatnonzero((power > POWER_FRACTION * power.max()) & ~guard)
+    if used.size == 0:
+        return None
+
+    def at(bins: NDArray[np.int64], noise: FloatArray) -> DeckSpectra:
+        cols = bins[:, None] - _OFFSETS[None, :]
+        return DeckSpectra(
+            mass_kg=problem.mass_kg,
+            frequency_hz=freq[bins],
+            body=body[bins],
+            sources=deck[cols] * _TAPER_LINES[None, :],
+            source_omega=2.0 * np.pi * freq[cols],
+            noise_var=noise,
+            deck_power=power[bins],
+        )
+
+    # First pass: the noise level of quiet bins near the used ones (median / ln 2 is the
+    # mean of an exponential variable, robust to a stray line).
+    quiet = (power < QUIET_FRACTION * power.max()) & ~guard
+    first = np.empty(used.size)
+    for i, j in enumerate(used):
+        for width in (2, 4, 8):
+            near = quiet & (np.abs(freq - freq[j]) <= width * NOISE_HALF_WIDTH_HZ)
+            if near.sum() >= 8:
+                break
+        level = np.abs(body[near]) ** 2
+        first[i] = np.median(level) / np.log(2.0) if level.size else np.abs(body[j]) ** 2
+    first = np.maximum(first, 1e-12 * max(float(first.max()), 1e-300))
+    lo = np.array([problem.prior.damping_ns_per_m[0], problem.prior.stiffness_n_per_m[0]])
+    hi = np.array([problem.prior.damping_ns_per_m[1], problem.prior.stiffness_n_per_m[1]])
+    c0, k0 = _best_pair(at(used, first), lo, hi)
+
+    # Second pass: the residual at the first pass's best (C, K), every non-guarded bin
+    # within the window, corrected for the two fitted parameters (one complex dof).
+    margin = 2.0 * NOISE_HALF_WIDTH_HZ
+    around = np.flatnonzero(
+        (freq > freq[used].min() - margin) & (freq < freq[used].max() + margin) & ~guard
+    )
+    resid = at(around, np.ones(around.size))
+    r2 = np.abs(resid.body - resid.deck_driven(c0, k0)[0]) ** 2
+    n_eff = used.size / WINDOW_ENBW_BINS
+    dof = n_eff / max(n_eff - 1.0, 0.5)
+    noise = np.array(
+        [np.mean(r2[np.abs(freq[around] - freq[j]) <= NOISE_HALF_WIDTH_HZ]) for j in used]
+    )
+    noise = np.maximum(noise * dof, 1e-12 * max(float(noise.max()), 1e-300))
+    return at(used, noise)
 
 
 @dataclass(frozen=True)
 class SurfaceTransmissibility:
-    """C and K from the surface's transmissibility (module docstring).
+    """C and K from the surface's transmissibility alone (exact grid posterior).
 
     Attributes
     ----------
     frequency_hz : ndarray
         Frequencies of the bins used [Hz].
     apparent_mass_kg : ndarray (complex)
-        H1 estimate ``M T(w)`` at those bins [kg].
-    coherence : ndarray
-        Coherence of surface and body acceleration at those bins.
+        Measured apparent mass at those bins [kg].
     estimates, posterior_sd : dict
         Posterior mean and sd of C, K, f_n and zeta.
     interval_95 : dict
         Equal-tailed 95 % intervals.
     at_prior_bound : bool
         Whether the posterior piles against the edge of the prior box.
+    level : str
+        The identifiability level of that posterior.
     """
 
     frequency_hz: FloatArray
     apparent_mass_kg: NDArray[np.complex128]
-    coherence: FloatArray
     estimates: dict[str, float]
     posterior_sd: dict[str, float]
     interval_95: dict[str, tuple[float, float]]
     at_prior_bound: bool
+    level: str
 
     def to_json(self) -> dict[str, Any]:
         """JSON-able form."""
         return {
             "frequency_hz": [float(f) for f in self.frequency_hz],
-            "coherence": [float(c) for c in self.coherence],
             "apparent_mass_kg": [[float(h.real), float(h.imag)] for h in self.apparent_mass_kg],
             "estimates": self.estimates,
             "posterior_sd": self.posterior_sd,
             "interval_95": {k: list(v) for k, v in self.interval_95.items()},
             "at_prior_bound": self.at_prior_bound,
+            "level": self.level,
         }
 
 
-def _transmissibility(c: FloatArray, k: FloatArray, w: FloatArray, mass: float) -> Any:
-    num = k[..., None] + 1j * w * c[..., None]
-    return num / (num - w**2 * mass)
-
-
 def surface_transmissibility(problem: IdentificationProblem) -> SurfaceTransmissibility | None:
-    """Estimate C and K from the deck-driven part of the response (module docstring).
+    """Compute the grid posterior of (C, K) from the transmissibility alone (module docstring).
 
     Parameters
     ----------
@@ -118,78 +288,30 @@ def surface_transmissibility(problem: IdentificationProblem) -> SurfaceTransmiss
     Returns
     -------
     SurfaceTransmissibility or None
-        None when the record has no surface, is shorter than two segments, or the deck has
-        no power away from the gait harmonics.
+        None when :func:`deck_spectra` is.
     """
-    if problem.surface is None:
+    from workbench.inference.exact import exact_posterior
+
+    spectra = deck_spectra(problem)
+    if spectra is None:
         return None
-    fs = 1.0 / problem.dt_s
-    x = problem.surface.acc_m_s2
-    y = problem.absolute_y[:, 2]
-    # Three segments at least (shorter ones on records under 20 s), never under 4 s.
-    nper = min(round(SEGMENT_S * fs), x.size // 2)
-    if nper < 4.0 * fs:
-        return None
-    freq, pxx = signal.welch(x, fs=fs, window=WINDOW, nperseg=nper)
-    _, pxy = signal.csd(x, y, fs=fs, window=WINDOW, nperseg=nper)
-    _, pyy = signal.welch(y, fs=fs, window=WINDOW, nperseg=nper)
-    coh = np.abs(pxy) ** 2 / np.maximum(pxx * pyy, 1e-300)
-    n_avg = 2.0 * x.size / nper - 1.0  # Welch segments at half overlap
-    harmonic = freq / problem.pacing_hz
-    near_gait = np.abs(harmonic - np.round(harmonic)) < HARMONIC_GUARD
-    sel = (pxx > POWER_FRACTION * pxx.max()) & ~near_gait & (freq > 0) & (coh > 0.05)
-    if not np.any(sel):
-        return None
-    # A bin's estimate is the ratio of what leaked into it through the window's main lobe,
-    # so it belongs to the input's power-weighted frequency over that lobe, not to the bin's
-    # centre (for a sine deck every main-lobe bin carries T at the sine's frequency).
-    lobe = np.ones(2 * MAIN_LOBE_BINS + 1)
-    f_eff = np.convolve(pxx * freq, lobe, "same") / np.maximum(
-        np.convolve(pxx, lobe, "same"), 1e-300
-    )
-    w = 2 * np.pi * f_eff[sel]
-    h = problem.mass_kg * pxy[sel] / pxx[sel]
-    g2 = np.clip(coh[sel], 1e-6, 1 - 1e-9)
-    var = np.abs(h) ** 2 * (1 - g2) / (g2 * n_avg)
-    lo = np.array([problem.prior.damping_ns_per_m[0], problem.prior.stiffness_n_per_m[0]])
-    hi = np.array([problem.prior.damping_ns_per_m[1], problem.prior.stiffness_n_per_m[1]])
-    a, b = lo.copy(), hi.copy()
-    m = problem.mass_kg
-    at_bound = False
-    for _ in range(ZOOM_ROUNDS):
-        cc, kk = np.meshgrid(
-            np.linspace(a[0], b[0], GRID_NODES), np.linspace(a[1], b[1], GRID_NODES)
-        )
-        model = m * _transmissibility(cc, kk, w, m)
-        ll = -np.sum(np.abs(model - h) ** 2 / var, axis=-1) / WINDOW_ENBW_BINS
-        wts = np.exp(ll - ll.max())
-        wts /= wts.sum()
-        if a[0] == lo[0] and b[0] == hi[0]:
-            # Mass against the prior box's edge on the first (whole-box) grid.
-            at_bound = bool(
-                max(wts[0].sum(), wts[-1].sum(), wts[:, 0].sum(), wts[:, -1].sum()) > 0.01
-            )
-        pts = np.column_stack([cc.ravel(), kk.ravel()])
-        mean = wts.ravel() @ pts
-        spread = np.sqrt(np.maximum(wts.ravel() @ (pts - mean) ** 2, 0.0))
-        spacing = (b - a) / (GRID_NODES - 1)
-        if np.all(spacing < 0.25 * spread):
-            break
-        half = np.maximum(6.0 * spread, 2.0 * spacing)
-        a, b = np.maximum(lo, mean - half), np.minimum(hi, mean + half)
-    wts = wts.ravel()
-    c, k = cc.ravel(), kk.ravel()
-    draws = {
-        "damping_ns_per_m": c,
-        "stiffness_n_per_m": k,
-        "natural_frequency_hz": np.sqrt(k / m) / (2 * np.pi),
-        "damping_ratio": c / (2 * np.sqrt(k * m)),
+    post = exact_posterior(problem, loglik=spectra.loglik, force_moments=None)
+    est = {
+        **dict(zip(("damping_ns_per_m", "stiffness_n_per_m"), map(float, post.mean), strict=True)),
+        **post.modal_mean,
     }
-    est, sd, ci = {}, {}, {}
-    for name, v in draws.items():
-        mu = float(wts @ v)
-        est[name] = mu
-        sd[name] = float(np.sqrt(max(wts @ (v - mu) ** 2, 0.0)))
-        q_lo, q_hi = weighted_quantile(v, wts, np.array([0.025, 0.975]))
-        ci[name] = (float(q_lo), float(q_hi))
-    return SurfaceTransmissibility(f_eff[sel], h, coh[sel], est, sd, ci, at_bound)
+    sd = {
+        **dict(zip(("damping_ns_per_m", "stiffness_n_per_m"), map(float, post.sd), strict=True)),
+        **post.modal_sd,
+    }
+    ci = {name: (float(v[0]), float(v[1])) for name, v in post.intervals.items()}
+    report = post.identifiability
+    return SurfaceTransmissibility(
+        frequency_hz=spectra.frequency_hz,
+        apparent_mass_kg=spectra.apparent_mass_kg,
+        estimates=est,
+        posterior_sd=sd,
+        interval_95=ci,
+        at_prior_bound=any("edge of the prior box" in n for n in post.notes),
+        level=report.level if report is not None else "unknown",
+    )

@@ -163,7 +163,7 @@ def surface_report(
         The problem it solved.
     record : Record
         The record (whether it measures a surface motion at all).
-    surface_model : {"coupled", "rigid"}
+    surface_model : {"coupled", "joint", "rigid"}
         The model's surface setting.
 
     Returns
@@ -179,7 +179,7 @@ def surface_report(
             "sentence": "The record measures no surface motion; it was identified as a walk on "
             "a rigid floor.",
         }
-    if surface_model != "coupled" or problem.surface is None:
+    if surface_model == "rigid" or problem.surface is None:
         rms = float(np.sqrt(np.mean(np.square(record.ground_acc_m_s2))))
         return {
             "model": "ignored (rigid floor)",
@@ -192,16 +192,44 @@ def surface_report(
     step = (STEP_SD * sd["damping_ns_per_m"], STEP_SD * sd["stiffness_n_per_m"])
     info = information_with_and_without(problem, c, k, step)
     rms = problem.surface.rms_acc_m_s2
-    frf = surface_transmissibility(problem)
+    route = result.extra.get("surface_route")
+    if route is not None:
+        # C and K already are the transmissibility's posterior: report it, not again.
+        frf_json: dict[str, Any] | None = {
+            "estimates": dict(est),
+            "posterior_sd": dict(sd),
+            "interval_95": {k: list(v) for k, v in result.interval().items()},
+            "level": result.identifiability.get("level"),
+            "bins": route["bins"],
+            "band_hz": route["band_hz"],
+        }
+    else:
+        frf = surface_transmissibility(problem)
+        frf_json = None if frf is None else frf.to_json()
     report: dict[str, Any] = {
         "model": "coupled",
+        "c_and_k_from": "transmissibility" if route is not None else "time history",
         "source": problem.surface.source,
         "rms_acc_m_s2": rms,
         "dominant_hz": _dominant_hz(problem),
         "information": info,
-        "transmissibility": None if frf is None else frf.to_json(),
+        "transmissibility": frf_json,
     }
-    report["sentence"] = _sentence(rms, info)
+    if route is not None:
+        level = str(result.identifiability.get("level", ""))
+        lo, hi = route["band_hz"]
+        report["sentence"] = (
+            f"C and K were read from the deck's transmissibility ({route['bins']} bins at "
+            f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them"
+            + (
+                "."
+                if level in ("well identified", "weakly identified")
+                else f"; the deck's {rms:.3g} m/s^2 there carries too little information "
+                "to pin them (docs/validation/deck.md)."
+            )
+        )
+    else:
+        report["sentence"] = _sentence(rms, info)
     return report
 
 

@@ -33,8 +33,9 @@ __all__ = ["PIECE_MODES", "SURFACE_MODELS", "TIME_BASES", "SMDModel"]
 TIME_BASES = ("step_phase", "absolute")
 #: Whether the force coefficients are redrawn at every step or shared by the whole record.
 PIECE_MODES = ("steps", "whole")
-#: How a measured surface motion enters: through the spring and damper, or ignored.
-SURFACE_MODELS = ("coupled", "rigid")
+#: How a measured surface motion enters: through the spring and damper (C and K read from the
+#: deck's transmissibility, or from the whole time history jointly with the force), or ignored.
+SURFACE_MODELS = ("coupled", "joint", "rigid")
 
 FloatArray = NDArray[np.float64]
 
@@ -86,11 +87,17 @@ class SMDModel:
         A known biomechanical force ``a0, a1, b1, ..., an, bn`` [N] (``2 n + 1`` values, the
         order of :class:`~workbench.models.force.FourierForce`), e.g. a sampled walker on a
         footbridge; None while unknown.
-    surface : {"coupled", "rigid"}, optional
+    surface : {"coupled", "joint", "rigid"}, optional
         ``"coupled"`` (the default): when the record measures the walking surface's motion
         (a ``ground_acc`` column), the spring and damper act on the motion relative to it,
-        ``M u'' + C (u' - z') + K (u - z) = F_bio``; on a rigid floor this is the plain
-        model. ``"rigid"``: ignore any surface motion (to see what it adds).
+        ``M u'' + C (u' - z') + K (u - z) = F_bio``, and C and K are read from the deck's
+        transmissibility (the response the deck drives, which the step force cannot absorb),
+        the force given them from the time history; without deck power away from the gait
+        harmonics, or with effects, C and K come from the time history as in ``"joint"``.
+        ``"joint"``: the same model with C, K and the force from the time history jointly
+        (right when the force model describes the walk; docs/validation/deck.md). On a rigid
+        floor both are the plain model. ``"rigid"``: ignore any surface motion (to see what
+        it adds).
 
     Examples
     --------
