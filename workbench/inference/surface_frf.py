@@ -19,8 +19,8 @@ Spectra
     (a line of ``z''`` at a record harmonic answers with ``T`` at that line's frequency);
     the only approximation is the response to the wrap-around at the record's ends, which
     decays within a second and which the taper suppresses. No spectral averaging and no
-    assignment of a bin to an "effective" frequency is involved, which is what biased a
-    Welch estimate by a few per cent on narrow-band decks.
+    assignment of a bin to an "effective" frequency is involved (that is what biased an
+    earlier Welch estimate on narrow-band decks).
 Bins used
     Where the tapered deck spectrum has at least ``POWER_FRACTION`` of its peak power, above
     ``MIN_HZ``, and outside a guard around every gait harmonic ``k f_p`` of four bins (the
