@@ -28,15 +28,12 @@ from __future__ import annotations
 from typing import Any
 
 from workbench.inference.exact import _kalman_force_moments, exact_posterior
-from workbench.inference.methods import exact_result
+from workbench.inference.methods import Exact, exact_result
 from workbench.inference.problem import IdentificationProblem
 from workbench.inference.results import IdentificationResult
 from workbench.inference.surface_frf import deck_spectra
 
 __all__ = ["identify_through_surface"]
-
-#: Draws from the grid posterior that the result holds (as the exact method).
-N_DRAWS = 4000
 
 
 def identify_through_surface(
@@ -70,7 +67,8 @@ def identify_through_surface(
     post = exact_posterior(
         problem, loglik=spectra.loglik, force_moments=_kalman_force_moments("foh")
     )
-    result = exact_result(post, problem, N_DRAWS, seed, common)
+    # As many draws from the grid posterior as the exact method keeps.
+    result = exact_result(post, problem, Exact.n_draws, seed, common)
     route = {
         "c_and_k_from": "transmissibility",
         "force_from": "time history given C and K (Kalman filter, mixed over the grid)",
