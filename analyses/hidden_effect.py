@@ -170,9 +170,11 @@ def sweep(
         "(record, other effect not named indistinguishable) where the other effect does that;\n"
         "after: where the other effect does that added after the hidden one.\n"
     )
+    # The rigid-floor model: on the base_motion rows the surface is the effect it leaves out.
     opts: dict[str, Any] = {
         "step_variation": step_variation,
         "response_modulation": response_modulation,
+        "surface": "rigid",
     }
     head = (
         f"{'hidden effect':<32} {'first+sig':>9} {'found':>6} {'cut':>6} {'wrong':>7} {'after':>7}"
@@ -280,7 +282,7 @@ def pairs(n: int) -> None:
         for second in names[i + 1 :]:
             top3 = sig = 0
             for seed in range(n):
-                diag = diagnose(hidden_effect_walk([first, second], seed).record)
+                diag = diagnose(hidden_effect_walk([first, second], seed).record, surface="rigid")
                 cands = {c.effect: c for c in diag.candidates}
                 top = [c.effect for c in diag.candidates[:3]]
                 top3 += first in top and second in top

@@ -18,6 +18,7 @@ __all__ = [
     "Parser",
     "add_allow_negative_force",
     "add_rigid_floor_flag",
+    "surface_choice",
     "emit",
     "floats",
     "identify_settings",
@@ -266,7 +267,7 @@ def identify_settings(args: argparse.Namespace) -> Any:
         "force_check": False if flag("no_force_check") else None,
         "effects": flag("effects"),
         "rescale_to_mass": True if flag("rescale_to_mass") else None,
-        "surface": "rigid" if flag("rigid_floor") else None,
+        "surface": surface_choice(args),
     }
     if flag("config"):
         return IdentifySettings.from_toml(args.config, **overrides)
@@ -274,14 +275,43 @@ def identify_settings(args: argparse.Namespace) -> Any:
 
 
 def add_rigid_floor_flag(parser: Any) -> None:
-    """Add ``--rigid-floor`` (ignore a measured surface motion) to a parser or group."""
+    """Add ``--rigid-floor`` and ``--surface MODEL`` (how a measured surface motion enters)."""
     parser.add_argument(
         "--rigid-floor",
         action="store_true",
         help="ignore the record's ground_acc column: identify as on a rigid floor instead of "
         "letting the measured surface motion act through K and C (the default), to see "
-        "what the surface adds",
+        "what the surface adds; the same as --surface rigid",
     )
+    parser.add_argument(
+        "--surface",
+        choices=("coupled", "joint", "rigid"),
+        default=None,
+        help="how the record's ground_acc enters: coupled (default; C and K from the deck's "
+        "transmissibility, the force given them), joint (C, K and the force from the time "
+        "history together, in every method), rigid (ignored)",
+    )
+
+
+def surface_choice(args: argparse.Namespace) -> str | None:
+    """The surface model asked for by ``--surface`` / ``--rigid-floor`` (None: the default).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+
+    Returns
+    -------
+    str or None
+    """
+    surface = getattr(args, "surface", None)
+    if getattr(args, "rigid_floor", False):
+        if surface not in (None, "rigid"):
+            from workbench.errors import UsageError
+
+            raise UsageError(f"--rigid-floor contradicts --surface {surface}; give one of them")
+        return "rigid"
+    return surface
 
 
 def floats(text: str) -> tuple[float, ...]:

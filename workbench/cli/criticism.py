@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from workbench.cli.common import emit, load, record_options
+from workbench.cli.common import (
+    add_rigid_floor_flag,
+    emit,
+    load,
+    record_options,
+    surface_choice,
+)
 from workbench.errors import UsageError
 
 __all__ = ["add_criticism_parser", "parse_effect_names"]
@@ -61,7 +67,11 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     data = _prepared(args)
     names = parse_effect_names(args.effects)
     result = diagnose(
-        data, effects=names, harmonics=args.harmonics, step_variation=not args.raw_error
+        data,
+        effects=names,
+        harmonics=args.harmonics,
+        step_variation=not args.raw_error,
+        surface=surface_choice(args),
     )
     check = None
     if not args.no_one_step:
@@ -119,6 +129,7 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> tuple[An
         effects=tuple(n for n in names if n in available_effects()),
         seed=args.seed,
         highpass_hz=args.highpass_hz,
+        surface=surface_choice(args) or "coupled",
     )
     result = identify(load(args), settings=settings)
     diag = attach_one_step(diag, one_step_from_result(result))
@@ -134,7 +145,13 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         raise UsageError("compare: --effects needs at least one effect name, e.g. gait_asymmetry")
     _check_harmonics(args)
     data = _prepared(args)
-    rows = compare(data, names, harmonics=args.harmonics, step_variation=not args.raw_error)
+    rows = compare(
+        data,
+        names,
+        harmonics=args.harmonics,
+        step_variation=not args.raw_error,
+        surface=surface_choice(args),
+    )
     obj = {"rows": [r.to_dict() for r in rows]}
     text = "\n".join(
         f"{r.model:<50} RMSE {r.heldout_rmse_n:8.3f} N  fit {r.fit_percent:6.1f} %  "
@@ -172,6 +189,7 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "posterior-predictive replicates; compare's cross-validation draws nothing random, "
         "so its result does not depend on it",
     )
+    add_rigid_floor_flag(level)
     p = sub.add_parser(
         "diagnose",
         parents=[out_opts, rec_opts, level],

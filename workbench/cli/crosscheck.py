@@ -8,6 +8,7 @@ from typing import Any
 
 from workbench.cli.common import (
     add_rigid_floor_flag,
+    surface_choice,
     emit,
     load,
     positive_int,
@@ -46,7 +47,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         "observe": args.observe,
         "seed": args.seed,
         "force_check": False,
-        "surface": "rigid" if args.rigid_floor else None,
+        "surface": surface_choice(args),
     }
     settings = IdentifySettings().replace(**overrides)
     if settings.model.pieces != "steps":

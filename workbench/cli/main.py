@@ -95,7 +95,7 @@ FLAG_FOR_PARAMETER = {
     "replicates": "--replicates",
     "mode": "--mode",
     "effects": "--effects",
-    "surface": "--rigid-floor",
+    "surface": "--surface",
 }
 
 

@@ -141,7 +141,7 @@ from workbench.models.effects import (
     effect_class,
     split_effect_specs,
 )
-from workbench.models.smd import SMDModel
+from workbench.models.smd import SURFACE_MODELS, SMDModel
 from workbench.records.record import Record
 
 __all__ = [
@@ -248,6 +248,52 @@ def _resolve(
     return candidate_effects(model), model.harmonics if harmonics is None else harmonics
 
 
+def _surface_frame(
+    data: CriticismData, model: SMDModel | None, surface: str | None, where: str
+) -> CriticismData:
+    """The record in the frame of the model's surface (docs/science.md 6).
+
+    The surface model is ``surface``, else the model's, else the default ``"coupled"`` (as
+    in :func:`~workbench.inference.identify.identify`). Coupled or joint, with measured ground
+    motion, the spring and damper act on the motion relative to the surface; ``"rigid"``
+    keeps the absolute motion, and ``base_motion`` is then the candidate that stands for the
+    surface the model left out.
+    """
+    chosen = surface if surface is not None else (model.surface if model else "coupled")
+    if chosen not in SURFACE_MODELS:
+        raise UsageError(
+            f"{where}: surface must be one of {', '.join(SURFACE_MODELS)}, got {chosen!r}",
+            parameter="surface",
+        )
+    if model is not None and surface is not None and surface != model.surface:
+        raise UsageError(
+            f"{where}: surface={surface!r} contradicts the model's surface "
+            f"{model.surface!r}; give it in one place",
+            parameter="surface",
+        )
+    return data if chosen == "rigid" else data.coupled_to_surface()
+
+
+def _surface_name(data: CriticismData) -> str:
+    """How the baseline saw the surface: coupled, rigid (ignored) or none measured."""
+    if data.ground is None:
+        return "none measured"
+    return "coupled" if data.surface_coupled else "ignored (rigid floor)"
+
+
+def _refuse_base_motion_on_a_coupled_surface(
+    data: CriticismData, names: Iterable[str], where: str
+) -> None:
+    if data.surface_coupled and "base_motion" in names:
+        raise UsageError(
+            f"{where}: the model already lets the surface act through K and C, so "
+            "'base_motion' would count it twice; leave base_motion out, or criticise the "
+            "rigid-floor model (surface='rigid', --rigid-floor) to test the surface as the "
+            "missing effect",
+            parameter="effects",
+        )
+
+
 @dataclass
 class _Draft:
     """A candidate's result while the stepwise selection settles it (then frozen)."""
@@ -280,6 +326,7 @@ def diagnose(
     folds: int = DEFAULT_FOLDS,
     step_variation: bool = True,
     response_modulation: bool = True,
+    surface: str | None = None,
 ) -> Diagnosis:
     """Rank candidate effects by the held-out GRF error they remove.
 
@@ -308,6 +355,11 @@ def diagnose(
         Judge candidates beyond a ``K`` and ``C`` that may vary with the gait phase (module
         docstring, "Response modulation"); False is the plain ``K u + C u'``, kept to
         measure what the block changes.
+    surface : {"coupled", "joint", "rigid"}, optional
+        How a measured surface motion enters the baseline; default the model's, else
+        ``"coupled"``. Coupled (or joint), ``K`` and ``C`` act on the motion relative to the
+        surface and ``base_motion`` is not a candidate (it is in the model); ``"rigid"``
+        ignores the surface, and ``base_motion`` is the candidate that finds it.
 
     Returns
     -------
@@ -317,9 +369,17 @@ def diagnose(
     """
     if isinstance(data, Record):
         data = prepare(data)
+    data = _surface_frame(data, model, surface, "diagnose")
     current_effects, harmonics = _resolve(model, effects, harmonics, "diagnose")
     current = [e.name for e in current_effects]
+    _refuse_base_motion_on_a_coupled_surface(data, current, "diagnose")
     cand_effects = [e for e in candidate_effects(candidates) if e.name not in current]
+    if data.surface_coupled:
+        if candidates is not None:
+            _refuse_base_motion_on_a_coupled_surface(
+                data, [e.name for e in cand_effects], "diagnose"
+            )
+        cand_effects = [e for e in cand_effects if e.name != "base_motion"]
     by_name = {e.name: e for e in (*current_effects, *cand_effects)}
     cands = [e.name for e in cand_effects]
     cv, untestable = _build_cv(
@@ -396,6 +456,7 @@ def diagnose(
         "grf_rms_n": float(np.std(data.target_n)),
         "step_variation": bool(step_variation),
         "response_modulation": bool(response_modulation),
+        "surface": _surface_name(data),
     }
     candidates_out = tuple(c.freeze() for c in results)
     return Diagnosis(baseline, candidates_out, verdict, data, resid, base_pred, tuple(current))
@@ -571,6 +632,7 @@ def compare(
     folds: int = DEFAULT_FOLDS,
     step_variation: bool = True,
     response_modulation: bool = True,
+    surface: str | None = None,
 ) -> Comparison:
     """Scoreboard: the baseline, then the baseline with each effect added in turn.
 
@@ -589,6 +651,8 @@ def compare(
     folds : int, optional
         As in :func:`diagnose`.
     step_variation, response_modulation : bool, default True
+        As in :func:`diagnose`.
+    surface : {"coupled", "joint", "rigid"}, optional
         As in :func:`diagnose`.
 
     Returns
@@ -609,8 +673,10 @@ def compare(
         first, harmonics = _resolve(model, None, harmonics, "compare")
     else:
         first, harmonics = (), DEFAULT_HARMONICS if harmonics is None else harmonics
+    data = _surface_frame(data, model, surface, "compare")
     added = candidate_effects([*first, *candidate_effects(effects or ())])
     names = [e.name for e in added]
+    _refuse_base_motion_on_a_coupled_surface(data, names, "compare")
     if not names:
         raise UsageError(
             "compare: give at least one effect in 'effects', e.g. gait_asymmetry",

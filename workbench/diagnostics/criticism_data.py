@@ -12,6 +12,7 @@ helpers through the methods of :class:`CriticismData`
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -24,8 +25,7 @@ from workbench.models.force import step_phase_rad
 from workbench.records.preprocess import (
     DEFAULT_HIGHPASS_HZ,
     COMResponse,
-    highpass,
-    integrate,
+    motion_from_acceleration,
     preprocess,
 )
 from workbench.records.record import G_M_S2, Record
@@ -65,7 +65,8 @@ class CriticismData:
     target_n : ndarray
         ``GRF - M g`` [N], the quantity predicted.
     disp_m, vel_m_s : ndarray
-        COM displacement [m] and velocity [m/s] (preprocessed).
+        COM displacement [m] and velocity [m/s] (preprocessed); relative to the walking
+        surface when ``surface_coupled``.
     phase_rad : ndarray
         Step phase, ``2 pi`` per step, 0 at the first kept footfall.
     step : ndarray of int
@@ -80,6 +81,9 @@ class CriticismData:
         Where the record came from.
     pacing_local_hz : ndarray, optional
         Local pacing rate [Hz]: the step phase's rate, averaged over a stride.
+    surface_coupled : bool
+        Whether ``disp_m`` and ``vel_m_s`` are relative to the surface
+        (:meth:`coupled_to_surface`).
     """
 
     time_s: FloatArray
@@ -96,6 +100,25 @@ class CriticismData:
     ground: tuple[FloatArray, FloatArray, FloatArray] | None
     source: str = "<memory>"
     pacing_local_hz: FloatArray | None = None
+    surface_coupled: bool = False
+
+    def coupled_to_surface(self) -> CriticismData:
+        """The same record with ``disp_m`` and ``vel_m_s`` relative to the walking surface.
+
+        With the surface in the model (docs/science.md 6) the spring and damper act on the
+        motion relative to the surface, ``u - z`` and ``u' - z'``: the baseline's ``K`` and
+        ``C`` columns, and every state-acting candidate, then see the spring's extension,
+        and the deck-driven part of the GRF is the baseline's, not a candidate's. Unchanged
+        without measured ground motion or when already relative.
+        """
+        if self.ground is None or self.surface_coupled:
+            return self
+        return dataclasses.replace(
+            self,
+            disp_m=np.asarray(self.disp_m - self.ground[0], dtype=np.float64),
+            vel_m_s=np.asarray(self.vel_m_s - self.ground[1], dtype=np.float64),
+            surface_coupled=True,
+        )
 
     @property
     def n_steps(self) -> int:
@@ -161,15 +184,10 @@ def prepare(
     step = np.clip(np.floor(phase / (2.0 * np.pi)).astype(np.int64), 0, n_steps - 1)
     ground = None
     if record.ground_acc_m_s2 is not None:
-        acc_g = np.asarray(record.ground_acc_m_s2, dtype=np.float64)
-        fs = record.sample_rate_hz
-        if highpass_hz > 0:
-            acc_g = highpass(acc_g, fs, highpass_hz)
-            vel_g = highpass(integrate(acc_g, 1.0 / fs), fs, highpass_hz)
-            disp_g = highpass(integrate(vel_g, 1.0 / fs), fs, highpass_hz)
-        else:
-            vel_g = integrate(acc_g, 1.0 / fs)
-            disp_g = integrate(vel_g, 1.0 / fs)
+        # The body's chain, so that u - z carries the same filter on both terms.
+        acc_g, vel_g, disp_g = motion_from_acceleration(
+            record.ground_acc_m_s2, record.sample_rate_hz, highpass_hz
+        )
         ground = (disp_g[lo:hi], vel_g[lo:hi], acc_g[lo:hi])
     grf = np.asarray(record.grf_n[lo:hi], dtype=np.float64)
     return CriticismData(

@@ -656,7 +656,11 @@ class BaseMotion(Effect):
         disp, vel, _ = ctx.ground_at(t_b)
         return np.stack([-disp, -vel], axis=-1)
 
-    reason = "the error follows the measured ground motion: the walking surface moves"
+    reason = (
+        "the error follows the measured ground motion: the walking surface moves the feet "
+        "and the body answers through its spring and damper; couple the surface (drop "
+        "--rigid-floor, surface='coupled') rather than adding free coefficients"
+    )
 
     def criticism_columns(self, data: CriticismRecord) -> FloatArray | None:
         """Measured ground displacement, velocity and acceleration (None without them)."""
