@@ -1,6 +1,7 @@
 """Population laws: OLS, normality tests, lognormal fits, exclusion, and the synthetic study."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -139,3 +140,39 @@ def test_synthetic_study_recovers_generating_laws(tmp_path):
     truth = plan.assign(path="records/" + plan.record + ".csv").set_index("path")
     err = results.set_index("path").natural_frequency_hz - truth.natural_frequency_hz
     assert err.abs().max() < 0.5 * laws.natural_frequency_hz.residual_sd
+
+
+def test_records_identified_through_a_deck_are_counted_and_reported(tmp_path):
+    from types import SimpleNamespace
+
+    from workbench.population.batch import c_and_k_source
+    from workbench.reporting.population import population_report
+
+    kinds = ["deck transmissibility"] * 30 + ["time history, rigid floor"] * 20
+    table = _table(50, seed=4, c_and_k_from=kinds)
+    table.loc[0, "identified_stiffness"] = False  # one deck record not used
+    fit = fit_population(table)
+    assert fit.population_json["records_through_surface"] == 29
+    assert "29 with C and K from a deck's transmissibility" in fit.summary()
+    files = population_report(table, fit, tmp_path)
+    text = Path(files["markdown"]).read_text(encoding="utf-8")
+    assert "30 deck transmissibility, 20 time history, rigid floor" in text
+    assert "29 of the 49 records in the fits were identified through the deck" in text
+
+    # Where a result row says C and K came from.
+    def result(surface):
+        return SimpleNamespace(extra={} if surface is None else {"surface": surface})
+
+    assert c_and_k_source(result({"model": "coupled", "c_and_k_from": "transmissibility"})) == (
+        "deck transmissibility"
+    )
+    assert c_and_k_source(result({"model": "coupled", "c_and_k_from": "time history"})) == (
+        "time history, surface coupled"
+    )
+    assert c_and_k_source(result({"model": "ignored (rigid floor)"})) == (
+        "time history, surface ignored"
+    )
+    assert c_and_k_source(result({"model": "rigid floor (no ground_acc)"})) == (
+        "time history, rigid floor"
+    )
+    assert c_and_k_source(result(None)) == "time history, rigid floor"

@@ -243,6 +243,44 @@ def test_the_default_reads_c_and_k_from_the_transmissibility():
     for name in ("natural_frequency_hz", "damping_ratio"):
         assert ci[name][0] <= sim.truth[name] <= ci[name][1], (name, ci[name])
     assert "transmissibility" in surface["sentence"]
+    assert "posterior sd of f_n is" in surface["sentence"]
+    # C and K came from the deck alone, and the report says so.
+    info = surface["information"]
+    assert all(v["fraction_from_surface"] == 1.0 for v in info.values())
+    assert info["natural_frequency_hz"]["local_sd_with_surface"] == pytest.approx(
+        res.posterior_sd["natural_frequency_hz"]
+    )
+
+
+def test_the_advice_on_more_vibration_follows_the_deck_information_scaling():
+    """The sentence's advice assumes sd(f_n) ~ 1 / RMS; a deck four times stronger on the
+    same walk (seeds 0-2, stated in advance) cuts the sd about fourfold."""
+    from workbench.inference.surface_information import enough_vibration
+
+    walker = {
+        "mass_kg": 70.0,
+        "natural_frequency_hz": 2.8,
+        "damping_ratio": 0.3,
+        "pacing_hz": 1.8,
+        "deck_frequency_hz": 3.1,
+        "deck_kind": "narrowband",
+        "duration_s": 30.0,
+    }
+    ratios = []
+    for seed in range(3):
+        sds = []
+        for rms in (0.3, 1.2):
+            sim = deck_walk(seed, deck_rms_m_s2=rms, **walker)
+            insp = inspect_record(sim.record)
+            problem = build_problem(insp.com, insp.steps, surface=surface_motion(insp.record))
+            frf = surface_transmissibility(problem)
+            assert frf is not None and frf.level == "well identified"
+            sds.append(frf.posterior_sd["natural_frequency_hz"])
+        ratios.append(sds[0] / sds[1])
+    assert 2.5 < float(np.median(ratios)) < 6.0, ratios
+    assert enough_vibration(0.3, 0.02, "well identified") == "."
+    assert "about 0.4 m/s^2 RMS" in enough_vibration(0.1, 0.12, "weakly identified")
+    assert "at least 0.19 m/s^2" in enough_vibration(0.02, 0.28, "mostly prior")
 
 
 def test_base_motion_is_not_counted_twice(periodic_deck_walk):

@@ -190,9 +190,12 @@ def surface_report(
     est, sd = result.estimates, result.posterior_sd
     c, k = est["damping_ns_per_m"], est["stiffness_n_per_m"]
     step = (STEP_SD * sd["damping_ns_per_m"], STEP_SD * sd["stiffness_n_per_m"])
-    info = information_with_and_without(problem, c, k, step)
     rms = problem.surface.rms_acc_m_s2
     route = result.extra.get("surface_route")
+    if route is None:
+        info = information_with_and_without(problem, c, k, step)
+    else:
+        info = _route_information(problem, c, k, step, sd)
     if route is not None:
         # C and K already are the transmissibility's posterior: report it, not again.
         frf_json: dict[str, Any] | None = {
@@ -218,19 +221,86 @@ def surface_report(
     if route is not None:
         level = str(result.identifiability.get("level", ""))
         lo, hi = route["band_hz"]
+        sd_rel = sd["natural_frequency_hz"] / est["natural_frequency_hz"]
         report["sentence"] = (
             f"C and K were read from the deck's transmissibility ({route['bins']} bins at "
-            f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them"
-            + (
-                "."
-                if level in ("well identified", "weakly identified")
-                else f"; the deck's {rms:.3g} m/s^2 there carries too little information "
-                "to pin them (docs/validation/deck.md)."
-            )
+            f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them; the posterior "
+            f"sd of f_n is {100 * sd_rel:.1f} % of it" + enough_vibration(rms, sd_rel, level)
+        )
+    elif frf_json is None:
+        report["sentence"] = (
+            f"The deck moved ({rms:.3g} m/s^2 RMS, mostly at {report['dominant_hz']:.2f} Hz) "
+            "only near the walker's gait harmonics, where its drive cannot be told from the "
+            "walker's own force, so C and K came from the time history. " + _sentence(rms, info)
         )
     else:
         report["sentence"] = _sentence(rms, info)
     return report
+
+
+#: The posterior sd of f_n, as a fraction of f_n, that the advice on more vibration aims at.
+TARGET_SD_FN = 0.03
+
+
+def enough_vibration(rms_m_s2: float, sd_fn_rel: float, level: str) -> str:
+    """Finish the route's sentence: how much deck motion would pin f_n to 3 %.
+
+    The posterior sd of f_n falls in proportion to the deck's RMS acceleration (the
+    deck-driven response, and so each bin's signal-to-noise amplitude ratio, is proportional
+    to it), while a longer record helps much less; ``analyses/deck_information.py`` measures
+    both (docs/validation/deck-information.md). Where the prior still shapes the posterior,
+    the reported sd understates the likelihood's, and the amount is a lower bound.
+
+    Parameters
+    ----------
+    rms_m_s2 : float
+        The deck's RMS acceleration over the record [m/s^2].
+    sd_fn_rel : float
+        Posterior sd of f_n over f_n.
+    level : str
+        The identifiability level.
+
+    Returns
+    -------
+    str
+        ``"."`` when f_n is pinned to 3 % or better, else the advice, ending with a full stop.
+    """
+    identified = level in ("well identified", "weakly identified")
+    if identified and sd_fn_rel <= TARGET_SD_FN:
+        return "."
+    needed = rms_m_s2 * max(sd_fn_rel / TARGET_SD_FN, 1.0)
+    bound = "about" if identified else "at least"
+    head = "" if identified else f"; the deck's {rms_m_s2:.3g} m/s^2 carries too little information"
+    return (
+        f"{head}; sd(f_n) falls in proportion to the deck's RMS, so {bound} {needed:.2g} "
+        f"m/s^2 RMS at these frequencies would bring it to {100 * TARGET_SD_FN:.0f} %, while a "
+        "longer record helps much less (docs/validation/deck-information.md)."
+    )
+
+
+def _route_information(
+    problem: IdentificationProblem,
+    damping_ns_per_m: float,
+    stiffness_n_per_m: float,
+    step: tuple[float, float],
+    posterior_sd: dict[str, float],
+) -> dict[str, dict[str, float]]:
+    """Report the information when C and K came from the transmissibility alone.
+
+    All of it came from the surface: the sd with the surface is the transmissibility's
+    posterior sd; beside it the local sd the rigid-floor time history would give.
+    """
+    centre = np.array([damping_ns_per_m, stiffness_n_per_m], dtype=np.float64)
+    rigid = rigid_floor_problem(problem)
+    without = _local_sd(_information(rigid, centre, np.asarray(step)), centre, problem.mass_kg)
+    return {
+        name: {
+            "local_sd_with_surface": float(posterior_sd[name]),
+            "local_sd_rigid_floor": without[name],
+            "fraction_from_surface": 1.0,
+        }
+        for name in PARAMETERS
+    }
 
 
 def _sentence(rms: float, info: dict[str, dict[str, float]]) -> str:

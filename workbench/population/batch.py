@@ -82,6 +82,7 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "identified_damping",
     "identified_stiffness",
     "trustworthy",
+    "c_and_k_from",
     "seed",
     "elapsed_s",
 )
@@ -190,6 +191,20 @@ def _num(x: Any) -> float:
     return x if math.isfinite(x) else math.nan
 
 
+def c_and_k_source(result: Any) -> str:
+    """Where C and K came from: the deck's transmissibility, or the time history (with the
+    surface coupled jointly, ignored, or on a rigid floor)."""
+    surface = result.extra.get("surface") or {}
+    if surface.get("c_and_k_from") == "transmissibility":
+        return "deck transmissibility"
+    model = surface.get("model", "")
+    if model == "coupled":
+        return "time history, surface coupled"
+    if model.startswith("ignored"):
+        return "time history, surface ignored"
+    return "time history, rigid floor"
+
+
 def result_row(result: Any, path: str, subject: str | None, seed: int) -> dict[str, Any]:
     """Turn an :class:`~workbench.inference.results.IdentificationResult` into a table row.
 
@@ -230,6 +245,7 @@ def result_row(result: Any, path: str, subject: str | None, seed: int) -> dict[s
     row["identified_damping"] = bool(ident.get("identified_damping", False))
     row["identified_stiffness"] = bool(ident.get("identified_stiffness", False))
     row["trustworthy"] = bool(result.trustworthy)
+    row["c_and_k_from"] = c_and_k_source(result)
     row["seed"] = int(seed)
     return row
 

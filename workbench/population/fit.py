@@ -74,7 +74,8 @@ class PopulationFit:
         """Return the laws as text: each law with its 95 % intervals, residual sd and tests."""
         s = self.population_json
         lines = [
-            f"records used {s['records_used']}, excluded {s['records_excluded']} "
+            f"records used {s['records_used']} ({s.get('records_through_surface', 0)} with C "
+            f"and K from a deck's transmissibility), excluded {s['records_excluded']} "
             f"({s['exclusion_rule']})"
         ]
         for key, law in s["laws"].items():
@@ -104,6 +105,13 @@ def _flag(value: Any) -> bool:
     if isinstance(value, str):
         return value.strip().lower() in ("true", "1", "yes")
     return bool(value) if not (isinstance(value, float) and math.isnan(value)) else False
+
+
+def _through_surface(used: pd.DataFrame) -> int:
+    """How many of the records used had C and K from a deck's transmissibility."""
+    if "c_and_k_from" not in used.columns:  # results of an earlier version
+        return 0
+    return int((used["c_and_k_from"].astype(str) == "deck transmissibility").sum())
 
 
 def _select(results: pd.DataFrame, keep_not_identified: bool) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -288,6 +296,7 @@ def fit_population(
             else " records whose C or K is flagged not identified, and records without finite "
             "values"
         ),
+        "records_through_surface": _through_surface(used),
         "pacing_range_hz": [float(fp.min()), float(fp.max())],
         "ranges_at_pacing_hz": {"pacing_hz": list(RANGE_PACING_HZ), **ranges},
     }

@@ -308,6 +308,20 @@ def _embed_images(html_text: str, folder: Path) -> str:
     return re.sub(r'src="([^"]+\.png)"', repl, html_text)
 
 
+def _surface_sentence(results: pd.DataFrame, s: dict[str, Any]) -> str:
+    """Which records were identified through a vibrating surface (docs/science.md 6)."""
+    if "c_and_k_from" not in results.columns:
+        return "The results do not say where C and K came from (an earlier batch version)."
+    counts = results["c_and_k_from"].astype(str).value_counts()
+    parts = ", ".join(f"{n} {kind}" for kind, n in counts.items())
+    return (
+        f"C and K came from: {parts} (all identified records); "
+        f"{int(s.get('records_through_surface', 0))} of the {s['records_used']} records in "
+        "the fits were identified through the deck's transmissibility, the rest from the "
+        "time history alone."
+    )
+
+
 def population_report(
     results: pd.DataFrame,
     fit: PopulationFit,
@@ -396,6 +410,7 @@ def population_report(
     bullets = [
         f"Records used {s['records_used']}, excluded {s['records_excluded']}: "
         f"{s['exclusion_rule']}.",
+        _surface_sentence(results, s),
         "Kolmogorov-Smirnov p-values use parameters fitted to the same data, so they are "
         "conservative (a lognormal that fails them fits badly).",
         *(notes or []),
