@@ -366,3 +366,19 @@ def test_criticism_couples_the_surface_and_the_rigid_floor_misses_it():
         compare(data, ["base_motion"])
     with pytest.raises(UsageError, match="contradicts the model's surface"):
         diagnose(data, model=wb.SMDModel(surface="rigid"), surface="coupled")
+
+
+def test_the_crosscheck_checks_the_joint_filter_on_a_deck_record(tmp_path, capsys):
+    """The cross-check compares a filter step by step; the default route has no steps, so on
+    a deck record crosscheck runs the joint time-history filter, and identify --crosscheck
+    says so instead of failing."""
+    path = tmp_path / "deck.csv"
+    save_record(deck_walk(2, duration_s=20.0).record, path)
+    out = _run(["crosscheck", path, "--max-steps", "3", "--particles", "64", "--json"], capsys)
+    assert out["surface"] == "joint"
+    assert len(out["steps"]) == 3
+    assert 0.0 <= out["agreement"] <= 1.0
+    code = main([str(a) for a in ["identify", path, "--crosscheck", "--json"]])
+    _, err = capsys.readouterr()
+    assert code != 0 and "Traceback" not in err
+    assert "came from the deck's transmissibility, which has no steps" in err

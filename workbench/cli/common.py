@@ -18,7 +18,6 @@ __all__ = [
     "Parser",
     "add_allow_negative_force",
     "add_rigid_floor_flag",
-    "surface_choice",
     "emit",
     "floats",
     "identify_settings",
@@ -28,6 +27,7 @@ __all__ = [
     "positive_int",
     "record_options",
     "safe_key",
+    "surface_choice",
     "warn_accepted_negative_force",
 ]
 
@@ -294,7 +294,7 @@ def add_rigid_floor_flag(parser: Any) -> None:
 
 
 def surface_choice(args: argparse.Namespace) -> str | None:
-    """The surface model asked for by ``--surface`` / ``--rigid-floor`` (None: the default).
+    """Return the surface model asked for by ``--surface`` / ``--rigid-floor`` (None: default).
 
     Parameters
     ----------
