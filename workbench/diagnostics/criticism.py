@@ -251,7 +251,7 @@ def _resolve(
 def _surface_frame(
     data: CriticismData, model: SMDModel | None, surface: str | None, where: str
 ) -> CriticismData:
-    """The record in the frame of the model's surface (docs/science.md 6).
+    """Return the record in the frame of the model's surface (docs/science.md 6).
 
     The surface model is ``surface``, else the model's, else the default ``"coupled"`` (as
     in :func:`~workbench.inference.identify.identify`). Coupled or joint, with measured ground

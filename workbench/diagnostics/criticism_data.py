@@ -103,7 +103,7 @@ class CriticismData:
     surface_coupled: bool = False
 
     def coupled_to_surface(self) -> CriticismData:
-        """The same record with ``disp_m`` and ``vel_m_s`` relative to the walking surface.
+        """Return the record with ``disp_m`` and ``vel_m_s`` relative to the walking surface.
 
         With the surface in the model (docs/science.md 6) the spring and damper act on the
         motion relative to the surface, ``u - z`` and ``u' - z'``: the baseline's ``K`` and

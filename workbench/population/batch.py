@@ -192,8 +192,11 @@ def _num(x: Any) -> float:
 
 
 def c_and_k_source(result: Any) -> str:
-    """Where C and K came from: the deck's transmissibility, or the time history (with the
-    surface coupled jointly, ignored, or on a rigid floor)."""
+    """Return where C and K came from (the ``c_and_k_from`` column).
+
+    The deck's transmissibility, or the time history with the surface coupled jointly,
+    ignored, or on a rigid floor.
+    """
     surface = result.extra.get("surface") or {}
     if surface.get("c_and_k_from") == "transmissibility":
         return "deck transmissibility"
