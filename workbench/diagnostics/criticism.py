@@ -369,8 +369,8 @@ def diagnose(
     """
     if isinstance(data, Record):
         data = prepare(data)
-    data = _surface_frame(data, model, surface, "diagnose")
     current_effects, harmonics = _resolve(model, effects, harmonics, "diagnose")
+    data = _surface_frame(data, model, surface, "diagnose")
     current = [e.name for e in current_effects]
     _refuse_base_motion_on_a_coupled_surface(data, current, "diagnose")
     cand_effects = [e for e in candidate_effects(candidates) if e.name not in current]
