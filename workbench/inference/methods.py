@@ -36,6 +36,7 @@ from workbench.inference.problem import (
     SEED_STATE_FRACTION,
     IdentificationProblem,
 )
+from workbench.inference.rbpf import REJUVENATE
 from workbench.inference.resampling import SCHEMES
 from workbench.inference.results import IdentificationResult
 
@@ -218,9 +219,26 @@ class RBPF(_ParticleFilter):
         Resampling scheme (see :mod:`workbench.inference.resampling`).
     ess_threshold : float, default 0.5
         Resample when the effective sample size falls below this fraction of the particles.
+    rejuvenate : {"auto", "surprise", "always"}, default "auto"
+        When the particles get exact Metropolis moves (:mod:`workbench.inference.rbpf`):
+        ``"surprise"`` (when a piece moves the posterior beyond the cloud, cheap),
+        ``"always"`` (after every resampling: follows a posterior that drifts along the
+        record, several times slower), ``"auto"`` (``"always"`` on a record whose surface
+        acts through K and C, where the deck's bursts move the posterior along the record;
+        ``"surprise"`` otherwise).
     """
 
     name: ClassVar[str] = "rbpf"
+    rejuvenate: str = "auto"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.rejuvenate not in REJUVENATE:
+            raise UsageError(
+                f"RBPF: 'rejuvenate' must be one of {', '.join(REJUVENATE)}, got "
+                f"{self.rejuvenate!r}",
+                parameter="rejuvenate",
+            )
 
     def _filter(
         self, problem: IdentificationProblem, seed: int, progress: bool
@@ -233,6 +251,7 @@ class RBPF(_ParticleFilter):
             seed=seed,
             resampling=self.resampling,
             ess_threshold=self.ess_threshold,
+            rejuvenate=self.rejuvenate,
             progress=progress,
         )
 

@@ -80,6 +80,12 @@ contracts steadily the default agrees with the exact posterior within about 0.3 
 (:mod:`workbench.inference.exact`) is the reference when in doubt; a growing gap between the
 two is itself a sign of misfit.
 
+On a deck record with the joint time-history model the drift is the rule, not the
+exception: the deck's information arrives in bursts with its envelope, and each burst moves
+the posterior of C and K. ``rejuvenate="auto"`` (the default) therefore runs exact moves
+after every resampling when the problem has a surface; docs/validation/deck.md measures the
+step-by-step cross-check both ways.
+
 Noise model, discretisation and the piece-boundary convention are those of
 :mod:`workbench.inference.kalman` (``"foh"`` by default); the random walks of C and K in
 ``problem.noise`` belong to the seed-faithful filter and are not used here.
@@ -109,10 +115,13 @@ from workbench.inference.outputs import ParticleFilterOutput
 from workbench.inference.problem import IdentificationProblem, StiffnessDampingPrior
 from workbench.inference.resampling import SCHEMES, ess, normalise_log_weights, resample
 
-__all__ = ["liu_west_move", "run_rbpf"]
+__all__ = ["REJUVENATE", "liu_west_move", "run_rbpf"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+
+#: When the particles get exact moves: chosen by the record ("auto"), on surprise, or always.
+REJUVENATE = ("auto", "surprise", "always")
 
 # Most tempering steps per piece; the last one assimilates whatever remains.
 _MAX_STEPS = 50
@@ -215,7 +224,7 @@ def run_rbpf(
     discretisation: str = "foh",
     progress: bool = False,
     exact_moves: int = 3,
-    rejuvenate: str = "surprise",
+    rejuvenate: str = "auto",
     exact_budget: float = 0.3,
     predictive: bool = False,
 ) -> ParticleFilterOutput:
@@ -244,11 +253,13 @@ def run_rbpf(
     exact_moves : int, default 3
         Metropolis steps per particle of an exact move (module docstring); 0 uses Liu-West
         moves only.
-    rejuvenate : {"surprise", "always"}, default "surprise"
+    rejuvenate : {"auto", "surprise", "always"}, default "auto"
         When to use exact moves instead of the Liu-West kernel: after a second resampling
         inside one piece and while ``exact_budget`` lasts, or after every resampling
         (resample-move / IBIS: exact whatever the record, several times slower; use it
-        when the posterior drifts along the record, see the module docstring).
+        when the posterior drifts along the record, see the module docstring). ``"auto"``
+        is ``"always"`` when the problem has a surface acting through K and C and
+        ``"surprise"`` otherwise; ``settings["rejuvenate"]`` records the choice.
     exact_budget : float, default 0.3
         With ``rejuvenate="surprise"``: an ordinary resampling (the first in its piece)
         uses exact moves as long as the exact moves of such resamplings have cost at most
@@ -273,8 +284,13 @@ def run_rbpf(
     n_part, a, n_mh = _check_args(
         problem, n_particles, resampling, ess_threshold, shrinkage, discretisation, exact_moves
     )
-    if rejuvenate not in ("surprise", "always"):
-        raise UsageError(f"rejuvenate must be 'surprise' or 'always', got {rejuvenate!r}")
+    if rejuvenate not in REJUVENATE:
+        raise UsageError(f"rejuvenate must be one of {', '.join(REJUVENATE)}, got {rejuvenate!r}")
+    if rejuvenate == "auto":
+        # A deck's drive comes in bursts (a narrow-band deck's envelope), and each burst
+        # moves the joint model's posterior of C and K by more than the cloud's width:
+        # the drift the surprise rule cannot follow (module docstring).
+        rejuvenate = "always" if problem.surface is not None else "surprise"
     if not (
         isinstance(exact_budget, int | float)
         and not isinstance(exact_budget, bool)

@@ -320,8 +320,11 @@ def _sentence(rms: float, info: dict[str, dict[str, float]]) -> str:
             f"The surface's motion ({rms:.3g} m/s^2 RMS) acted through K and C and carried "
             f"{shares}."
         )
+    # A flat or non-concave likelihood at the estimate has no local sd to compare, so the
+    # share cannot be measured; say so rather than print empty parentheses.
+    measured = shares or "its share could not be measured: the likelihood has no curvature there"
     return (
         f"The surface's motion ({rms:.3g} m/s^2 RMS) acted through K and C but carried too "
-        f"little information on {' and '.join(weak)} ({shares}); a stronger or longer "
+        f"little information on {' and '.join(weak)} ({measured}); a stronger or longer "
         "deck excitation is needed to pin them."
     )
