@@ -1,9 +1,10 @@
 """Do the methods agree on a deck record? Exact, RBPF and the seed-faithful PF, joint model.
 
 Run: ``python analyses/deck_methods.py`` (about a minute), and
-``python analyses/deck_methods.py --crosscheck`` (about eight minutes): ``workbench
-crosscheck`` on ``deck_walk(2, duration_s=30)`` (a realistic 30 s walk on a 0.35 m/s^2
-narrow-band deck), which checks the joint time-history RBPF step by step against emcee.
+``python analyses/deck_methods.py --crosscheck [surprise]`` (about eight minutes): the
+cross-check of ``deck_walk(2, duration_s=30)`` (a realistic 30 s walk on a 0.35 m/s^2
+narrow-band deck), which checks the joint time-history RBPF step by step against emcee,
+with the RBPF's default rejuvenation or (``surprise``) exact moves only on surprise.
 
 A 70 kg walker (f_n 2.8 Hz, zeta 0.30) at 1.8 Hz without step-to-step variability, 12 s at
 100 Hz, 10 N GRF noise, on a deck moving at 3.1 Hz with 0.1 and 0.5 m/s^2 peak
@@ -27,38 +28,32 @@ from workbench.synth.simulate import simulate_walking
 PARAMETERS = ("natural_frequency_hz", "damping_ratio")
 
 
-def crosscheck() -> None:
-    import json
-    import subprocess
-    import sys
-    import tempfile
-    from pathlib import Path
-
-    from workbench.records.io import save_record
+def crosscheck(rejuvenate: str) -> None:
+    from workbench.inference.crosscheck import crosscheck as check_steps
     from workbench.synth import deck_walk
 
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "deck_walk_2_30s.csv"
-        save_record(deck_walk(2, duration_s=30.0).record, path)
-        run = subprocess.run(
-            [sys.executable, "-m", "workbench", "crosscheck", str(path), "--json"],
-            capture_output=True,
-            text=True,
-            check=False,
-        )
-    if run.returncode != 0:
-        sys.exit(run.stderr.strip())
-    out = json.loads(run.stdout)
-    print(f"surface model of the filter: {out['surface']}; agreement {out['agreement']:.2f}")
-    print(out["verdict"])
-    print(out["identifiability"].get("sentence", ""))
+    record = deck_walk(2, duration_s=30.0).record
+    method = wb.RBPF(256, rejuvenate=rejuvenate)
+    ident = wb.identify(record, wb.SMDModel(surface="joint"), method=method, force_check=False)
+    result = check_steps(ident.problem, ident, seed=0, keep_inference_data=False)
+    chosen = ident.extra["filter_settings"]["rejuvenate"]
+    print(f"joint model, rbpf rejuvenate={rejuvenate} ({chosen}): agreement {result.agreement:.2f}")
+    print(result.verdict)
+    steps = [s for s in result.steps if s.converged]
+    z = np.array([np.max(np.abs(s.z)) for s in steps])
+    ratio = np.array([s.sd_ratio for s in steps])
+    print(
+        f"converged {len(steps)} of {len(result.steps)}; max |z| {z.max():.2f}; "
+        f"filter sd / MCMC sd {ratio.min():.2f}-{ratio.max():.2f}"
+    )
+    print(ident.identifiability["sentence"])
 
 
 def main() -> None:
     import sys
 
     if "--crosscheck" in sys.argv[1:]:
-        crosscheck()
+        crosscheck("surprise" if "surprise" in sys.argv[1:] else "auto")
         return
     model = wb.SMDModel(
         harmonics=3, pieces="whole", time_basis="absolute", pacing_hz=1.8, surface="joint"
