@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Any, NoReturn
@@ -27,6 +28,7 @@ __all__ = [
     "positive_int",
     "record_options",
     "safe_key",
+    "seed_int",
     "surface_choice",
     "warn_accepted_negative_force",
 ]
@@ -36,8 +38,24 @@ __all__ = [
 CURRENT_ARGV: list[str] = []
 
 
+#: What argparse should read as a (negative) value rather than an option: a number or a
+#: comma-separated list of numbers, so that ``--blf -0.4,0.1`` passes ``-0.4,0.1`` to the
+#: option instead of failing with "expected one argument". Argparse's own pattern knows only
+#: single numbers.
+_NEGATIVE_VALUE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,.*)?$")
+
+
 class Parser(argparse.ArgumentParser):
-    """An argument parser whose usage errors honour ``--json`` (one JSON object on stdout)."""
+    """An argument parser whose usage errors honour ``--json`` (one JSON object on stdout).
+
+    It also reads negative lists of numbers (``-0.4,0.1``) as values (:data:`_NEGATIVE_VALUE`).
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # Argparse's private hook, present in every supported Python; no option of the
+        # workbench looks like a negative number, so widening it cannot hide an option.
+        self._negative_number_matcher = _NEGATIVE_VALUE
 
     def error(self, message: str) -> NoReturn:  # argparse's hook for usage errors
         """Print the usage error (also as JSON under ``--json``) and exit with status 2.
@@ -331,6 +349,33 @@ def floats(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not a comma-separated list of numbers"
         ) from None
+
+
+def seed_int(text: str) -> int:
+    """Argparse type: a random seed, a whole number of 0 or more.
+
+    Checked here, once for every command, so that a negative seed is refused before any work
+    (numpy's generators refuse it only when they are built, deep inside a computation).
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    int
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a seed; give a whole number of 0 or more"
+        ) from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is negative; a seed is a whole number of 0 or more"
+        )
+    return value
 
 
 def positive_int(text: str) -> int:

@@ -13,6 +13,7 @@ from workbench.cli.common import (
     positive_int,
     record_options,
     safe_key,
+    seed_int,
     surface_choice,
 )
 from workbench.errors import UsageError
@@ -192,6 +193,6 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--max-steps", type=positive_int, metavar="N", help="check the first N steps")
     p.add_argument("--ensembles", type=positive_int, default=4, metavar="N", help="(4)")
     p.add_argument("--walkers", type=positive_int, metavar="N", help="per ensemble (32)")
-    p.add_argument("--seed", type=int, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed_int, help="random seed (default 0)")
     p.add_argument("--out", metavar="DIR", help="write the InferenceData (netCDF) and figures")
     p.set_defaults(handler=_cmd_crosscheck)

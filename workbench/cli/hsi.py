@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.cli.common import emit, floats
+from workbench.cli.common import emit, floats, seed_int
 from workbench.errors import UsageError
 
 __all__ = ["add_hsi_parser"]
@@ -313,7 +313,7 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--static-weight", action="store_true", help="add the walkers' weight as a moving load"
     )
-    g.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    g.add_argument("--seed", type=seed_int, default=0, help="random seed (0)")
     g.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler")
     p.add_argument("--out", metavar="DIR", help="write crossings.csv, figures, summary.json")

@@ -11,6 +11,7 @@ from workbench.cli.common import (
     add_rigid_floor_flag,
     emit,
     identify_settings,
+    seed_int,
 )
 from workbench.errors import UsageError
 
@@ -152,7 +153,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         metavar="POPULATION.json",
         help="laws written by 'workbench population' (default: the seed's laws)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed_int, default=0, help="random seed (default 0)")
     p.set_defaults(handler=_cmd_sample)
 
     p = sub.add_parser(
@@ -180,7 +181,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--no-force-check", action="store_true", help="skip the force-model check (faster)"
     )
     p.add_argument("--config", metavar="TOML", help="identification settings file")
-    p.add_argument("--seed", type=int, help="batch seed (default 0)")
+    p.add_argument("--seed", type=seed_int, help="batch seed (default 0)")
     add_rigid_floor_flag(p)
     add_allow_negative_force(p)
     p.set_defaults(handler=_cmd_batch)

@@ -11,6 +11,7 @@ from workbench.cli.common import (
     add_rigid_floor_flag,
     emit,
     identify_settings,
+    seed_int,
     warn_accepted_negative_force,
 )
 from workbench.errors import UsageError
@@ -103,7 +104,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="levels of one factor (multipliers for the noise and prior_box factors); repeatable",
     )
     p.add_argument("--replicates", type=int, default=3, help="seeds per level (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument("--seed", type=seed_int, default=0, help="study seed (default 0)")
     p.add_argument("--workers", type=int, default=1, help="local processes (default 1)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address")
     p.add_argument("--out", metavar="DIR", required=True, help="folder for tables and report")

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.cli.common import floats
+from workbench.cli.common import floats, seed_int
 from workbench.errors import InputError, UsageError
 
 __all__ = ["add_simulate_parser", "parse_effect"]
@@ -413,5 +413,5 @@ def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         default="steady",
         help="start from rest (transient) or in steady state (default)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    p.add_argument("--seed", type=seed_int, default=0, help="random seed (0)")
     p.set_defaults(handler=_cmd_simulate)
