@@ -53,8 +53,10 @@ SEED_COMMANDS = {
 def test_negative_seed_is_refused_before_any_work(command, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)  # nothing may be written; if it were, not into the repo
     err = usage_error([*SEED_COMMANDS[command], "--seed", "-1"], capsys)
-    assert err.strip().splitlines()[-1].endswith(
-        "argument --seed: '-1' is negative; a seed is a whole number of 0 or more"
+    assert (
+        err.strip()
+        .splitlines()[-1]
+        .endswith("argument --seed: '-1' is negative; a seed is a whole number of 0 or more")
     )
     assert list(tmp_path.iterdir()) == []
 
@@ -93,9 +95,8 @@ def test_an_option_after_a_negative_list_is_still_an_option():
 
 
 def test_a_negative_list_is_judged_by_the_command_not_by_argparse(tmp_path, capsys):
-    code, out, err = run_cli(["simulate", "--out", tmp_path / "w.csv", "--blf", "-0.4,0.1"], capsys)
+    code, _, err = run_cli(["simulate", "--out", tmp_path / "w.csv", "--blf", "-0.4,0.1"], capsys)
     assert code == 2, err
     assert "expected one argument" not in err
     assert "--blf" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "w.csv").exists()
-
