@@ -7,7 +7,12 @@ that pointed the wrong way; each is checked the way a user meets it, through ``m
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
+import tempfile
+from pathlib import Path
 
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -100,3 +105,93 @@ def test_a_negative_list_is_judged_by_the_command_not_by_argparse(tmp_path, caps
     assert "expected one argument" not in err
     assert "--blf" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "w.csv").exists()
+
+
+# -- results tables that population and report cannot fit -------------------------------------
+def _results(n: int = 12, seed: int = 3) -> pd.DataFrame:
+    from workbench.population.sampler import sample_pedestrians
+
+    table = sample_pedestrians(n, seed=seed).assign(path=[f"r{i:02d}.csv" for i in range(n)])
+    table["identified_damping"] = True
+    table["identified_stiffness"] = True
+    table["identifiability"] = "well identified"
+    return table
+
+
+def _batch_folder(tmp_path: Path, table: pd.DataFrame) -> Path:
+    folder = tmp_path / "batch"
+    folder.mkdir()
+    table.to_csv(folder / "results.csv", index=False)
+    return folder
+
+
+@pytest.mark.parametrize("command", ["population", "report"])
+def test_one_shared_pacing_is_refused_naming_the_file(command, tmp_path, capsys):
+    folder = _batch_folder(tmp_path, _results().assign(pacing_hz=1.8))
+    code, out, err = run_cli([command, folder, "--out", tmp_path / "o"], capsys)
+    assert code == 2, err
+    assert out == "" and len(err.strip().splitlines()) == 1, err
+    assert str(folder / "results.csv") in err
+    assert "share one pacing (1.8 Hz)" in err and "other pacings" in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command", ["population", "report"])
+def test_text_in_a_pacing_cell_is_refused_naming_the_cell(command, tmp_path, capsys):
+    table = _results()
+    table["pacing_hz"] = table["pacing_hz"].astype(object)
+    table.loc[4, "pacing_hz"] = "1,8"
+    folder = _batch_folder(tmp_path, table)
+    code, _, err = run_cli([command, folder, "--out", tmp_path / "o"], capsys)
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert (
+        f"{folder / 'results.csv'}, column 'pacing_hz', record 5 (r04.csv): the value '1,8'" in err
+    )
+    assert "plain number" in err
+
+
+def test_no_identified_record_points_to_keep_not_identified(tmp_path, capsys):
+    folder = _batch_folder(tmp_path, _results().assign(identified_stiffness=False))
+    code, _, err = run_cli(["population", folder, "--out", tmp_path / "o"], capsys)
+    assert code == 2, err
+    assert "12 excluded because C or K is not identified" in err
+    assert "pass --keep-not-identified" in err and "'keep_not_identified'" not in err
+    argv = ["population", folder, "--out", tmp_path / "o", "--keep-not-identified"]
+    assert run_cli(argv, capsys)[0] == 0
+
+
+FITTED = ["pacing_hz", "natural_frequency_hz", "damping_ratio", "blf1", "blf2", "blf3"]
+
+
+@settings(max_examples=25, deadline=None, derandomize=True, database=None)
+@given(
+    edits=st.lists(
+        st.tuples(
+            st.integers(0, 11),
+            st.sampled_from([*FITTED, "identified_stiffness", "path"]),
+            st.one_of(
+                st.sampled_from(["", "nan", "inf", "-1", "0", "1.8", "n/a", "1,8", "True"]),
+                st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                st.text(alphabet="0123456789.,-eE naif", max_size=6),
+            ),
+        ),
+        max_size=6,
+    ),
+    one_pacing=st.booleans(),
+)
+def test_edited_results_tables_fit_or_give_one_sentence(edits, one_pacing):
+    table = _results().assign(pacing_hz=1.8) if one_pacing else _results()
+    table = table.astype(object)
+    for row, column, text in edits:
+        table.loc[row, column] = text
+    with tempfile.TemporaryDirectory() as folder:
+        batch = _batch_folder(Path(folder), table)
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(out):
+            code = main(["population", str(batch), "--out", str(Path(folder) / "o")])
+    text = out.getvalue()
+    assert code in (0, 2), text
+    if code == 2:
+        lines = text.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("workbench: error: "), text

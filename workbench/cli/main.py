@@ -96,6 +96,7 @@ FLAG_FOR_PARAMETER = {
     "mode": "--mode",
     "effects": "--effects",
     "surface": "--surface",
+    "keep_not_identified": "--keep-not-identified",
 }
 
 

@@ -81,12 +81,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
 # population
 # ---------------------------------------------------------------------------------------------
 def _cmd_population(args: argparse.Namespace) -> int:
-    from workbench.population.files import read_results, write_population
+    from workbench.population.files import read_results, results_path, write_population
     from workbench.population.fit import fit_population
 
     results = read_results(args.results_dir)
     fit = fit_population(
-        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+        results,
+        keep_not_identified=args.keep_not_identified,
+        source=str(results_path(args.results_dir)),
     )
     files = write_population(fit, args.out)
     obj = {**fit.to_json(), "files": files}
@@ -98,13 +100,15 @@ def _cmd_population(args: argparse.Namespace) -> int:
 # report
 # ---------------------------------------------------------------------------------------------
 def _cmd_report(args: argparse.Namespace) -> int:
-    from workbench.population.files import read_results, write_population
+    from workbench.population.files import read_results, results_path, write_population
     from workbench.population.fit import fit_population
     from workbench.reporting.population import population_report
 
     results = read_results(args.results_dir)
     fit = fit_population(
-        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+        results,
+        keep_not_identified=args.keep_not_identified,
+        source=str(results_path(args.results_dir)),
     )
     files = write_population(fit, args.out)
     files.update(population_report(results, fit, args.out, title=args.title))
