@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
 import tempfile
 from pathlib import Path
 
@@ -195,3 +196,84 @@ def test_edited_results_tables_fit_or_give_one_sentence(edits, one_pacing):
     if code == 2:
         lines = text.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("workbench: error: "), text
+
+
+# -- batch: confinement, exit status, workers -------------------------------------------------
+def _manifest(folder: Path, *paths: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    manifest = folder / "manifest.csv"
+    manifest.write_text("path,mass_kg\n" + "".join(f"{p},70\n" for p in paths))
+    return manifest
+
+
+@pytest.mark.parametrize("outside", ["../secret.csv", "/etc/passwd", "records/../../secret.csv"])
+def test_manifest_paths_outside_its_folder_are_refused(outside, tmp_path, capsys):
+    (tmp_path / "secret.csv").write_text("time,grf\n")
+    manifest = _manifest(tmp_path / "study", "records/a.csv", outside)
+    out = tmp_path / "out"
+    code, _, err = run_cli(["batch", manifest, "--out", out], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"{manifest}, line 3, column 'path'" in err
+    assert "outside the manifest's folder" in err and "--allow-outside-paths" in err
+    assert not out.exists()  # refused before anything was opened or written
+
+
+def test_allow_outside_paths_reads_them_and_the_flag_reaches_the_loader(tmp_path, capsys):
+    from workbench.records.io import load_manifest
+
+    manifest = _manifest(tmp_path / "study", "inside/a.csv", "../b.csv")
+    entries = load_manifest(manifest, allow_outside_paths=True)
+    assert [e.path.name for e in entries] == ["a.csv", "b.csv"]
+    assert build_parser().parse_args(["batch", "m.csv", "--out", "o"]).allow_outside_paths is False
+    args = build_parser().parse_args(
+        ["sensitivity", "m.csv", "--out", "o", "--allow-outside-paths"]
+    )
+    assert args.allow_outside_paths is True
+    # A link placed in the folder on purpose is the user's choice: the check reads the text.
+    (tmp_path / "study" / "link").symlink_to(tmp_path)
+    assert load_manifest(_manifest(tmp_path / "study", "link/b.csv"))[0].path.name == "b.csv"
+
+
+def test_batch_with_failed_records_exits_4_and_says_where_paths_start(tmp_path, capsys):
+    manifest = _manifest(tmp_path / "study", "records/missing.csv")
+    out = tmp_path / "out"
+    code, stdout, err = run_cli(["batch", manifest, "--out", out, "--json"], capsys)
+    assert code == 4, err
+    summary = json.loads(stdout)
+    assert (summary["done"], summary["failed"]) == (0, 1)
+    reason = summary["failed_records"][0]["reason"]
+    assert reason.startswith("records/missing.csv, whole file: the record file does not exist")
+    assert "relative paths start from the manifest's folder" in reason
+    assert "current folder" not in reason
+    assert summary["timings"] == str(out / "timings.csv")
+    assert (out / "timings.csv").read_text().startswith("path,status,elapsed_s\n")
+    assert "elapsed_s" not in (out / "results.csv").read_text()
+
+
+def test_exit_status_4_is_documented():
+    contracts = (Path(__file__).parents[1] / "docs" / "contracts.md").read_text()
+    assert "| 4 | `batch` finished but could not identify every record" in contracts
+
+
+@pytest.mark.parametrize("command", ["batch", "sensitivity", "hsi"])
+def test_more_workers_than_cores_warns_once(command, tmp_path, capsys, monkeypatch):
+    import os
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda _: {0, 1}, raising=False)
+
+    def argv(workers: str) -> list:
+        out = tmp_path / f"out{workers}"
+        return {
+            "batch": ["batch", _manifest(tmp_path, "missing.csv"), "--out", out],
+            "sensitivity": ["sensitivity", tmp_path / "absent.csv", "--out", out],
+            "hsi": ["hsi", "--crossings", "0"],  # refused after the warning: nothing runs
+        }[command] + ["--workers", workers]
+
+    _, _, err = run_cli(argv("12"), capsys)
+    warnings = [line for line in err.splitlines() if "warning" in line]
+    assert warnings == [
+        "workbench: warning: --workers 12 is more than the 2 cores this computer lets the "
+        "workbench use, so the workers share them and run no faster; give --workers 2 or fewer"
+    ], err
+    _, _, err = run_cli(argv("2"), capsys)
+    assert "warning" not in err

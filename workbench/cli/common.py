@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import sys
 from pathlib import Path
@@ -16,8 +17,10 @@ from typing import Any, NoReturn
 
 __all__ = [
     "CURRENT_ARGV",
+    "EXIT_RECORDS_FAILED",
     "Parser",
     "add_allow_negative_force",
+    "add_allow_outside_paths",
     "add_rigid_floor_flag",
     "emit",
     "floats",
@@ -31,8 +34,13 @@ __all__ = [
     "seed_int",
     "surface_choice",
     "warn_accepted_negative_force",
+    "warn_many_workers",
 ]
 
+
+#: Exit status of a batch that finished but could not identify every record (their reasons
+#: are in failures.csv); distinct from 2, a batch that did not run at all.
+EXIT_RECORDS_FAILED = 4
 
 #: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
 CURRENT_ARGV: list[str] = []
@@ -95,6 +103,45 @@ def add_allow_negative_force(group: Any) -> None:
         help="accept a total force that dips below zero (a synthetic benchmark force such as "
         "the seed study's numerical example) with a warning instead of refusing the record",
     )
+
+
+def add_allow_outside_paths(group: Any) -> None:
+    """Add ``--allow-outside-paths`` (manifest paths outside the manifest's folder).
+
+    Parameters
+    ----------
+    group : argparse.ArgumentParser or argument group
+    """
+    group.add_argument(
+        "--allow-outside-paths",
+        action="store_true",
+        help="read manifest paths outside the manifest's folder (absolute or with ..); "
+        "refused by default so that a manifest cannot open any file of the machine",
+    )
+
+
+def warn_many_workers(workers: int) -> None:
+    """Warn on stderr when more local workers are asked for than this computer has cores.
+
+    They would share the cores, run no faster and multiply the memory; the command still
+    runs as asked (a user may know better, e.g. on a shared machine's cgroup limits).
+
+    Parameters
+    ----------
+    workers : int
+        The ``--workers`` value.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))  # the cores this process may use
+    except AttributeError:  # not on every platform
+        cores = os.cpu_count() or 1
+    if workers > cores:
+        print(
+            f"workbench: warning: --workers {workers} is more than the {cores} cores this "
+            f"computer lets the workbench use, so the workers share them and run no faster; "
+            f"give --workers {cores} or fewer",
+            file=sys.stderr,
+        )
 
 
 def record_options() -> Parser:

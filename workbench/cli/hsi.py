@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.cli.common import emit, floats, seed_int
+from workbench.cli.common import emit, floats, seed_int, warn_many_workers
 from workbench.errors import UsageError
 
 __all__ = ["add_hsi_parser"]
@@ -103,6 +103,8 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
     from workbench.hsi.montecarlo import CrossingSpec, run_monte_carlo
     from workbench.reporting.hsi import crossing_summary
 
+    if not args.scheduler:
+        warn_many_workers(args.workers)
     _positive(args, "span", "mass_per_m", "frequency", "width", "dt", "duration", "density", "flow")
     if args.crossings < 1:
         raise UsageError(f"--crossings {args.crossings}: give at least one crossing")

@@ -27,10 +27,16 @@ from workbench.cli import (
     sensitivity,
     simulate,
 )
-from workbench.cli.common import CURRENT_ARGV, Parser, output_options
+from workbench.cli.common import CURRENT_ARGV, EXIT_RECORDS_FAILED, Parser, output_options
 from workbench.errors import UsageError, WorkbenchError
 
-__all__ = ["EXIT_INTERNAL_ERROR", "EXIT_USER_ERROR", "build_parser", "main"]
+__all__ = [
+    "EXIT_INTERNAL_ERROR",
+    "EXIT_RECORDS_FAILED",
+    "EXIT_USER_ERROR",
+    "build_parser",
+    "main",
+]
 
 #: Exit status of a problem the user can fix.
 EXIT_USER_ERROR = 2
@@ -111,8 +117,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns
     -------
     int
-        0 on success, 2 for a problem the user can fix, 3 for an internal error, 130 when
-        interrupted.
+        0 on success, 2 for a problem the user can fix, 3 for an internal error, 4 for a
+        batch that could not identify every record, 130 when interrupted.
     """
     parser = build_parser()
     CURRENT_ARGV[:] = list(argv) if argv is not None else []

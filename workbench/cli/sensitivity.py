@@ -8,11 +8,13 @@ from typing import Any
 
 from workbench.cli.common import (
     add_allow_negative_force,
+    add_allow_outside_paths,
     add_rigid_floor_flag,
     emit,
     identify_settings,
     seed_int,
     warn_accepted_negative_force,
+    warn_many_workers,
 )
 from workbench.errors import UsageError
 
@@ -29,6 +31,8 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
     from workbench.sensitivity.design import parse_factors, parse_levels
     from workbench.sensitivity.study import run_sensitivity
 
+    if not args.scheduler:
+        warn_many_workers(args.workers)
     if args.replicates < 1:
         raise UsageError(f"--replicates must be at least 1, got {args.replicates}")
     if args.workers < 1:
@@ -48,6 +52,7 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
         subject=args.subject,
         rescale_to_mass=args.rescale_to_mass,
         allow_negative_force=args.allow_negative_force,
+        allow_outside_paths=args.allow_outside_paths,
     )
     for _, record in records:
         warn_accepted_negative_force(record)
@@ -132,4 +137,5 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="scale the GRF so its mean over whole steps equals M g (sensor gain error)",
     )
     add_allow_negative_force(r)
+    add_allow_outside_paths(r)
     p.set_defaults(handler=_cmd_sensitivity)
