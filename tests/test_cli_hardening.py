@@ -277,3 +277,136 @@ def test_more_workers_than_cores_warns_once(command, tmp_path, capsys, monkeypat
     ], err
     _, _, err = run_cli(argv("2"), capsys)
     assert "warning" not in err
+
+
+# -- messages that pointed the wrong way ------------------------------------------------------
+@pytest.mark.parametrize("duration", ["inf", "nan", "-inf"])
+def test_simulate_non_finite_duration_says_so(duration, tmp_path, capsys):
+    code, _, err = run_cli(
+        ["simulate", "--out", tmp_path / "w.csv", "--duration", duration], capsys
+    )
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"--duration {duration}: give the record's length as a finite number" in err
+    assert "shorter" not in err
+
+
+def test_simulate_outside_the_identification_prior_warns(tmp_path, capsys):
+    argv = ["simulate", "--out", tmp_path / "w.csv", "--duration", "4", "--pacing", "1.8"]
+    code, _, err = run_cli([*argv, "--damping-ratio", "2"], capsys)
+    assert code == 0, err
+    assert err.strip().splitlines() == [
+        "workbench: warning: --damping-ratio 2 is outside 0.05-0.9, the prior range of "
+        "'workbench identify' (--prior modal), which therefore cannot recover it from this record"
+    ]
+    code, _, err = run_cli(
+        [*argv, "--natural-frequency-hz", "0.5", "--damping-ratio", "0.3"], capsys
+    )
+    assert code == 0 and "--natural-frequency-hz 0.5 is outside 1-4 Hz" in err
+    code, _, err = run_cli([*argv, "--damping-ratio", "0.9"], capsys)
+    assert code == 0 and "warning" not in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "computation"),
+    [
+        (["sample", "--n", "3"], "workbench.population.sampler.sample_pedestrians"),
+        (["simulate"], "workbench.synth.simulate.simulate_walking"),
+    ],
+)
+def test_unwritable_out_is_found_before_the_computation(argv, computation, tmp_path, capsys):
+    module, name = computation.rsplit(".", 1)
+    pytest.importorskip(module)
+
+    def never(*_, **__):
+        raise AssertionError("the computation ran before --out was checked")
+
+    monkeypatch = pytest.MonkeyPatch()
+    monkeypatch.setattr(f"{module}.{name}", never)
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    try:
+        code, _, err = run_cli([*argv, "--out", blocker / "sub" / "x.csv"], capsys)
+    finally:
+        monkeypatch.undo()
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"--out {blocker / 'sub' / 'x.csv'}: {blocker} is a file" in err
+    assert ".tmp" not in err
+
+
+@pytest.mark.parametrize("command", ["batch", "population", "report", "identify", "hsi"])
+def test_out_that_is_a_file_is_refused_up_front(command, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    argv = {
+        "batch": ["batch", tmp_path / "absent.csv"],
+        "population": ["population", tmp_path],
+        "report": ["report", tmp_path],
+        "identify": ["identify", tmp_path / "absent.csv"],
+        "hsi": ["hsi"],
+    }[command]
+    code, _, err = run_cli([*argv, "--out", blocker], capsys)
+    assert code == 2, err
+    assert err.strip() == f"workbench: error: --out {blocker}: this is a file, not a folder; " + (
+        "choose a folder you can write to"
+    )
+
+
+def test_a_failed_write_names_the_file_not_its_temporary_name():
+    from workbench.cli.main import _written_name
+
+    assert _written_name("/data/out/.x.csv.5u8lbaiy.tmp") == "/data/out/x.csv"
+    assert _written_name("/data/out/x.csv") == "/data/out/x.csv"
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["sample", "--n", "3", "--laws"], "give the population.json"),
+        (["hsi", "--structure"], "give the structure's JSON file"),
+    ],
+)
+def test_an_input_folder_is_not_told_to_be_writable(argv, message, tmp_path, capsys):
+    out = ["--out", tmp_path / "s.csv"] if argv[0] == "sample" else []
+    code, _, err = run_cli([*argv, tmp_path, *out], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert f"{tmp_path}, whole file: this is a folder; {message}" in err
+    assert "write to" not in err
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "message"),
+    [
+        ("--walkers", "3", "'3' walkers cannot be split in two equal halves"),
+        ("--walkers", "1", "'1' walkers cannot be split in two equal halves"),
+        ("--ensembles", "1", "'1' is too few; the convergence check (R-hat) compares ensembles"),
+    ],
+)
+def test_crosscheck_speaks_of_its_flags_before_any_work(flag, value, message, tmp_path, capsys):
+    # The record does not exist: the option must be refused before anything is loaded.
+    err = usage_error(["crosscheck", tmp_path / "absent.csv", flag, value], capsys)
+    assert f"argument {flag}: {message}" in err
+    assert "n_walkers" not in err and "n_ensembles" not in err
+
+
+@pytest.mark.parametrize(
+    "command", ["inspect", "identify", "crosscheck", "diagnose", "sensitivity"]
+)
+@pytest.mark.parametrize("value", ["-1", "1e-9", "5", "nan"])
+def test_highpass_range_is_the_same_for_every_command(command, value, tmp_path, capsys):
+    extra = ["--out", tmp_path / "o"] if command == "sensitivity" else []
+    argv = [command, tmp_path / "absent.csv", *extra, "--highpass-hz", value]
+    code, _, err = run_cli(argv, capsys)
+    assert code == 2, err
+    assert err.startswith(
+        f"workbench: error: --highpass-hz {float(value):g} is outside 0.02-0.6 Hz"
+    )
+    assert "absent.csv" not in err  # refused before the record was looked at
+    assert not (tmp_path / "o").exists()
+
+
+def test_hsi_density_and_flow_together_are_refused(capsys):
+    argv = ["hsi", "--crowd", "stream", "--density", "0.1", "--flow", "0.5"]
+    code, _, err = run_cli(argv, capsys)
+    assert code == 2
+    assert "--density and --flow both set the size of the stream" in err
+    assert "give one of them" in err

@@ -12,6 +12,7 @@ import json
 import os
 import re
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -22,6 +23,8 @@ __all__ = [
     "add_allow_negative_force",
     "add_allow_outside_paths",
     "add_rigid_floor_flag",
+    "check_highpass",
+    "check_out",
     "emit",
     "floats",
     "identify_settings",
@@ -46,11 +49,13 @@ EXIT_RECORDS_FAILED = 4
 CURRENT_ARGV: list[str] = []
 
 
-#: What argparse should read as a (negative) value rather than an option: a number or a
-#: comma-separated list of numbers, so that ``--blf -0.4,0.1`` passes ``-0.4,0.1`` to the
+#: What argparse should read as a (negative) value rather than an option: a number (also
+#: ``-inf``, judged by the option's own check) or a comma-separated list of numbers, so that ``--blf -0.4,0.1`` passes ``-0.4,0.1`` to the
 #: option instead of failing with "expected one argument". Argparse's own pattern knows only
 #: single numbers.
-_NEGATIVE_VALUE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,.*)?$")
+_NEGATIVE_VALUE = re.compile(
+    r"^-((\d+\.?\d*|\.\d+)(e[-+]?\d+)?|inf|infinity|nan)(,.*)?$", re.IGNORECASE
+)
 
 
 class Parser(argparse.ArgumentParser):
@@ -118,6 +123,52 @@ def add_allow_outside_paths(group: Any) -> None:
         help="read manifest paths outside the manifest's folder (absolute or with ..); "
         "refused by default so that a manifest cannot open any file of the machine",
     )
+
+
+def check_out(path: str | os.PathLike[str], *, is_file: bool = False) -> None:
+    """Refuse an ``--out`` that cannot be written, before any computation.
+
+    Otherwise a write failure shows only after the work is done. The check has no side
+    effect: it finds the nearest existing folder of the output and creates and removes an
+    empty hidden file there; the writers create the missing folders later.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``--out`` value.
+    is_file : bool, default False
+        The output is one file (``simulate``, ``sample``), not a folder.
+
+    Raises
+    ------
+    UsageError
+        In one sentence naming ``--out`` and the folder in the way.
+    """
+    from workbench.errors import UsageError
+
+    target = Path(path)
+    fix = "choose a folder you can write to"
+    try:
+        if is_file and target.is_dir():
+            raise UsageError(f"--out {path}: this is a folder; give a file name in it")
+        if not is_file and target.exists() and not target.is_dir():
+            raise UsageError(f"--out {path}: this is a file, not a folder; {fix}")
+        existing = (target.parent if is_file else target).absolute()
+        while not existing.exists():
+            existing = existing.parent
+    except OSError as err:
+        raise UsageError(f"--out {path}: {err.strerror or err}; {fix}") from None
+    if not existing.is_dir():
+        raise UsageError(
+            f"--out {path}: {existing} is a file, so no folder can be made in it; {fix}"
+        )
+    try:  # the system's answer, which permission bits alone do not give (read-only mounts)
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".workbench-check-"):
+            pass
+    except OSError as err:
+        raise UsageError(
+            f"--out {path}: cannot write in {existing} ({err.strerror or err}); {fix}"
+        ) from None
 
 
 def warn_many_workers(workers: int) -> None:
@@ -396,6 +447,34 @@ def floats(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not a comma-separated list of numbers"
         ) from None
+
+
+def check_highpass(value: float) -> None:
+    """Refuse a ``--highpass-hz`` outside the range every command takes, before any work.
+
+    The library checks the same range where it filters, but identification's settings
+    refuse a negative value first with other words; checked here, every command says the
+    same, before a record is loaded.
+
+    Parameters
+    ----------
+    value : float
+        The ``--highpass-hz`` value (0 switches the filter off).
+
+    Raises
+    ------
+    UsageError
+    """
+    from workbench.errors import UsageError
+    from workbench.records.preprocess import MAX_HIGHPASS_HZ, MIN_HIGHPASS_HZ
+
+    if value != 0 and not MIN_HIGHPASS_HZ <= value <= MAX_HIGHPASS_HZ:
+        raise UsageError(
+            f"--highpass-hz {value:g} is outside {MIN_HIGHPASS_HZ:g}-{MAX_HIGHPASS_HZ:g} Hz: "
+            "lower cut-offs need minutes of padding and let the integrals drift, higher ones "
+            "remove part of the walking fundamental (1-3 Hz); use 0.15 (the seed's) or 0 to "
+            "switch the filter off"
+        )
 
 
 def seed_int(text: str) -> int:

@@ -61,6 +61,17 @@ def _structure(args: argparse.Namespace) -> Any:
         obj = json.loads(Path(args.structure).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(args.structure, "whole file", "does not exist", "check the path") from None
+    except IsADirectoryError:
+        raise InputError(
+            args.structure, "whole file", "this is a folder", "give the structure's JSON file"
+        ) from None
+    except OSError as err:  # an input: main's message about writable folders would mislead
+        raise InputError(
+            args.structure,
+            "whole file",
+            f"the file cannot be read ({err.strerror or err})",
+            "check its permissions",
+        ) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise InputError(
             args.structure, "whole file", f"is not JSON ({err})", "give a JSON object"
@@ -117,6 +128,12 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         raise UsageError(f"--at {args.at:g} m is off the {structure.span_m:g} m span")
     if args.crowd == "single" and (args.density is not None or args.flow is not None):
         raise UsageError("--density and --flow describe a crowd; add --crowd stream")
+    if args.density is not None and args.flow is not None:
+        # Each fixes the stream's size (density = flow / (width x speed)); one would be ignored.
+        raise UsageError(
+            "--density and --flow both set the size of the stream (density is flow over deck "
+            "width times walking speed); give one of them"
+        )
     _check_records_args(args)
     spec = CrossingSpec(
         structure=structure,

@@ -12,9 +12,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import traceback
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from workbench.cli import (
     criticism,
@@ -27,7 +29,14 @@ from workbench.cli import (
     sensitivity,
     simulate,
 )
-from workbench.cli.common import CURRENT_ARGV, EXIT_RECORDS_FAILED, Parser, output_options
+from workbench.cli.common import (
+    CURRENT_ARGV,
+    EXIT_RECORDS_FAILED,
+    Parser,
+    check_highpass,
+    check_out,
+    output_options,
+)
 from workbench.errors import UsageError, WorkbenchError
 
 __all__ = [
@@ -125,6 +134,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     handler: Handler = args.handler
     try:
+        # Options shared by many commands, checked once here before any work.
+        if getattr(args, "highpass_hz", None) is not None:
+            check_highpass(args.highpass_hz)
+        if getattr(args, "out", None) is not None:
+            check_out(args.out, is_file=getattr(args, "out_is_file", False))
         return handler(args)
     except UsageError as err:
         # Library messages name their parameters; here the user typed flags.
@@ -134,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _report_error(args, str(err))
         return err.exit_code
     except OSError as err:
-        target = err.filename or "the output"
+        target = _written_name(err.filename) if err.filename else "the output"
         _report_error(
             args,
             f"could not write or read {target} ({err.strerror or err}); choose a folder you "
@@ -161,6 +175,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             "traceback).",
         )
         return EXIT_INTERNAL_ERROR
+
+
+#: The temporary name under which a file is written before its atomic rename
+#: (:func:`workbench.fileutil.atomic_path`): ``.NAME.RANDOM.tmp``.
+_TEMPORARY_NAME = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")
+
+
+def _written_name(filename: str | os.PathLike[str]) -> str:
+    """Name the file the user asked for, not the temporary file it is written through."""
+    path = Path(filename)
+    match = _TEMPORARY_NAME.match(path.name)
+    return str(path.with_name(match["name"])) if match else str(filename)
 
 
 def _report_error(args: argparse.Namespace, message: str) -> None:

@@ -166,7 +166,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="laws written by 'workbench population' (default: the seed's laws)",
     )
     p.add_argument("--seed", type=seed_int, default=0, help="random seed (default 0)")
-    p.set_defaults(handler=_cmd_sample)
+    p.set_defaults(handler=_cmd_sample, out_is_file=True)
 
     p = sub.add_parser(
         "batch",
