@@ -176,3 +176,38 @@ def test_dask_local_cluster(study, reference, tmp_path, capsys):
     assert (summary["done"], summary["failed"]) == (N_GOOD, 3)
     ref, _ = reference
     _assert_same_outputs(tmp_path, ref)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_signal_to_the_main_process_stops_the_workers(study, tmp_path, signum):
+    psutil = pytest.importorskip("psutil")
+    cmd = [sys.executable, "-m", "workbench", "batch", str(study / "manifest.csv")]
+    cmd += ["--out", str(tmp_path), "--config", str(study / "study.toml"), "--workers", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    main_process = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 120
+    try:
+        # Wait until both pool workers run (the spawn start method imports the package).
+        while time.monotonic() < deadline and proc.poll() is None:
+            workers = [
+                p
+                for p in main_process.children(recursive=True)
+                if "spawn_main" in " ".join(p.cmdline())
+            ]
+            if len(workers) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the batch ended before the signal could be sent"
+        descendants = main_process.children(recursive=True)
+        os.kill(proc.pid, signum)  # to the main process only, as a service manager does
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "workbench: interrupted"
+    _, alive = psutil.wait_procs(descendants, timeout=10)
+    assert alive == [], [p.cmdline() for p in alive]
+    # The finished records stay, so --resume continues where the signal stopped the batch.
+    assert not (tmp_path / "results.csv").exists()

@@ -50,9 +50,9 @@ CURRENT_ARGV: list[str] = []
 
 
 #: What argparse should read as a (negative) value rather than an option: a number (also
-#: ``-inf``, judged by the option's own check) or a comma-separated list of numbers, so that ``--blf -0.4,0.1`` passes ``-0.4,0.1`` to the
-#: option instead of failing with "expected one argument". Argparse's own pattern knows only
-#: single numbers.
+#: ``-inf``, judged by the option's own check) or a comma-separated list of numbers, so
+#: that ``--blf -0.4,0.1`` passes ``-0.4,0.1`` to the option instead of failing with
+#: "expected one argument". Argparse's own pattern knows only single numbers.
 _NEGATIVE_VALUE = re.compile(
     r"^-((\d+\.?\d*|\.\d+)(e[-+]?\d+)?|inf|infinity|nan)(,.*)?$", re.IGNORECASE
 )

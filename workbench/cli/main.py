@@ -10,13 +10,17 @@ unexpected internal failure prints one sentence too (exit 3) and shows the trace
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
+import signal
 import sys
+import threading
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from workbench.cli import (
     criticism,
@@ -133,6 +137,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     CURRENT_ARGV[:] = list(argv) if argv is not None else []
     args = parser.parse_args(argv)
     handler: Handler = args.handler
+    with _sigterm_interrupts():
+        return _run(args, handler)
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts() -> Iterator[None]:
+    """Treat SIGTERM like Ctrl-C while a command runs.
+
+    Python dies on SIGTERM without unwinding, so a batch's pool workers would be left
+    running; as a KeyboardInterrupt it unwinds, the executor stops its workers and the
+    command exits with status 130. Outside the main thread signals cannot be handled.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace, handler: Handler) -> int:
+    """Run a parsed command and turn its errors into messages and exit statuses."""
     try:
         # Options shared by many commands, checked once here before any work.
         if getattr(args, "highpass_hz", None) is not None:
