@@ -501,7 +501,7 @@ def test_manifest_loading(tmp_path: Path) -> None:
         ManifestEntry(tmp_path / "abs.csv", 82.5, None, "S3", 5),
     ]
     # The absolute path leaves the manifest's folder: refused unless allowed.
-    with pytest.raises(InputError, match="line 5, column 'path'.*--allow-outside-paths"):
+    with pytest.raises(InputError, match=r"line 5, column 'path'.*--allow-outside-paths"):
         load_manifest(manifest)
 
 
