@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from workbench.cli import main
+from workbench.cli.main import EXIT_RECORDS_FAILED
 from workbench.population.batch import RESULT_COLUMNS, TIMING_COLUMNS, record_seed
 from workbench.population.study import StudyDesign, study_plan, write_study
 
@@ -55,9 +56,18 @@ def _batch(study, out, *extra):
     return main([*argv, str(study / "study.toml"), "--json", *extra])
 
 
-def _without_timing(path: Path) -> str:
-    table = pd.read_csv(path, dtype=str, keep_default_na=False)
-    return table.drop(columns=list(TIMING_COLUMNS)).to_csv(index=False)
+def _assert_same_outputs(out: Path, ref: Path) -> None:
+    """Results, failures and every record file byte for byte; only timings.csv may differ."""
+    for name in ("results.csv", "failures.csv"):
+        assert (out / name).read_bytes() == (ref / name).read_bytes(), name
+    records = sorted(p.name for p in (ref / "records").glob("*.json"))
+    assert sorted(p.name for p in (out / "records").glob("*.json")) == records
+    for name in records:
+        assert (out / "records" / name).read_bytes() == (ref / "records" / name).read_bytes()
+    timings = pd.read_csv(out / "timings.csv")
+    assert tuple(timings.columns) == TIMING_COLUMNS
+    assert list(timings.path) == sorted(pd.read_csv(ref / "timings.csv").path)
+    assert (timings.elapsed_s >= 0).all()
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +78,8 @@ def reference(study, tmp_path_factory):
 
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert _batch(study, out) == 0
+        # Three records fail: the batch finishes them all and says so in its exit status.
+        assert _batch(study, out) == EXIT_RECORDS_FAILED
     return out, json.loads(buf.getvalue())
 
 
@@ -82,8 +93,12 @@ def test_faults_reported_and_rest_complete(study, reference):
     assert "does not exist" in reasons[BAD[0]]
     assert "binary data" in reasons[BAD[1]]
     assert "NaN" in reasons[BAD[2]]
+    assert "paths start from the manifest's folder" in reasons[BAD[0]]
     results = pd.read_csv(out / "results.csv")
-    assert tuple(results.columns) == RESULT_COLUMNS
+    assert tuple(results.columns) == RESULT_COLUMNS and "elapsed_s" not in results.columns
+    timings = pd.read_csv(out / "timings.csv")
+    assert sorted(timings.path) == sorted([*BAD, *results.path])
+    assert dict(zip(timings.path, timings.status, strict=True))[BAD[0]] == "failed"
     assert len(results) == N_GOOD and results.path.is_monotonic_increasing
     truth = pd.read_csv(study / "truth.csv")
     truth["path"] = "records/" + truth.record + ".csv"
@@ -103,10 +118,9 @@ def test_faults_reported_and_rest_complete(study, reference):
 
 
 def test_two_workers_give_identical_results(study, reference, tmp_path, capsys):
-    assert _batch(study, tmp_path, "--workers", "2") == 0
+    assert _batch(study, tmp_path, "--workers", "2") == EXIT_RECORDS_FAILED
     ref, _ = reference
-    assert _without_timing(tmp_path / "results.csv") == _without_timing(ref / "results.csv")
-    assert (tmp_path / "failures.csv").read_bytes() == (ref / "failures.csv").read_bytes()
+    _assert_same_outputs(tmp_path, ref)
 
 
 def test_kill_and_resume_equals_uninterrupted(study, reference, tmp_path, capsys):
@@ -132,15 +146,14 @@ def test_kill_and_resume_equals_uninterrupted(study, reference, tmp_path, capsys
     # Without --resume the folder is refused rather than overwritten.
     assert _batch(study, tmp_path) == 2
     capsys.readouterr()
-    assert _batch(study, tmp_path, "--resume") == 0
+    assert _batch(study, tmp_path, "--resume") == EXIT_RECORDS_FAILED
     summary = json.loads(capsys.readouterr().out)
     assert summary["done"] + summary["failed"] + summary["skipped"] == N_GOOD + 3
     assert summary["skipped"] >= 1 and summary["failed"] == 3
     ref, _ = reference
-    assert _without_timing(tmp_path / "results.csv") == _without_timing(ref / "results.csv")
-    assert (tmp_path / "failures.csv").read_bytes() == (ref / "failures.csv").read_bytes()
+    _assert_same_outputs(tmp_path, ref)
     # A second resume has nothing left to identify; other settings are refused.
-    assert _batch(study, tmp_path, "--resume") == 0
+    assert _batch(study, tmp_path, "--resume") == EXIT_RECORDS_FAILED
     again = json.loads(capsys.readouterr().out)
     assert (again["done"], again["skipped"]) == (0, N_GOOD)
     assert _batch(study, tmp_path, "--resume", "--particles", "40") == 2
@@ -157,8 +170,44 @@ def test_dask_local_cluster(study, reference, tmp_path, capsys):
             dashboard_address=None,
         ) as cluster,
     ):
-        assert _batch(study, tmp_path, "--scheduler", cluster.scheduler_address) == 0
+        code = _batch(study, tmp_path, "--scheduler", cluster.scheduler_address)
+    assert code == EXIT_RECORDS_FAILED
     summary = json.loads(capsys.readouterr().out)
     assert (summary["done"], summary["failed"]) == (N_GOOD, 3)
     ref, _ = reference
-    assert _without_timing(tmp_path / "results.csv") == _without_timing(ref / "results.csv")
+    _assert_same_outputs(tmp_path, ref)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_signal_to_the_main_process_stops_the_workers(study, tmp_path, signum):
+    psutil = pytest.importorskip("psutil")
+    cmd = [sys.executable, "-m", "workbench", "batch", str(study / "manifest.csv")]
+    cmd += ["--out", str(tmp_path), "--config", str(study / "study.toml"), "--workers", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    main_process = psutil.Process(proc.pid)
+    deadline = time.monotonic() + 120
+    try:
+        # Wait until both pool workers run (the spawn start method imports the package).
+        while time.monotonic() < deadline and proc.poll() is None:
+            workers = [
+                p
+                for p in main_process.children(recursive=True)
+                if "spawn_main" in " ".join(p.cmdline())
+            ]
+            if len(workers) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the batch ended before the signal could be sent"
+        descendants = main_process.children(recursive=True)
+        os.kill(proc.pid, signum)  # to the main process only, as a service manager does
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "workbench: interrupted"
+    _, alive = psutil.wait_procs(descendants, timeout=10)
+    assert alive == [], [p.cmdline() for p in alive]
+    # The finished records stay, so --resume continues where the signal stopped the batch.
+    assert not (tmp_path / "results.csv").exists()

@@ -494,12 +494,15 @@ def test_manifest_loading(tmp_path: Path) -> None:
         '"sub dir/b, c.csv",,,\n'
         f"{tmp_path / 'abs.csv'},82.5,,S3\n"
     )
-    entries = load_manifest(manifest)
+    entries = load_manifest(manifest, allow_outside_paths=True)
     assert entries == [
         ManifestEntry(tmp_path / "data" / "a.csv", 70.0, 1.8, "S1", 2),
         ManifestEntry(tmp_path / "data" / "sub dir" / "b, c.csv", None, None, None, 4),
         ManifestEntry(tmp_path / "abs.csv", 82.5, None, "S3", 5),
     ]
+    # The absolute path leaves the manifest's folder: refused unless allowed.
+    with pytest.raises(InputError, match=r"line 5, column 'path'.*--allow-outside-paths"):
+        load_manifest(manifest)
 
 
 def test_manifest_semicolon_and_path_only(tmp_path: Path) -> None:

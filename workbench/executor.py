@@ -17,7 +17,7 @@ workers or the order in which they finish; callers sort what they collect.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from workbench.errors import UsageError
 
@@ -37,10 +37,35 @@ def _pool(fn: Callable[[T], R], tasks: Sequence[T], workers: int) -> Iterator[R]
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    try:
         futures = [pool.submit(fn, t) for t in tasks]
         for fut in as_completed(futures):
             yield fut.result()
+    except BaseException:
+        # Interrupted (Ctrl-C, SIGTERM turned into KeyboardInterrupt by the command line) or
+        # abandoned: the pool's own exit would wait for every running task, and a killed
+        # parent would leave its workers running re-parented. Stop them now instead.
+        _stop_workers(pool)
+        raise
+    else:
+        pool.shutdown(wait=True)
+
+
+def _stop_workers(pool: Any) -> None:
+    """Cancel the queued tasks and terminate the pool's processes, waiting until they are gone."""
+    # The executor offers no public way to terminate before Python 3.14
+    # (``terminate_workers``); its process table is the documented-in-source way in.
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(timeout=10)
+        if proc.is_alive():  # ignored SIGTERM: no choice left
+            proc.kill()
+            proc.join(timeout=5)
 
 
 def _dask(

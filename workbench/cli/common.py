@@ -9,15 +9,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import re
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any, NoReturn
 
 __all__ = [
     "CURRENT_ARGV",
+    "EXIT_RECORDS_FAILED",
     "Parser",
     "add_allow_negative_force",
+    "add_allow_outside_paths",
     "add_rigid_floor_flag",
+    "check_highpass",
+    "check_out",
     "emit",
     "floats",
     "identify_settings",
@@ -27,17 +34,41 @@ __all__ = [
     "positive_int",
     "record_options",
     "safe_key",
+    "seed_int",
     "surface_choice",
     "warn_accepted_negative_force",
+    "warn_many_workers",
 ]
 
+
+#: Exit status of a batch that finished but could not identify every record (their reasons
+#: are in failures.csv); distinct from 2, a batch that did not run at all.
+EXIT_RECORDS_FAILED = 4
 
 #: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
 CURRENT_ARGV: list[str] = []
 
 
+#: What argparse should read as a (negative) value rather than an option: a number (also
+#: ``-inf``, judged by the option's own check) or a comma-separated list of numbers, so
+#: that ``--blf -0.4,0.1`` passes ``-0.4,0.1`` to the option instead of failing with
+#: "expected one argument". Argparse's own pattern knows only single numbers.
+_NEGATIVE_VALUE = re.compile(
+    r"^-((\d+\.?\d*|\.\d+)(e[-+]?\d+)?|inf|infinity|nan)(,.*)?$", re.IGNORECASE
+)
+
+
 class Parser(argparse.ArgumentParser):
-    """An argument parser whose usage errors honour ``--json`` (one JSON object on stdout)."""
+    """An argument parser whose usage errors honour ``--json`` (one JSON object on stdout).
+
+    It also reads negative lists of numbers (``-0.4,0.1``) as values (:data:`_NEGATIVE_VALUE`).
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # Argparse's private hook, present in every supported Python; no option of the
+        # workbench looks like a negative number, so widening it cannot hide an option.
+        self._negative_number_matcher = _NEGATIVE_VALUE
 
     def error(self, message: str) -> NoReturn:  # argparse's hook for usage errors
         """Print the usage error (also as JSON under ``--json``) and exit with status 2.
@@ -77,6 +108,91 @@ def add_allow_negative_force(group: Any) -> None:
         help="accept a total force that dips below zero (a synthetic benchmark force such as "
         "the seed study's numerical example) with a warning instead of refusing the record",
     )
+
+
+def add_allow_outside_paths(group: Any) -> None:
+    """Add ``--allow-outside-paths`` (manifest paths outside the manifest's folder).
+
+    Parameters
+    ----------
+    group : argparse.ArgumentParser or argument group
+    """
+    group.add_argument(
+        "--allow-outside-paths",
+        action="store_true",
+        help="read manifest paths outside the manifest's folder (absolute or with ..); "
+        "refused by default so that a manifest cannot open any file of the machine",
+    )
+
+
+def check_out(path: str | os.PathLike[str], *, is_file: bool = False) -> None:
+    """Refuse an ``--out`` that cannot be written, before any computation.
+
+    Otherwise a write failure shows only after the work is done. The check has no side
+    effect: it finds the nearest existing folder of the output and creates and removes an
+    empty hidden file there; the writers create the missing folders later.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``--out`` value.
+    is_file : bool, default False
+        The output is one file (``simulate``, ``sample``), not a folder.
+
+    Raises
+    ------
+    UsageError
+        In one sentence naming ``--out`` and the folder in the way.
+    """
+    from workbench.errors import UsageError
+
+    target = Path(path)
+    fix = "choose a folder you can write to"
+    try:
+        if is_file and target.is_dir():
+            raise UsageError(f"--out {path}: this is a folder; give a file name in it")
+        if not is_file and target.exists() and not target.is_dir():
+            raise UsageError(f"--out {path}: this is a file, not a folder; {fix}")
+        existing = (target.parent if is_file else target).absolute()
+        while not existing.exists():
+            existing = existing.parent
+    except OSError as err:
+        raise UsageError(f"--out {path}: {err.strerror or err}; {fix}") from None
+    if not existing.is_dir():
+        raise UsageError(
+            f"--out {path}: {existing} is a file, so no folder can be made in it; {fix}"
+        )
+    try:  # the system's answer, which permission bits alone do not give (read-only mounts)
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".workbench-check-"):
+            pass
+    except OSError as err:
+        raise UsageError(
+            f"--out {path}: cannot write in {existing} ({err.strerror or err}); {fix}"
+        ) from None
+
+
+def warn_many_workers(workers: int) -> None:
+    """Warn on stderr when more local workers are asked for than this computer has cores.
+
+    They would share the cores, run no faster and multiply the memory; the command still
+    runs as asked (a user may know better, e.g. on a shared machine's cgroup limits).
+
+    Parameters
+    ----------
+    workers : int
+        The ``--workers`` value.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))  # the cores this process may use
+    except AttributeError:  # not on every platform
+        cores = os.cpu_count() or 1
+    if workers > cores:
+        print(
+            f"workbench: warning: --workers {workers} is more than the {cores} cores this "
+            f"computer lets the workbench use, so the workers share them and run no faster; "
+            f"give --workers {cores} or fewer",
+            file=sys.stderr,
+        )
 
 
 def record_options() -> Parser:
@@ -331,6 +447,61 @@ def floats(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not a comma-separated list of numbers"
         ) from None
+
+
+def check_highpass(value: float) -> None:
+    """Refuse a ``--highpass-hz`` outside the range every command takes, before any work.
+
+    The library checks the same range where it filters, but identification's settings
+    refuse a negative value first with other words; checked here, every command says the
+    same, before a record is loaded.
+
+    Parameters
+    ----------
+    value : float
+        The ``--highpass-hz`` value (0 switches the filter off).
+
+    Raises
+    ------
+    UsageError
+    """
+    from workbench.errors import UsageError
+    from workbench.records.preprocess import MAX_HIGHPASS_HZ, MIN_HIGHPASS_HZ
+
+    if value != 0 and not MIN_HIGHPASS_HZ <= value <= MAX_HIGHPASS_HZ:
+        raise UsageError(
+            f"--highpass-hz {value:g} is outside {MIN_HIGHPASS_HZ:g}-{MAX_HIGHPASS_HZ:g} Hz: "
+            "lower cut-offs need minutes of padding and let the integrals drift, higher ones "
+            "remove part of the walking fundamental (1-3 Hz); use 0.15 (the seed's) or 0 to "
+            "switch the filter off"
+        )
+
+
+def seed_int(text: str) -> int:
+    """Argparse type: a random seed, a whole number of 0 or more.
+
+    Checked here, once for every command, so that a negative seed is refused before any work
+    (numpy's generators refuse it only when they are built, deep inside a computation).
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    int
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a seed; give a whole number of 0 or more"
+        ) from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is negative; a seed is a whole number of 0 or more"
+        )
+    return value
 
 
 def positive_int(text: str) -> int:

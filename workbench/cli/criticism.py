@@ -10,6 +10,7 @@ from workbench.cli.common import (
     emit,
     load,
     record_options,
+    seed_int,
     surface_choice,
 )
 from workbench.errors import UsageError
@@ -183,7 +184,7 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     level.add_argument(
         "--seed",
-        type=int,
+        type=seed_int,
         default=0,
         help="random seed (default 0) of diagnose's identification (rbpf) and "
         "posterior-predictive replicates; compare's cross-validation draws nothing random, "

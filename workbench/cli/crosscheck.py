@@ -13,6 +13,7 @@ from workbench.cli.common import (
     positive_int,
     record_options,
     safe_key,
+    seed_int,
     surface_choice,
 )
 from workbench.errors import UsageError
@@ -29,6 +30,27 @@ def _history(text: str) -> int | str:
         raise argparse.ArgumentTypeError(
             f"{text!r} is not 'grid', 'all' or a whole number of steps"
         ) from None
+
+
+def _ensembles(text: str) -> int:
+    """Argparse type of ``--ensembles``: R-hat compares ensembles, so at least two."""
+    value = positive_int(text)
+    if value < 2:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is too few; the convergence check (R-hat) compares ensembles, give 2 or more"
+        )
+    return value
+
+
+def _walkers(text: str) -> int:
+    """Argparse type of ``--walkers``: an even number of at least 2 (checked before any work)."""
+    value = positive_int(text)
+    if value < 2 or value % 2:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} walkers cannot be split in two equal halves as the MCMC moves need; "
+            "give an even number of at least 2, such as 32"
+        )
+    return value
 
 
 def _surface_for_the_filter(record: Any, chosen: str | None) -> str | None:
@@ -190,8 +212,8 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     add_rigid_floor_flag(p)
     p.add_argument("--max-steps", type=positive_int, metavar="N", help="check the first N steps")
-    p.add_argument("--ensembles", type=positive_int, default=4, metavar="N", help="(4)")
-    p.add_argument("--walkers", type=positive_int, metavar="N", help="per ensemble (32)")
-    p.add_argument("--seed", type=int, help="random seed (default 0)")
+    p.add_argument("--ensembles", type=_ensembles, default=4, metavar="N", help="(4; at least 2)")
+    p.add_argument("--walkers", type=_walkers, metavar="N", help="per ensemble, even (32)")
+    p.add_argument("--seed", type=seed_int, help="random seed (default 0)")
     p.add_argument("--out", metavar="DIR", help="write the InferenceData (netCDF) and figures")
     p.set_defaults(handler=_cmd_crosscheck)

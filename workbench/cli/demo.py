@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from workbench.cli.common import emit
+from workbench.cli.common import emit, seed_int
 
 __all__ = ["add_demo_parser"]
 
@@ -35,5 +35,5 @@ def add_demo_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "and write an HTML and Markdown report.",
     )
     p.add_argument("--out", metavar="DIR", default="reports/demo", help="report folder")
-    p.add_argument("--seed", type=int, default=20261122, help="seed for everything random")
+    p.add_argument("--seed", type=seed_int, default=20261122, help="seed for everything random")
     p.set_defaults(handler=_cmd_demo)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from workbench.cli.common import emit, floats
+from workbench.cli.common import emit, floats, seed_int, warn_many_workers
 from workbench.errors import UsageError
 
 __all__ = ["add_hsi_parser"]
@@ -61,6 +61,17 @@ def _structure(args: argparse.Namespace) -> Any:
         obj = json.loads(Path(args.structure).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise InputError(args.structure, "whole file", "does not exist", "check the path") from None
+    except IsADirectoryError:
+        raise InputError(
+            args.structure, "whole file", "this is a folder", "give the structure's JSON file"
+        ) from None
+    except OSError as err:  # an input: main's message about writable folders would mislead
+        raise InputError(
+            args.structure,
+            "whole file",
+            f"the file cannot be read ({err.strerror or err})",
+            "check its permissions",
+        ) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise InputError(
             args.structure, "whole file", f"is not JSON ({err})", "give a JSON object"
@@ -103,6 +114,8 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
     from workbench.hsi.montecarlo import CrossingSpec, run_monte_carlo
     from workbench.reporting.hsi import crossing_summary
 
+    if not args.scheduler:
+        warn_many_workers(args.workers)
     _positive(args, "span", "mass_per_m", "frequency", "width", "dt", "duration", "density", "flow")
     if args.crossings < 1:
         raise UsageError(f"--crossings {args.crossings}: give at least one crossing")
@@ -115,6 +128,12 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         raise UsageError(f"--at {args.at:g} m is off the {structure.span_m:g} m span")
     if args.crowd == "single" and (args.density is not None or args.flow is not None):
         raise UsageError("--density and --flow describe a crowd; add --crowd stream")
+    if args.density is not None and args.flow is not None:
+        # Each fixes the stream's size (density = flow / (width x speed)); one would be ignored.
+        raise UsageError(
+            "--density and --flow both set the size of the stream (density is flow over deck "
+            "width times walking speed); give one of them"
+        )
     _check_records_args(args)
     spec = CrossingSpec(
         structure=structure,
@@ -313,7 +332,7 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--static-weight", action="store_true", help="add the walkers' weight as a moving load"
     )
-    g.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    g.add_argument("--seed", type=seed_int, default=0, help="random seed (0)")
     g.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler")
     p.add_argument("--out", metavar="DIR", help="write crossings.csv, figures, summary.json")

@@ -13,6 +13,7 @@ from workbench.cli.common import (
     load,
     record_options,
     safe_key,
+    seed_int,
 )
 from workbench.errors import UsageError
 
@@ -148,6 +149,6 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "identifiability from the MCMC posterior instead of the filter's cloud",
     )
     p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
-    p.add_argument("--seed", type=int, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed_int, help="random seed (default 0)")
     p.add_argument("--out", metavar="DIR", help="write netCDF results and a report here")
     p.set_defaults(handler=_cmd_identify)

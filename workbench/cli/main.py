@@ -10,11 +10,17 @@ unexpected internal failure prints one sentence too (exit 3) and shows the trace
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import re
+import signal
 import sys
+import threading
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
 
 from workbench.cli import (
     criticism,
@@ -27,10 +33,23 @@ from workbench.cli import (
     sensitivity,
     simulate,
 )
-from workbench.cli.common import CURRENT_ARGV, Parser, output_options
+from workbench.cli.common import (
+    CURRENT_ARGV,
+    EXIT_RECORDS_FAILED,
+    Parser,
+    check_highpass,
+    check_out,
+    output_options,
+)
 from workbench.errors import UsageError, WorkbenchError
 
-__all__ = ["EXIT_INTERNAL_ERROR", "EXIT_USER_ERROR", "build_parser", "main"]
+__all__ = [
+    "EXIT_INTERNAL_ERROR",
+    "EXIT_RECORDS_FAILED",
+    "EXIT_USER_ERROR",
+    "build_parser",
+    "main",
+]
 
 #: Exit status of a problem the user can fix.
 EXIT_USER_ERROR = 2
@@ -96,6 +115,7 @@ FLAG_FOR_PARAMETER = {
     "mode": "--mode",
     "effects": "--effects",
     "surface": "--surface",
+    "keep_not_identified": "--keep-not-identified",
 }
 
 
@@ -110,14 +130,47 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns
     -------
     int
-        0 on success, 2 for a problem the user can fix, 3 for an internal error, 130 when
-        interrupted.
+        0 on success, 2 for a problem the user can fix, 3 for an internal error, 4 for a
+        batch that could not identify every record, 130 when interrupted.
     """
     parser = build_parser()
     CURRENT_ARGV[:] = list(argv) if argv is not None else []
     args = parser.parse_args(argv)
     handler: Handler = args.handler
+    with _sigterm_interrupts():
+        return _run(args, handler)
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts() -> Iterator[None]:
+    """Treat SIGTERM like Ctrl-C while a command runs.
+
+    Python dies on SIGTERM without unwinding, so a batch's pool workers would be left
+    running; as a KeyboardInterrupt it unwinds, the executor stops its workers and the
+    command exits with status 130. Outside the main thread signals cannot be handled.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
     try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace, handler: Handler) -> int:
+    """Run a parsed command and turn its errors into messages and exit statuses."""
+    try:
+        # Options shared by many commands, checked once here before any work.
+        if getattr(args, "highpass_hz", None) is not None:
+            check_highpass(args.highpass_hz)
+        if getattr(args, "out", None) is not None:
+            check_out(args.out, is_file=getattr(args, "out_is_file", False))
         return handler(args)
     except UsageError as err:
         # Library messages name their parameters; here the user typed flags.
@@ -127,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _report_error(args, str(err))
         return err.exit_code
     except OSError as err:
-        target = err.filename or "the output"
+        target = _written_name(err.filename) if err.filename else "the output"
         _report_error(
             args,
             f"could not write or read {target} ({err.strerror or err}); choose a folder you "
@@ -154,6 +207,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             "traceback).",
         )
         return EXIT_INTERNAL_ERROR
+
+
+#: The temporary name under which a file is written before its atomic rename
+#: (:func:`workbench.fileutil.atomic_path`): ``.NAME.RANDOM.tmp``.
+_TEMPORARY_NAME = re.compile(r"^\.(?P<name>.+)\.[^.]+\.tmp$")
+
+
+def _written_name(filename: str | os.PathLike[str]) -> str:
+    """Name the file the user asked for, not the temporary file it is written through."""
+    path = Path(filename)
+    match = _TEMPORARY_NAME.match(path.name)
+    return str(path.with_name(match["name"])) if match else str(filename)
 
 
 def _report_error(args: argparse.Namespace, message: str) -> None:

@@ -7,10 +7,14 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    EXIT_RECORDS_FAILED,
     add_allow_negative_force,
+    add_allow_outside_paths,
     add_rigid_floor_flag,
     emit,
     identify_settings,
+    seed_int,
+    warn_many_workers,
 )
 from workbench.errors import UsageError
 
@@ -54,6 +58,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from workbench.population.batch import run_batch
 
+    if not args.scheduler:
+        warn_many_workers(args.workers)
     summary = run_batch(
         args.manifest,
         args.out,
@@ -63,6 +69,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         resume=args.resume,
         progress=not args.json,
         allow_negative_force=args.allow_negative_force,
+        allow_outside_paths=args.allow_outside_paths,
     )
     obj = summary.to_json()
     lines = [
@@ -70,22 +77,26 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         f"(finished earlier) in {summary.elapsed_s:.1f} s",
         f"results  {summary.results_csv}",
         f"failures {summary.failures_csv}",
+        f"timings  {summary.timings_csv}",
     ]
     lines += [f"failed: {f['path']}: {f['reason']}" for f in summary.failures]
     emit(args, obj, "\n".join(lines))
-    return 0
+    # A script running batches must notice failed records without parsing the output.
+    return EXIT_RECORDS_FAILED if summary.failed else 0
 
 
 # ---------------------------------------------------------------------------------------------
 # population
 # ---------------------------------------------------------------------------------------------
 def _cmd_population(args: argparse.Namespace) -> int:
-    from workbench.population.files import read_results, write_population
+    from workbench.population.files import read_results, results_path, write_population
     from workbench.population.fit import fit_population
 
     results = read_results(args.results_dir)
     fit = fit_population(
-        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+        results,
+        keep_not_identified=args.keep_not_identified,
+        source=str(results_path(args.results_dir)),
     )
     files = write_population(fit, args.out)
     obj = {**fit.to_json(), "files": files}
@@ -97,13 +108,15 @@ def _cmd_population(args: argparse.Namespace) -> int:
 # report
 # ---------------------------------------------------------------------------------------------
 def _cmd_report(args: argparse.Namespace) -> int:
-    from workbench.population.files import read_results, write_population
+    from workbench.population.files import read_results, results_path, write_population
     from workbench.population.fit import fit_population
     from workbench.reporting.population import population_report
 
     results = read_results(args.results_dir)
     fit = fit_population(
-        results, keep_not_identified=args.keep_not_identified, source=str(args.results_dir)
+        results,
+        keep_not_identified=args.keep_not_identified,
+        source=str(results_path(args.results_dir)),
     )
     files = write_population(fit, args.out)
     files.update(population_report(results, fit, args.out, title=args.title))
@@ -152,18 +165,19 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         metavar="POPULATION.json",
         help="laws written by 'workbench population' (default: the seed's laws)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.set_defaults(handler=_cmd_sample)
+    p.add_argument("--seed", type=seed_int, default=0, help="random seed (default 0)")
+    p.set_defaults(handler=_cmd_sample, out_is_file=True)
 
     p = sub.add_parser(
         "batch",
         parents=[out_opts],
         help="identify every record of a manifest (process pool or Dask cluster)",
         description="Identify every record listed in a manifest CSV (path, optional mass_kg, "
-        "pacing_hz, subject). Writes DIR/results.csv (one row per identified record), "
-        "DIR/failures.csv (path, reason) and one JSON file per record, atomically; --resume "
-        "skips finished records. Each record's seed comes from the batch seed, its path and "
-        "its bytes, so the worker count does not change the results.",
+        "pacing_hz, subject; paths from the manifest's folder). Writes DIR/results.csv (one row "
+        "per identified record), DIR/failures.csv (path, reason), DIR/timings.csv (wall "
+        "times) and one JSON file per record, atomically; --resume skips finished records. "
+        "Each record's seed comes from the batch seed, its path and its bytes, so the worker "
+        "count does not change the results. Exits with status 4 when any record failed.",
     )
     p.add_argument("manifest", help="manifest CSV")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -180,9 +194,10 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--no-force-check", action="store_true", help="skip the force-model check (faster)"
     )
     p.add_argument("--config", metavar="TOML", help="identification settings file")
-    p.add_argument("--seed", type=int, help="batch seed (default 0)")
+    p.add_argument("--seed", type=seed_int, help="batch seed (default 0)")
     add_rigid_floor_flag(p)
     add_allow_negative_force(p)
+    add_allow_outside_paths(p)
     p.set_defaults(handler=_cmd_batch)
 
     p = sub.add_parser(

@@ -8,10 +8,13 @@ from typing import Any
 
 from workbench.cli.common import (
     add_allow_negative_force,
+    add_allow_outside_paths,
     add_rigid_floor_flag,
     emit,
     identify_settings,
+    seed_int,
     warn_accepted_negative_force,
+    warn_many_workers,
 )
 from workbench.errors import UsageError
 
@@ -28,6 +31,8 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
     from workbench.sensitivity.design import parse_factors, parse_levels
     from workbench.sensitivity.study import run_sensitivity
 
+    if not args.scheduler:
+        warn_many_workers(args.workers)
     if args.replicates < 1:
         raise UsageError(f"--replicates must be at least 1, got {args.replicates}")
     if args.workers < 1:
@@ -47,6 +52,7 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
         subject=args.subject,
         rescale_to_mass=args.rescale_to_mass,
         allow_negative_force=args.allow_negative_force,
+        allow_outside_paths=args.allow_outside_paths,
     )
     for _, record in records:
         warn_accepted_negative_force(record)
@@ -103,7 +109,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="levels of one factor (multipliers for the noise and prior_box factors); repeatable",
     )
     p.add_argument("--replicates", type=int, default=3, help="seeds per level (default 3)")
-    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument("--seed", type=seed_int, default=0, help="study seed (default 0)")
     p.add_argument("--workers", type=int, default=1, help="local processes (default 1)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address")
     p.add_argument("--out", metavar="DIR", required=True, help="folder for tables and report")
@@ -131,4 +137,5 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="scale the GRF so its mean over whole steps equals M g (sensor gain error)",
     )
     add_allow_negative_force(r)
+    add_allow_outside_paths(r)
     p.set_defaults(handler=_cmd_sensitivity)

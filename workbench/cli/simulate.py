@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from workbench.cli.common import floats
+from workbench.cli.common import floats, seed_int
 from workbench.errors import InputError, UsageError
 
 __all__ = ["add_simulate_parser", "parse_effect"]
@@ -157,7 +158,12 @@ def _check_simulate_args(args: argparse.Namespace) -> None:
             f"--sample-rate-hz {args.sample_rate_hz:g} is below {MIN_SAMPLE_RATE_HZ:g} Hz, too "
             "coarse for the force harmonics; use 100 or 200"
         )
-    if not (np.isfinite(args.duration) and args.duration >= MIN_DURATION_S):
+    if not np.isfinite(args.duration):
+        raise UsageError(
+            f"--duration {args.duration:g}: give the record's length as a finite number of "
+            f"seconds (at least {MIN_DURATION_S:g})"
+        )
+    if args.duration < MIN_DURATION_S:
         raise UsageError(
             f"--duration {args.duration:g} s is shorter than {MIN_DURATION_S:g} s; walking "
             "records need several steps"
@@ -179,6 +185,7 @@ def _check_simulate_args(args: argparse.Namespace) -> None:
     ):
         if value is not None and not (np.isfinite(value) and value > 0):
             raise UsageError(f"{flag} must be a positive number, got {value:g}")
+    _warn_outside_prior(args)
     for flag, value in (
         ("--noise-n", args.noise_n),
         ("--step-duration-sd", args.step_duration_sd),
@@ -192,6 +199,27 @@ def _check_simulate_args(args: argparse.Namespace) -> None:
     if args.ground_acc_amplitude and not (np.isfinite(freq) and freq > 0):
         raise UsageError(f"--ground-acc-hz must be a positive frequency, got {freq:g}")
     _check_deck_args(args)
+
+
+def _warn_outside_prior(args: argparse.Namespace) -> None:
+    """Warn when the chosen f_n or damping ratio lies outside identification's default prior.
+
+    Such a walker may be simulated on purpose (to see the prior's edge), but ``identify``
+    with the default ``--prior modal`` cannot return the true value, so say so up front.
+    """
+    from workbench.inference.problem import MODAL_DAMPING_RATIO, MODAL_NATURAL_FREQUENCY_HZ
+
+    for flag, value, (lo, hi), unit in (
+        ("--natural-frequency-hz", args.natural_frequency_hz, MODAL_NATURAL_FREQUENCY_HZ, " Hz"),
+        ("--damping-ratio", args.damping_ratio, MODAL_DAMPING_RATIO, ""),
+    ):
+        if value is not None and not lo <= value <= hi:
+            print(
+                f"workbench: warning: {flag} {value:g} is outside {lo:g}-{hi:g}{unit}, the prior "
+                "range of 'workbench identify' (--prior modal), which therefore cannot "
+                "recover it from this record",
+                file=sys.stderr,
+            )
 
 
 #: The deck flags, the deck kinds they apply to and what they set (for error messages).
@@ -413,5 +441,5 @@ def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         default="steady",
         help="start from rest (transient) or in steady state (default)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
-    p.set_defaults(handler=_cmd_simulate)
+    p.add_argument("--seed", type=seed_int, default=0, help="random seed (0)")
+    p.set_defaults(handler=_cmd_simulate, out_is_file=True)

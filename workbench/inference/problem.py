@@ -61,6 +61,8 @@ from workbench.records.surface import SurfaceMotion
 
 __all__ = [
     "KALMAN_STATE_FRACTION",
+    "MODAL_DAMPING_RATIO",
+    "MODAL_NATURAL_FREQUENCY_HZ",
     "OBSERVED_CHANNELS",
     "SEED_OBS_FRACTION",
     "SEED_STATE_FRACTION",
@@ -94,6 +96,11 @@ OBSERVED_CHANNELS = {"all": (True, True, True), "acc": (False, False, True)}
 #: Seed section 5.2: random-walk std of C [N s/m] and K [N/m] per time step.
 SEED_DAMPING_RW_SD = 5.0
 SEED_STIFFNESS_RW_SD = 100.0
+
+#: The default ("modal") prior box: natural frequency [Hz] and damping ratio ranges at the
+#: body mass (:meth:`StiffnessDampingPrior.from_modal`); ``simulate`` warns outside it.
+MODAL_NATURAL_FREQUENCY_HZ: tuple[float, float] = (1.0, 4.0)
+MODAL_DAMPING_RATIO: tuple[float, float] = (0.05, 0.9)
 
 
 @dataclass(frozen=True)
@@ -133,8 +140,8 @@ class StiffnessDampingPrior:
     def from_modal(
         cls,
         mass_kg: float,
-        natural_frequency_hz: tuple[float, float] = (1.0, 4.0),
-        damping_ratio: tuple[float, float] = (0.05, 0.9),
+        natural_frequency_hz: tuple[float, float] = MODAL_NATURAL_FREQUENCY_HZ,
+        damping_ratio: tuple[float, float] = MODAL_DAMPING_RATIO,
     ) -> StiffnessDampingPrior:
         """Return the box spanned by natural frequency and damping ratio ranges at a mass.
 

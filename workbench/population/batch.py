@@ -7,11 +7,15 @@
   same folder, then rename; :mod:`workbench.fileutil`) as soon as the record is finished,
   with ``status`` ``"done"`` (and the result row) or ``"failed"`` (and the reason);
 - ``OUT/results.csv``: one row per identified record (:data:`RESULT_COLUMNS`), sorted by
-  the record's path, assembled from the record files at the end, so its bytes depend only
-  on the records and the settings -- never on worker count, scheduling or interruptions
-  (apart from the timing column ``elapsed_s``);
+  the record's path, assembled from the record files at the end, so its bytes (and the
+  record files') depend only on the records and the settings -- never on worker count,
+  scheduling or interruptions;
 - ``OUT/failures.csv``: ``path, reason`` for every record that could not be identified
   (missing file, unreadable file, NaN samples, ...), sorted by path;
+- ``OUT/timings.csv``: ``path, status, elapsed_s`` (:data:`TIMING_COLUMNS`), the wall time
+  of each record's last run, sorted by path; the only output that changes from run to run,
+  so it is kept out of the files above (each record's time is written to
+  ``OUT/timings/<key>.json`` when it finishes, so a resumed batch keeps the earlier times);
 - ``OUT/batch.json``: the settings, so that ``--resume`` refuses to mix settings.
 
 Determinism: the seed of each record is derived from the batch seed, the record's path as
@@ -51,7 +55,7 @@ from typing import Any
 
 import pandas as pd
 
-from workbench.errors import UsageError, WorkbenchError
+from workbench.errors import InputError, UsageError, WorkbenchError
 from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json
 from workbench.inference.settings import IdentifySettings
@@ -59,6 +63,7 @@ from workbench.inference.settings import IdentifySettings
 __all__ = [
     "FAILURE_COLUMNS",
     "RESULT_COLUMNS",
+    "TIMING_COLUMNS",
     "BatchSummary",
     "BatchTask",
     "record_seed",
@@ -68,7 +73,7 @@ __all__ = [
 ]
 
 SCALARS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", "damping_ratio")
-#: Columns of ``results.csv``; ``elapsed_s`` is the only timing column.
+#: Columns of ``results.csv`` (no timing: the table is byte-identical from run to run).
 RESULT_COLUMNS: tuple[str, ...] = (
     "path",
     "subject",
@@ -84,9 +89,9 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "trustworthy",
     "c_and_k_from",
     "seed",
-    "elapsed_s",
 )
-TIMING_COLUMNS = ("elapsed_s",)
+#: Columns of ``timings.csv``: wall time [s] of each record's last run.
+TIMING_COLUMNS = ("path", "status", "elapsed_s")
 FAILURE_COLUMNS = ("path", "reason")
 
 
@@ -139,6 +144,7 @@ class BatchSummary:
     skipped: int
     results_csv: Path
     failures_csv: Path
+    timings_csv: Path
     elapsed_s: float
     failures: list[dict[str, str]]
 
@@ -150,6 +156,7 @@ class BatchSummary:
             "skipped": self.skipped,
             "results": str(self.results_csv),
             "failures": str(self.failures_csv),
+            "timings": str(self.timings_csv),
             "failed_records": self.failures,
             "elapsed_s": round(self.elapsed_s, 3),
         }
@@ -225,7 +232,7 @@ def result_row(result: Any, path: str, subject: str | None, seed: int) -> dict[s
     Returns
     -------
     dict
-        Keys :data:`RESULT_COLUMNS` without ``elapsed_s``.
+        Keys :data:`RESULT_COLUMNS`.
     """
     est, sd = result.estimates, result.posterior_sd
     ident = result.identifiability
@@ -275,6 +282,15 @@ def run_task(task: BatchTask) -> dict[str, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
+            if not Path(task.file).exists():
+                # The loader's own message would send the user to the current folder.
+                raise InputError(
+                    task.path,
+                    "whole file",
+                    "the record file does not exist",
+                    "check the manifest's path column (relative paths start from the "
+                    "manifest's folder)",
+                )
             record = load_record(
                 task.file,
                 mass_kg=task.mass_kg,
@@ -333,6 +349,7 @@ def run_batch(
     progress: bool = False,
     on_record: Callable[[dict[str, Any]], None] | None = None,
     allow_negative_force: bool = False,
+    allow_outside_paths: bool = False,
 ) -> BatchSummary:
     """Identify every record of a manifest (see the module docstring for the files).
 
@@ -359,6 +376,9 @@ def run_batch(
     allow_negative_force : bool, default False
         Accept records whose force dips below zero, with a warning (synthetic benchmarks);
         see :func:`~workbench.records.validation.validate_record`.
+    allow_outside_paths : bool, default False
+        Accept manifest paths outside the manifest's folder
+        (:func:`~workbench.records.manifest.load_manifest`).
 
     Returns
     -------
@@ -372,9 +392,10 @@ def run_batch(
     settings = settings or IdentifySettings()
     if int(workers) < 1:
         raise UsageError(f"'workers' must be at least 1, got {workers}", parameter="workers")
-    entries = load_manifest(manifest)
+    entries = load_manifest(manifest, allow_outside_paths=allow_outside_paths)
     out = Path(out_dir)
     rec_dir = out / "records"
+    time_dir = out / "timings"
     meta_path = out / "batch.json"
     settings_json = settings.to_json()
     meta = {"manifest": str(manifest), "settings": settings_json}
@@ -395,8 +416,10 @@ def run_batch(
                 parameter="resume",
             )
     rec_dir.mkdir(parents=True, exist_ok=True)
-    for stale in rec_dir.glob(".*.tmp"):  # a killed run's half-written file
-        stale.unlink(missing_ok=True)
+    time_dir.mkdir(exist_ok=True)
+    for folder in (rec_dir, time_dir):
+        for stale in folder.glob(".*.tmp"):  # a killed run's half-written file
+            stale.unlink(missing_ok=True)
     atomic_write_json(meta_path, _clean_json(meta))
 
     manifest_dir = Path(manifest).parent
@@ -444,7 +467,10 @@ def run_batch(
     bar = tqdm(total=len(tasks), desc="batch", unit="record", disable=not progress)
     try:
         for res in results:
+            timing = {"path": res["path"], "status": res["status"]}
+            timing["elapsed_s"] = res.pop("elapsed_s")
             atomic_write_json(rec_dir / f"{res['key']}.json", _clean_json(res))
+            atomic_write_json(time_dir / f"{res['key']}.json", _clean_json(timing))
             done += res["status"] == "done"
             bar.update(1)
             if on_record is not None:
@@ -454,23 +480,36 @@ def run_batch(
 
     rows: list[dict[str, Any]] = []
     failures: list[dict[str, str]] = []
+    timings: list[dict[str, Any]] = []
     for rel in sorted(keys):
         stored = _read_json(rec_dir / f"{keys[rel]}.json")
         if stored is None:
             failures.append({"path": rel, "reason": "no result was written (interrupted?)"})
-        elif stored.get("status") == "done":
-            rows.append({**stored["row"], "elapsed_s": stored.get("elapsed_s", math.nan)})
+            continue
+        if stored.get("status") == "done":
+            rows.append(stored["row"])
         else:
             failures.append({"path": rel, "reason": str(stored.get("reason", "unknown"))})
+        timing = _read_json(time_dir / f"{keys[rel]}.json") or {}
+        timings.append(
+            {
+                "path": rel,
+                "status": stored.get("status"),
+                # A batch of an earlier version kept the time in the record's file.
+                "elapsed_s": timing.get("elapsed_s", stored.get("elapsed_s", math.nan)),
+            }
+        )
     table = pd.DataFrame(rows, columns=list(RESULT_COLUMNS))
     _write_csv(out / "results.csv", table)
     _write_csv(out / "failures.csv", pd.DataFrame(failures, columns=list(FAILURE_COLUMNS)))
+    _write_csv(out / "timings.csv", pd.DataFrame(timings, columns=list(TIMING_COLUMNS)))
     return BatchSummary(
         done=done,
         failed=len(failures),
         skipped=skipped,
         results_csv=out / "results.csv",
         failures_csv=out / "failures.csv",
+        timings_csv=out / "timings.csv",
         elapsed_s=time.perf_counter() - t0,
         failures=failures,
     )

@@ -8,7 +8,23 @@ from typing import Any
 
 from workbench.errors import InputError
 
-__all__ = ["read_results", "write_population"]
+__all__ = ["read_results", "results_path", "write_population"]
+
+
+def results_path(path: str | os.PathLike[str]) -> Path:
+    """Return the results table a path names: ``results.csv`` in a batch folder, or the file.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``--out`` folder of a batch or the table itself.
+
+    Returns
+    -------
+    Path
+    """
+    p = Path(path)
+    return p / "results.csv" if p.is_dir() else p
 
 
 def read_results(path: str | os.PathLike[str]) -> Any:
@@ -27,12 +43,12 @@ def read_results(path: str | os.PathLike[str]) -> Any:
     Raises
     ------
     InputError
-        If there is no table or it cannot be read.
+        If there is no table, it cannot be read, or a cell the fit reads as a number holds
+        text.
     """
     import pandas as pd
 
-    p = Path(path)
-    file = p / "results.csv" if p.is_dir() else p
+    file = results_path(path)
     if not file.exists():
         raise InputError(
             file,
@@ -41,11 +57,42 @@ def read_results(path: str | os.PathLike[str]) -> Any:
             "give the --out folder of 'workbench batch' (it holds results.csv)",
         )
     try:
-        return pd.read_csv(file)
+        table = pd.read_csv(file)
     except (ValueError, UnicodeDecodeError) as err:
         raise InputError(
             file, "whole file", f"the table cannot be read ({err})", "rerun 'workbench batch'"
         ) from None
+    _check_numbers(table, file)
+    return table
+
+
+def _check_numbers(table: Any, file: Path) -> None:
+    """Refuse text in a column the fit reads as numbers, naming the record and the column.
+
+    An edited or foreign table can hold ``n/a`` or ``1,8`` where pandas expects a number;
+    found here, the message names the cell instead of failing deep inside the fit.
+    """
+    import pandas as pd
+
+    from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS
+
+    for column in ("pacing_hz", *LAW_COLUMNS, *LOGNORMAL_COLUMNS):
+        if column not in table.columns or pd.api.types.is_numeric_dtype(table[column]):
+            continue
+        cells = table[column]
+        numbers = pd.to_numeric(cells, errors="coerce")
+        bad = cells.notna() & numbers.isna()
+        if not bad.any():
+            continue
+        i = int(bad.to_numpy().argmax())
+        record = f" ({table['path'].iloc[i]})" if "path" in table.columns else ""
+        raise InputError(
+            file,
+            f"column {column!r}, record {i + 1}{record}",
+            f"the value {str(cells.iloc[i])!r} is not a number",
+            "write a plain number with a decimal point, or leave the cell empty to leave the "
+            "record out",
+        )
 
 
 def write_population(fit: Any, out_dir: str | os.PathLike[str]) -> dict[str, str]:

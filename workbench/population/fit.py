@@ -18,7 +18,8 @@
 Records whose identifiability report says C or K is not identified are *excluded* from every
 fit (their C and K, hence f_n and zeta, reflect the prior or a misfit, and their force
 coefficients are estimated jointly with them); the output says how many and which. Records
-with non-finite values in a fitted column are excluded too, with that reason.
+with non-finite values in a fitted column, or values no walking record gives
+(:data:`PLAUSIBLE_RANGES`, for tables edited by hand), are excluded too, with that reason.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import pandas as pd
 from scipy import stats
 
 from workbench.errors import UsageError
+from workbench.records.validation import PACING_RANGE_HZ
 
 __all__ = ["LAW_COLUMNS", "LOGNORMAL_COLUMNS", "PopulationFit", "fit_population"]
 
@@ -42,6 +44,19 @@ LOGNORMAL_COLUMNS = ("blf2", "blf3")
 RANGE_PACING_HZ = (1.5, 2.5)
 #: Fewest records a fit needs (below this, intervals are meaningless).
 MIN_RECORDS = 5
+#: Ranges outside which a value cannot come from identifying a walking record (the pacing
+#: range of the record checks, generous bounds on the rest); a record outside is excluded.
+PLAUSIBLE_RANGES: dict[str, tuple[float, float]] = {
+    "pacing_hz": PACING_RANGE_HZ,
+    "natural_frequency_hz": (0.0, 50.0),
+    "damping_ratio": (0.0, 10.0),
+    "blf1": (0.0, 5.0),
+    "blf2": (0.0, 5.0),
+    "blf3": (0.0, 5.0),
+}
+#: Smallest spread of the records' pacing [Hz] a law against pacing is fitted over (below
+#: it the slope is numerically undetermined; results.csv keeps 10 significant digits).
+PACING_SPREAD_HZ = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -131,6 +146,15 @@ def _select(results: pd.DataFrame, keep_not_identified: bool) -> tuple[pd.DataFr
             ]
             if bad:
                 why = f"no finite positive value of {', '.join(bad)}"
+            else:
+                # An edited or foreign table: one absurd point would swamp the regression.
+                absurd = [
+                    f"{c} {float(row[c]):g} outside {lo:g}-{hi:g}"
+                    for c, (lo, hi) in PLAUSIBLE_RANGES.items()
+                    if not lo <= float(row[c]) <= hi
+                ]
+                if absurd:
+                    why = f"not a walking pedestrian's value: {'; '.join(absurd)}"
         reasons.append(why)
     mask = np.array([r is None for r in reasons])
     excluded = pd.DataFrame(
@@ -249,12 +273,30 @@ def fit_population(
         )
     used, excluded = _select(results, keep_not_identified)
     if len(used) < MIN_RECORDS:
+        not_identified = sum(str(r).startswith("C or K not identified") for r in excluded["reason"])
+        if not_identified:
+            raise UsageError(
+                f"{source}: only {len(used)} of {len(results)} records can be used "
+                f"({not_identified} excluded because C or K is not identified, "
+                f"{len(excluded) - not_identified} for other reasons), fewer than the "
+                f"{MIN_RECORDS} a population fit needs; identify more records, or pass "
+                "'keep_not_identified' to fit them too (their C and K may reflect the prior)",
+                parameter="keep_not_identified",
+            )
         raise UsageError(
             f"{source}: only {len(used)} of {len(results)} records can be used "
             f"({len(excluded)} excluded), fewer than the {MIN_RECORDS} a population fit needs; "
             "identify more records"
         )
     fp = used["pacing_hz"].to_numpy(float)
+    # The laws are regressions on pacing: with one pacing there is no slope to fit (and
+    # statsmodels would drop the constant column and fail deep inside).
+    if float(np.ptp(fp)) < PACING_SPREAD_HZ:
+        raise UsageError(
+            f"{source}: all {len(used)} usable records share one pacing ({fp[0]:.4g} Hz) in "
+            "the column pacing_hz, so no law against pacing can be fitted; add records walked "
+            "at other pacings"
+        )
     lo_hz = min(float(fp.min()), RANGE_PACING_HZ[0])
     hi_hz = max(float(fp.max()), RANGE_PACING_HZ[1])
     grid = np.linspace(lo_hz, hi_hz, 61)

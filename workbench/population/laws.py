@@ -360,6 +360,20 @@ def read_laws(path: str | os.PathLike[str] | None) -> PopulationLaws:
         raise InputError(
             path, "whole file", "the file does not exist", "give the path of a population JSON"
         ) from None
+    except IsADirectoryError:
+        raise InputError(
+            path,
+            "whole file",
+            "this is a folder",
+            "give the population.json that 'workbench population --out DIR' writes in it",
+        ) from None
+    except OSError as err:  # an input: the command line's message about writing would mislead
+        raise InputError(
+            path,
+            "whole file",
+            f"the file cannot be read ({err.strerror or err})",
+            "check its permissions",
+        ) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise InputError(
             path,

@@ -57,6 +57,7 @@ def load_study_records(
     subject: str | None = None,
     rescale_to_mass: bool = False,
     allow_negative_force: bool = False,
+    allow_outside_paths: bool = False,
 ) -> list[tuple[str, Record]]:
     """Load a record, or every record of a manifest, as ``(key, Record)`` pairs.
 
@@ -73,6 +74,9 @@ def load_study_records(
     allow_negative_force : bool, optional
         Accept force samples below zero with a warning (synthetic benchmarks); see
         :func:`~workbench.records.validation.validate_record`.
+    allow_outside_paths : bool, optional
+        Accept manifest paths outside the manifest's folder
+        (:func:`~workbench.records.manifest.load_manifest`).
 
     Returns
     -------
@@ -101,7 +105,7 @@ def load_study_records(
         )
         return [(p.name, _rescaled(rec, rescale_to_mass))]
     out = []
-    for entry in load_manifest(p):
+    for entry in load_manifest(p, allow_outside_paths=allow_outside_paths):
         file = entry.path if entry.path.is_absolute() else p.parent / entry.path
         rec = load_record(
             file,

@@ -61,7 +61,9 @@ class ManifestEntry:
 _MANIFEST_COLUMNS = ("path", "mass_kg", "pacing_hz", "subject")
 
 
-def load_manifest(path: str | os.PathLike[str]) -> list[ManifestEntry]:
+def load_manifest(
+    path: str | os.PathLike[str], *, allow_outside_paths: bool = False
+) -> list[ManifestEntry]:
     """Read a batch manifest: a CSV with a ``path`` column and optional metadata columns.
 
     Columns: ``path`` (required; relative to the manifest's folder), ``mass_kg``,
@@ -70,10 +72,18 @@ def load_manifest(path: str | os.PathLike[str]) -> list[ManifestEntry]:
     so that a misspelt ``mass`` column is not silently ignored. Whether each record file exists
     is not checked here: a batch reports a missing record as a failure of that record.
 
+    Record paths must lie in the manifest's folder or below it, unless
+    ``allow_outside_paths``: a manifest from elsewhere must not make the workbench open (and
+    quote, in a failure's reason) any file of the machine. The check is on the written path
+    (``..`` and absolute paths), not on where symbolic links lead, so a link placed in the
+    folder on purpose still works.
+
     Parameters
     ----------
     path : str or path-like
         The manifest file.
+    allow_outside_paths : bool, default False
+        Accept absolute paths and paths that climb out of the manifest's folder.
 
     Returns
     -------
@@ -178,6 +188,14 @@ def load_manifest(path: str | os.PathLike[str]) -> list[ManifestEntry]:
         record_path = Path(file_text)
         if not record_path.is_absolute():
             record_path = folder / record_path
+        if not allow_outside_paths and not _inside(record_path, folder):
+            raise InputError(
+                source,
+                f"line {number}, column 'path'",
+                f"the record {_show(file_text)} lies outside the manifest's folder",
+                "move it into that folder or below it (paths start from the manifest's "
+                "folder), or pass --allow-outside-paths to read it where it is",
+            )
         entries.append(ManifestEntry(record_path, mass, pacing, subject, number))
     if not entries:
         raise InputError(
@@ -187,6 +205,16 @@ def load_manifest(path: str | os.PathLike[str]) -> list[ManifestEntry]:
             "add one row per record file",
         )
     return entries
+
+
+def _inside(record_path: Path, folder: Path) -> bool:
+    """Whether a record path, ``..`` resolved on the text, lies in ``folder`` or below it."""
+    record = os.path.normpath(os.path.abspath(record_path))
+    root = os.path.normpath(os.path.abspath(folder))
+    try:
+        return os.path.commonpath([record, root]) == root
+    except ValueError:  # another drive (Windows)
+        return False
 
 
 def _manifest_number(cell: str, source: str, line: int, column: str) -> float | None:
