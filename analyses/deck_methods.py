@@ -38,7 +38,7 @@ def crosscheck(rejuvenate: str) -> None:
     result = check_steps(ident.problem, ident, seed=0, keep_inference_data=False)
     chosen = ident.extra["filter_settings"]["rejuvenate"]
     print(f"joint model, rbpf rejuvenate={rejuvenate} ({chosen}): agreement {result.agreement:.2f}")
-    print(result.verdict)
+    print(result.verdict())
     steps = [s for s in result.steps if s.converged]
     z = np.array([np.max(np.abs(s.z)) for s in steps])
     ratio = np.array([s.sd_ratio for s in steps])

@@ -440,3 +440,38 @@ def test_the_rbpf_rejuvenates_always_on_a_deck_and_on_surprise_elsewhere(periodi
     assert forced.settings["rejuvenate"] == "surprise"
     with pytest.raises(UsageError, match="rejuvenate"):
         wb.RBPF(rejuvenate="sometimes")
+
+
+def test_a_deck_only_at_the_gait_harmonics_leaves_c_and_k_not_identified(monkeypatch):
+    """No bins away from the gait harmonics: the time history alone grades the record.
+
+    On realistic walks it does not pin C and K, and in the footbridge closed loop it called
+    wrong numbers identified, so such a record is graded not identified whatever the time
+    history's own grade (the later checks are switched off here to see this rule alone).
+    """
+    import workbench.inference.identify as ident
+
+    monkeypatch.setattr(ident, "downgrade_untrustworthy", lambda result: result)
+    sim = simulate_walking(
+        mass_kg=70.0,
+        natural_frequency_hz=2.0,
+        damping_ratio=0.4,
+        pacing_hz=2.0,
+        duration_s=20.0,
+        sample_rate_hz=100.0,
+        noise_sd_n=0.5,
+        ground_acc_m_s2=lambda t: 0.3 * np.sin(2 * np.pi * 2.0 * np.asarray(t)),
+        seed=0,
+    )
+    res = wb.identify(sim.record, method=wb.Exact(), seed=0, force_check=False)
+    assert res.extra["surface"]["c_and_k_from"] == "time history"
+    assert "only near the walker's gait harmonics" in res.extra["surface"]["sentence"]
+    assert res.identifiability["level"] == "not identified"
+    assert not res.identifiability["identified_damping"]
+    assert not res.identifiability["identified_stiffness"]
+    assert "gait harmonics" in res.identifiability["sentence"]
+    # The same record with a force for the whole record keeps the time history's grade:
+    # the rule is about a force redrawn every step.
+    whole = wb.SMDModel(harmonics=3, pieces="whole", time_basis="absolute", pacing_hz=2.0)
+    res = wb.identify(sim.record, whole, method=wb.Exact(), seed=0, force_check=False)
+    assert "gait harmonics" not in res.identifiability["sentence"]

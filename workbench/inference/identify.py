@@ -326,7 +326,8 @@ def identify(
         )
         problem, pilot = with_effects(problem, terms)
     result = None
-    if settings.model.surface == "coupled" and problem.surface is not None and not effects:
+    route = settings.model.surface == "coupled" and problem.surface is not None and not effects
+    if route:
         from workbench.inference.surface_route import identify_through_surface
 
         result = identify_through_surface(
@@ -335,6 +336,7 @@ def identify(
             common=_common(problem, settings, info.to_json()),
             requested_method=settings.method.name,
         )
+    deck_only_at_harmonics = route and result is None
     if result is None:
         result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
     extra = {**result.extra, "inspection_warnings": list(insp.warnings)}
@@ -350,7 +352,32 @@ def identify(
     result = result.replace(extra=extra)
     if settings.force_check and "surface_route" not in extra:
         result = apply_force_model_check(result, problem)
+    if deck_only_at_harmonics and settings.model.pieces == "steps":
+        result = _not_identified_by_the_deck(result)
     return downgrade_untrustworthy(result)
+
+
+def _not_identified_by_the_deck(result: IdentificationResult) -> IdentificationResult:
+    """Grade a deck record whose deck moved only near the gait harmonics as not identified.
+
+    There the force redrawn every step absorbs whatever the deck drives through K and C, so
+    the deck adds nothing on C and K and the time history is left on its own, which does not
+    identify them on realistic walks (the footbridge closed loop of docs/validation/deck.md
+    measures it). The numbers stay in the result; the grade says they are not estimates.
+    """
+    report = dict(result.identifiability)
+    if report.get("level") == "not identified":
+        return result
+    report["level"] = "not identified"
+    report["sentence"] = (
+        "Not identified: the deck moved only near the walker's gait harmonics, where the "
+        "step-by-step force absorbs its drive, so C and K rest on the time history alone, "
+        "which does not pin them on a realistic walk; a deck moving away from the gait "
+        "harmonics is needed (docs/validation/deck-information.md)."
+    )
+    report["identified_damping"] = False
+    report["identified_stiffness"] = False
+    return result.replace(identifiability=report)
 
 
 def _ground_on(insp: _Prepared, problem: IdentificationProblem) -> Any:
