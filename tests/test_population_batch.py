@@ -181,8 +181,14 @@ def test_dask_local_cluster(study, reference, tmp_path, capsys):
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_signal_to_the_main_process_stops_the_workers(study, tmp_path, signum):
     psutil = pytest.importorskip("psutil")
+    # Slow records (many particles, the force check on), so that the batch is still running
+    # when the signal arrives on a loaded machine: with the study's fast settings it could
+    # finish its eight records between the workers' start and the signal.
+    slow = tmp_path / "slow.toml"
+    slow.write_text(SETTINGS_TOML.replace("particles = 32", "particles = 5000"))
+    out = tmp_path / "out"
     cmd = [sys.executable, "-m", "workbench", "batch", str(study / "manifest.csv")]
-    cmd += ["--out", str(tmp_path), "--config", str(study / "study.toml"), "--workers", "2"]
+    cmd += ["--out", str(out), "--config", str(slow), "--workers", "2"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     main_process = psutil.Process(proc.pid)
     deadline = time.monotonic() + 120
@@ -210,4 +216,4 @@ def test_signal_to_the_main_process_stops_the_workers(study, tmp_path, signum):
     _, alive = psutil.wait_procs(descendants, timeout=10)
     assert alive == [], [p.cmdline() for p in alive]
     # The finished records stay, so --resume continues where the signal stopped the batch.
-    assert not (tmp_path / "results.csv").exists()
+    assert not (out / "results.csv").exists()

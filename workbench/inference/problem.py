@@ -35,11 +35,10 @@ choice (the seed's Euler ``I + A dt`` for ``method="pf"``).
 On a moving surface (``surface`` set, docs/science.md 6) the spring and damper act on the
 motion relative to the surface, ``M u'' + C (u' - z') + K (u - z) = F_bio``. In the
 surface's frame, ``r = u - z``, that is the same model with the known inertial load
-``-M z''`` added to the force, ``M r'' + C r' + K r = F_bio - M z''``: the problem's ``y`` then
-holds ``(r, r', r'')`` and every method adds :attr:`IdentificationProblem.surface_force_n`
-to ``b_k theta``. The load does not depend on (C, K), so the model stays linear-Gaussian
-given (C, K) and no method needs anything else; the measured deck motion enters the
-likelihood through the response it drives in ``r``, which pins K and C.
+``-M z''`` added to the force, ``M r'' + C r' + K r = F_bio - M z''``: ``y`` then holds
+``(r, r', r'')`` and every method adds :attr:`IdentificationProblem.surface_force_n` to
+``b_k theta``. The load does not depend on (C, K), so the model stays linear-Gaussian given
+(C, K); the deck enters the likelihood through the response it drives in ``r``.
 """
 
 from __future__ import annotations
@@ -61,8 +60,6 @@ from workbench.records.surface import SurfaceMotion
 
 __all__ = [
     "KALMAN_STATE_FRACTION",
-    "MODAL_DAMPING_RATIO",
-    "MODAL_NATURAL_FREQUENCY_HZ",
     "OBSERVED_CHANNELS",
     "SEED_OBS_FRACTION",
     "SEED_STATE_FRACTION",
@@ -81,24 +78,21 @@ PieceMode = Literal["steps", "whole"]
 SEED_OBS_FRACTION = 0.10
 #: Seed section 5.2: process noise 0.5 % of the RMS of each response state, per time step.
 SEED_STATE_FRACTION = 0.005
-#: Process noise of (u, u') for the Kalman-based methods (rbpf, exact): none. u and u' are
-#: integrals of the measured u'', so the SMD equation holds exactly between samples; the
-#: seed's 0.5 % only keeps the plain particle filter's particles alive.
+#: Process noise of (u, u') for the Kalman-based methods (rbpf, exact): none (u, u' integrate
+#: the measured u''); the seed's 0.5 % only keeps the plain particle filter's particles alive.
 KALMAN_STATE_FRACTION = 0.0
 #: An unobserved channel keeps an observation sd this many times its RMS: its Kalman gain
 #: and its share of the likelihood's (C, K) dependence are then below 1e-8, i.e. rounding.
 UNOBSERVED_SD_FACTOR = 1e4
-#: Which of (u, u', u'') the likelihood uses (``observe=``): the seed's three, or only the
-#: acceleration u'' -- the one channel the force plate measures; u and u' are its integrals,
-#: whose integrated noise and high-pass distortion the i.i.d. noise model does not describe.
+#: Channels of (u, u', u'') the likelihood uses (``observe=``): the seed's three, or the
+#: measured u'' alone (u and u' carry integrated noise the i.i.d. model does not describe).
 OBSERVED_CHANNELS = {"all": (True, True, True), "acc": (False, False, True)}
 
 #: Seed section 5.2: random-walk std of C [N s/m] and K [N/m] per time step.
 SEED_DAMPING_RW_SD = 5.0
 SEED_STIFFNESS_RW_SD = 100.0
 
-#: The default ("modal") prior box: natural frequency [Hz] and damping ratio ranges at the
-#: body mass (:meth:`StiffnessDampingPrior.from_modal`); ``simulate`` warns outside it.
+#: The modal prior box's natural frequency [Hz] and damping ratio ranges (``from_modal``).
 MODAL_NATURAL_FREQUENCY_HZ: tuple[float, float] = (1.0, 4.0)
 MODAL_DAMPING_RATIO: tuple[float, float] = (0.05, 0.9)
 
