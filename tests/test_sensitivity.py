@@ -221,7 +221,7 @@ def test_factorial_grid_heat_map_and_seeds_shared_with_one_at_a_time(study, tmp_
     assert "Sensitivity" in sec.title
 
 
-def test_pooled_effects_and_manifest_records(tmp_path):
+def test_pooled_effects_and_manifest_records(tmp_path, monkeypatch):
     import pandas as pd
 
     from workbench.records.collection import load_study_records
@@ -246,3 +246,8 @@ def test_pooled_effects_and_manifest_records(tmp_path):
     recs = load_study_records(str(tmp_path / "m.csv"))
     assert [k for k, _ in recs] == ["a.csv", "b.csv"]
     assert recs[1][1].mass_kg == 71.0
+    # A manifest named relative to the working folder: its rows start from its own folder,
+    # joined once (they were joined twice, and the records were not found).
+    monkeypatch.chdir(tmp_path.parent)
+    relative = load_study_records(f"{tmp_path.name}/m.csv")
+    assert [k for k, _ in relative] == ["a.csv", "b.csv"]

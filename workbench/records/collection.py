@@ -106,7 +106,7 @@ def load_study_records(
         return [(p.name, _rescaled(rec, rescale_to_mass))]
     out = []
     for entry in load_manifest(p, allow_outside_paths=allow_outside_paths):
-        file = entry.path if entry.path.is_absolute() else p.parent / entry.path
+        file = entry.path  # already joined to the manifest's folder by load_manifest
         rec = load_record(
             file,
             mass_kg=entry.mass_kg if entry.mass_kg is not None else mass_kg,
