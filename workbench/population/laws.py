@@ -283,10 +283,18 @@ class PopulationLaws:
                 )
             logn = obj["lognormal"]
             for key in ("blf2", "blf3"):
-                kwargs[key] = LognormalLaw(
-                    mu=_finite(logn[key]["mu"], f"lognormal.{key}.mu"),
-                    sigma=_nonneg(logn[key]["sigma"], f"lognormal.{key}.sigma"),
-                )
+                mu = _finite(logn[key]["mu"], f"lognormal.{key}.mu")
+                sigma = _nonneg(logn[key]["sigma"], f"lognormal.{key}.sigma")
+                # A higher harmonic's load factor is a small fraction of the body weight; a
+                # median of 1 or more, or a log-sd past MAX_LOG_SD, draws factors that are not
+                # walking (and, far enough out, overflow).
+                if mu >= 0 or sigma > MAX_LOG_SD:
+                    raise UsageError(
+                        f"the population laws give lognormal.{key} mu = {mu:g}, sigma = "
+                        f"{sigma:g}: a median load factor exp(mu) of 1 or more, or a log-sd "
+                        f"above {MAX_LOG_SD:g}; fit the laws again or correct them"
+                    )
+                kwargs[key] = LognormalLaw(mu=mu, sigma=sigma)
         except (KeyError, TypeError) as err:
             raise UsageError(
                 f"the population laws lack the entry {err}; give the JSON object that "
@@ -315,9 +323,15 @@ class PopulationLaws:
         return replace(self, **changes)
 
 
+#: Largest log-sd of a lognormal load-factor law (a factor e^2 per sd already spans most of
+#: the published BLF2 and BLF3 values at once).
+MAX_LOG_SD = 2.0
+
+
 def _finite(value: Any, name: str) -> float:
     try:
-        x = float(value)
+        # JSON true/false are no numbers, though Python would read them as 1 and 0.
+        x = math.nan if isinstance(value, bool) else float(value)
     except (TypeError, ValueError):
         x = math.nan
     if not math.isfinite(x):

@@ -65,14 +65,21 @@ def _truncnorm(
 
 
 def _law_draw(
-    rng: np.random.Generator, law: LinearLaw, pacing: np.ndarray, bounds: tuple[float, float]
+    rng: np.random.Generator,
+    laws: PopulationLaws,
+    name: str,
+    pacing: np.ndarray,
+    bounds: tuple[float, float],
 ) -> np.ndarray:
+    law: LinearLaw = getattr(laws, name)
     mean = law.mean(pacing)
     if np.any(mean <= bounds[0]) or np.any(mean >= bounds[1]):
+        # Name the laws' file: an edited or foreign population.json is the usual cause.
         raise UsageError(
-            f"the law {law.slope:g} f_p + {law.intercept:g} leaves its physical range "
-            f"({bounds[0]:g} to {bounds[1]:g}) inside the pacing range "
-            f"{pacing.min():.3g}-{pacing.max():.3g} Hz; check the population laws"
+            f"{laws.source}: the law of {name}, {law.slope:g} f_p + {law.intercept:g}, leaves "
+            f"its physical range ({bounds[0]:g} to {bounds[1]:g}) inside the pacing range "
+            f"{pacing.min():.3g}-{pacing.max():.3g} Hz; fix that law or fit the laws again "
+            "with 'workbench population'"
         )
     return _truncnorm(rng, mean, law.residual_sd, *bounds)
 
@@ -129,9 +136,9 @@ def sample_pedestrians(n: int, *, seed: int, laws: PopulationLaws | None = None)
     step = _truncnorm(
         rng, sl.slope_m_per_hz * pacing + sl.intercept_m, sl.residual_sd_m, sl.min_m, np.inf
     )
-    fn = _law_draw(rng, laws.natural_frequency_hz, pacing, FN_BOUNDS_HZ)
-    zeta = _law_draw(rng, laws.damping_ratio, pacing, ZETA_BOUNDS)
-    blf1 = _law_draw(rng, laws.blf1, pacing, BLF1_BOUNDS)
+    fn = _law_draw(rng, laws, "natural_frequency_hz", pacing, FN_BOUNDS_HZ)
+    zeta = _law_draw(rng, laws, "damping_ratio", pacing, ZETA_BOUNDS)
+    blf1 = _law_draw(rng, laws, "blf1", pacing, BLF1_BOUNDS)
     blf2 = np.exp(rng.normal(laws.blf2.mu, laws.blf2.sigma, n))
     blf3 = np.exp(rng.normal(laws.blf3.mu, laws.blf3.sigma, n))
     phases = rng.uniform(0.0, 2 * np.pi, size=(3, n))
