@@ -2,7 +2,8 @@
 
 See :mod:`workbench.synth.simulate` for the physics, the step-phase force model and the
 integration scheme, :mod:`workbench.synth.ground` for the surface motion and
-:mod:`workbench.synth.decks` for ready-made vibrating decks.
+:mod:`workbench.synth.decks` for ready-made vibrating decks and :mod:`workbench.synth.gait`
+for walks that start, stop or change pace.
 """
 
 from workbench.synth.decks import (
@@ -13,6 +14,7 @@ from workbench.synth.decks import (
     deck_from_json,
     deck_walk,
 )
+from workbench.synth.gait import GaitProfile
 from workbench.synth.ground import surface_motion
 from workbench.synth.simulate import (
     POPULATION_DAMPING_RATIO,
@@ -31,6 +33,7 @@ __all__ = [
     "DECK_WALK_RANGES",
     "POPULATION_DAMPING_RATIO",
     "POPULATION_NATURAL_FREQUENCY_HZ",
+    "GaitProfile",
     "NarrowBandDeck",
     "Simulation",
     "SineDeck",

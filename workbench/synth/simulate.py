@@ -53,6 +53,7 @@ from workbench.synth.checks import (
     _rng,
     _time_grid,
 )
+from workbench.synth.gait import GaitProfile
 from workbench.synth.ground import (
     GroundInput,
     _describe,
@@ -280,6 +281,7 @@ def simulate_walking(
     start: Literal["rest", "steady"] = "rest",
     seed: int | np.random.Generator | None = None,
     model: SMDModel | None = None,
+    gait: GaitProfile | None = None,
 ) -> Simulation:
     r"""Simulate a pedestrian walking on the spot (or on a moving surface).
 
@@ -340,6 +342,11 @@ def simulate_walking(
         step's rate (exact without variability, effects and ground motion).
     seed : int, Generator or None, optional
         Randomness for steps and noise; None draws fresh entropy and stores it in the truth.
+    gait : GaitProfile, optional
+        Per-step duration and amplitude factors relative to steady walking
+        (:mod:`workbench.synth.gait`: an overground walk from standing to standing, a speed
+        change); applied on top of the random step-to-step variability, which draws the
+        same numbers with or without it. Default: steady walking throughout.
 
     Returns
     -------
@@ -458,8 +465,13 @@ def simulate_walking(
 
     # Steps: enough to cover the record even if every step were as short as allowed.
     period = 1.0 / fp
-    n_steps = int(np.ceil((duration / period + 2.0) / (1.0 - 3.0 * sd_d))) + 2
+    shortest = 1.0 if gait is None else min(1.0, min(gait.duration_factors))
+    n_steps = int(np.ceil((duration / (period * shortest) + 2.0) / (1.0 - 3.0 * sd_d))) + 2
     durations = period * (1.0 + sd_d * np.clip(rng.standard_normal(n_steps), -3.0, 3.0))
+    duration_factor, amplitude_factor = (
+        (np.ones(n_steps), np.ones(n_steps + 2)) if gait is None else gait.step_factors(n_steps)
+    )
+    durations = durations * duration_factor
     starts = np.concatenate([[0.0], np.cumsum(durations)])
 
     # Per-step coefficients at knots theta = 2 pi (j + 1/2), j = -1 .. n_steps.
@@ -468,13 +480,13 @@ def simulate_walking(
     n_knots = n_steps + 2
     amp_noise = rng.standard_normal((n_knots, n))
     pha_noise = rng.standard_normal((n_knots, n))
-    step_amp = amp * np.clip(1.0 + sd_a * amp_noise, 0.0, None)
+    step_amp = amp * np.clip(1.0 + sd_a * amp_noise, 0.0, None) * amplitude_factor[:, None]
     step_pha = pha + sd_p * pha_noise
     knot_coef = np.empty((n_knots, force_model.n_coefficients))
     knot_coef[:, 0] = mean_coef[0]
     knot_coef[:, 1::2] = step_amp * np.cos(step_pha)
     knot_coef[:, 2::2] = step_amp * np.sin(step_pha)
-    varies = sd_a > 0 or sd_p > 0
+    varies = sd_a > 0 or sd_p > 0 or gait is not None
     if not varies:
         knot_coef[:] = mean_coef  # exactly the mean, without cos/sin round trips
     knots_theta = 2.0 * np.pi * (np.arange(-1.0, n_steps + 1.0) + 0.5)
@@ -527,7 +539,7 @@ def simulate_walking(
         # a surface motion that states a higher frequency (a fast sweep) widens the band,
         # up to what the record can hold.
         bandwidth_hz=max(
-            (n + 1) * fp / (1.0 - 3.0 * sd_d),
+            (n + 1) * fp / (shortest * (1.0 - 3.0 * sd_d)),
             min(_highest_frequency_hz(ground_acc_m_s2), fs / 2.0),
         ),
     )
@@ -548,6 +560,8 @@ def simulate_walking(
         "step_start_s": in_record,
         "step_duration_s": step_durations,
         "step_coefficients": knot_coef[1 : 1 + in_record.size],
+        "gait": None if gait is None else gait.to_json(),
+        "step_amplitude_factor": amplitude_factor[1 : 1 + in_record.size],
         "step_duration_sd": sd_d,
         "amplitude_sd": sd_a,
         "phase_sd_rad": sd_p,
