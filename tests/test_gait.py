@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -87,3 +89,44 @@ def test_a_speed_change_moves_the_pacing_and_the_amplitude(ratio):
 def test_bad_profiles_are_refused_in_one_sentence(make, match):
     with pytest.raises(UsageError, match=match):
         make()
+
+
+@pytest.mark.parametrize(
+    ("argv", "steps"),
+    [
+        (["--gait", "overground", "--walking-steps", "20"], (17, 22)),
+        (["--gait", "speed-change"], (28, 34)),
+    ],
+)
+def test_simulate_writes_a_gait_profile_walk(tmp_path, capsys, argv, steps):
+    import json
+
+    from workbench.cli import main
+
+    out = tmp_path / "walk.csv"
+    assert main(["simulate", "--out", str(out), "--pacing", "1.8", *argv, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    truth = json.loads(Path(report["truth"]).read_text())
+    assert truth["gait"]["label"].split(":")[0] == argv[1].replace("-", " ")
+    # The record lasts as long as the walk: its own step detection finds the walking steps.
+    from workbench.records.io import load_record
+
+    found = len(inspect_record(load_record(out)).steps.boundaries) - 1
+    assert steps[0] <= found <= steps[1], found
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--gait", "overground", "--start", "steady"], "starts from standing"),
+        (["--gait", "overground", "--walking-steps", "5"], "--walking-steps 5"),
+        (["--gait", "speed-change", "--pacing-ratio", "2"], "--pacing-ratio 2"),
+    ],
+)
+def test_simulate_refuses_a_bad_gait_in_one_sentence(tmp_path, capsys, argv, message):
+    from workbench.cli import main
+
+    assert main(["simulate", "--out", str(tmp_path / "w.csv"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1

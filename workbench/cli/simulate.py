@@ -37,6 +37,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from workbench.records.export import write_mot
     from workbench.records.io import save_record
 
+    _resolve_gait(args)
     _check_simulate_args(args)
     out = Path(args.out)
     if out.suffix.lower() not in (".csv", ".mot"):
@@ -325,6 +326,47 @@ def _deck(args: argparse.Namespace) -> Any:
         raise UsageError(err.naming(_DECK_PARAMETER_FLAGS)) from None
 
 
+def _resolve_gait(args: argparse.Namespace) -> None:
+    """Set the gait profile, and the duration and start it implies unless they were given."""
+    from workbench.records.validation import pacing_problem
+    from workbench.synth.gait import GaitProfile
+
+    profile = None
+    if args.gait == "overground":
+        if args.start == "steady":
+            raise UsageError(
+                "--start steady with --gait overground: an overground walk starts from "
+                "standing; leave --start out (or give --start rest)"
+            )
+        if args.walking_steps < 8:
+            raise UsageError(
+                f"--walking-steps {args.walking_steps}: an overground walk needs at least 8 "
+                "steps (three to start, three to stop, two steady); give 8 or more"
+            )
+        profile = GaitProfile.overground(walking_steps=args.walking_steps)
+    elif args.gait == "speed-change":
+        if not (np.isfinite(args.pacing_ratio) and 0.7 <= args.pacing_ratio <= 1.4):
+            raise UsageError(
+                f"--pacing-ratio {args.pacing_ratio:g}: give the new pacing over the old one "
+                "as a ratio in 0.7-1.4"
+            )
+        if pacing_problem(args.pacing) is not None:
+            return  # the pacing check names the flag
+        if min(args.pacing, args.pacing * args.pacing_ratio) <= 0.95:
+            raise UsageError(
+                f"--pacing {args.pacing:g} with --pacing-ratio {args.pacing_ratio:g}: a speed "
+                "change scales its amplitudes by the BLF1 law 0.41 (f_p - 0.95), so both "
+                "pacings must stay above 0.95 Hz; give a faster pacing"
+            )
+        profile = GaitProfile.speed_change(args.pacing, pacing_ratio=args.pacing_ratio)
+    args.profile = profile
+    if args.start is None:
+        args.start = "rest" if args.gait == "overground" else "steady"
+    if args.duration is None:
+        # The profile's walk, or 30 s of steady walking.
+        args.duration = 30.0 if profile is None else profile.relative_length() / args.pacing
+
+
 def _simulate(args: argparse.Namespace, effects: list[Any], ground: Any) -> Any:
     from workbench.synth.simulate import simulate_walking
 
@@ -344,6 +386,7 @@ def _simulate(args: argparse.Namespace, effects: list[Any], ground: Any) -> Any:
         effects=effects,
         start=args.start,
         seed=args.seed,
+        gait=args.profile,
     )
 
 
@@ -368,7 +411,12 @@ def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="FILE", help="record file (.csv or .mot)")
     p.add_argument("--mass", type=float, default=70.0, metavar="KG", help="body mass (70)")
     p.add_argument("--pacing", type=float, default=1.8, metavar="HZ", help="pacing f_p (1.8)")
-    p.add_argument("--duration", type=float, default=30.0, metavar="S", help="length (30 s)")
+    p.add_argument(
+        "--duration",
+        type=float,
+        metavar="S",
+        help="length (30 s; with --gait overground or speed-change, the walk's own length)",
+    )
     p.add_argument(
         "--natural-frequency-hz",
         type=float,
@@ -438,8 +486,29 @@ def add_simulate_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--start",
         choices=["rest", "steady"],
+        help="start from rest (transient) or in steady state (default; rest for an "
+        "overground walk)",
+    )
+    p.add_argument(
+        "--gait",
+        choices=["steady", "overground", "speed-change"],
         default="steady",
-        help="start from rest (transient) or in steady state (default)",
+        help="steady walking on the spot (default); an overground walk from standing to "
+        "standing; or a change of pace (docs/guide/simulate.md)",
+    )
+    p.add_argument(
+        "--walking-steps",
+        type=int,
+        default=24,
+        metavar="N",
+        help="steps of an overground walk, start and stop included (24)",
+    )
+    p.add_argument(
+        "--pacing-ratio",
+        type=float,
+        default=1.15,
+        metavar="R",
+        help="new pacing over the old one in a speed change (1.15)",
     )
     p.add_argument("--seed", type=seed_int, default=0, help="random seed (0)")
     p.set_defaults(handler=_cmd_simulate, out_is_file=True)
