@@ -13,6 +13,7 @@ import pytest
 from workbench.cli import common as cli_common
 from workbench.cli import main
 from workbench.errors import UsageError, check_seed
+from workbench.inference.settings import IdentifySettings
 
 
 def run_cli(argv, capsys):
@@ -130,14 +131,19 @@ def test_no_limits_is_documented():
 # -- seeds given to the Python API --------------------------------------------------------------
 @pytest.mark.parametrize("seed", [-1, 1.5, True, "3"])
 def test_public_functions_refuse_a_bad_seed_in_one_sentence(seed):
+    from workbench.hsi.montecarlo import CrossingSpec, run_monte_carlo
+    from workbench.hsi.structure import simply_supported_beam
     from workbench.population.sampler import sample_pedestrians
     from workbench.population.study import study_plan
 
+    spec = CrossingSpec(simply_supported_beam(50, 500, 2, 0.005), sample_pedestrians)
     for call, name in (
-        (lambda: sample_pedestrians(3, seed=seed), "sample_pedestrians"),
-        (lambda: study_plan(seed=seed), "study_plan"),
+        (lambda: sample_pedestrians(3, seed=seed), "sample_pedestrians: "),
+        (lambda: study_plan(seed=seed), "study_plan: "),
+        (lambda: run_monte_carlo(spec, 1, seed=seed), "run_monte_carlo: "),
+        (lambda: IdentifySettings(seed=seed), ""),
     ):
-        with pytest.raises(UsageError, match=rf"^{name}: 'seed' must be a whole number of 0 or"):
+        with pytest.raises(UsageError, match=rf"^{name}'seed' must be a whole number of 0 or"):
             call()
 
 
