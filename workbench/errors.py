@@ -80,3 +80,43 @@ class UsageError(WorkbenchError):
         if flag is None:
             return text
         return text.replace(f"'{self.parameter}'", flag, 1)
+
+
+def check_seed(seed: object, where: str = "") -> int:
+    """Return ``seed`` as an ``int``, or refuse it in one sentence if it is not a seed.
+
+    The one check of the public functions that take a ``seed``: numpy's generators refuse a
+    negative seed only when they are built, deep inside a computation, with a bare
+    ``ValueError: expected non-negative integer``.
+
+    Parameters
+    ----------
+    seed : object
+        The value given; a whole number of 0 or more (``int`` or a numpy integer).
+    where : str, optional
+        The function, put before the sentence (``"sample_pedestrians"``).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    UsageError
+        Naming ``'seed'`` (``parameter="seed"``, so that the command line can say
+        ``--seed``).
+    """
+    from operator import index
+
+    try:  # index() takes int and numpy integers, refuses floats and strings
+        value = index(seed)  # type: ignore[arg-type]
+    except TypeError:
+        value = -1
+    if isinstance(seed, bool) or value < 0:
+        prefix = f"{where}: " if where else ""
+        raise UsageError(
+            f"{prefix}'seed' must be a whole number of 0 or more, got {seed!r}; pass for "
+            "example seed=1",
+            parameter="seed",
+        )
+    return value

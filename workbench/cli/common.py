@@ -19,10 +19,14 @@ from typing import Any, NoReturn
 __all__ = [
     "CURRENT_ARGV",
     "EXIT_RECORDS_FAILED",
+    "MEMORY_BUDGET_GB",
+    "TIME_BUDGET_MIN",
     "Parser",
     "add_allow_negative_force",
     "add_allow_outside_paths",
+    "add_no_limits",
     "add_rigid_floor_flag",
+    "check_budget",
     "check_highpass",
     "check_out",
     "emit",
@@ -44,6 +48,13 @@ __all__ = [
 #: Exit status of a batch that finished but could not identify every record (their reasons
 #: are in failures.csv); distinct from 2, a batch that did not run at all.
 EXIT_RECORDS_FAILED = 4
+
+#: Work budgets of one command, checked against estimates before any long computation
+#: (:func:`check_budget`): what a modest laptop gives one command without swapping or a wait
+#: that looks like a hang. Each command estimates its memory and time from its inputs with
+#: coefficients measured on small runs (see the command's estimate); ``--no-limits`` lifts both.
+MEMORY_BUDGET_GB = 2.0
+TIME_BUDGET_MIN = 30.0
 
 #: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
 CURRENT_ARGV: list[str] = []
@@ -123,6 +134,65 @@ def add_allow_outside_paths(group: Any) -> None:
         help="read manifest paths outside the manifest's folder (absolute or with ..); "
         "refused by default so that a manifest cannot open any file of the machine",
     )
+
+
+def add_no_limits(group: Any) -> None:
+    """Add ``--no-limits``, which lifts the memory and time budgets of :func:`check_budget`.
+
+    Parameters
+    ----------
+    group : argparse.ArgumentParser or argument group
+    """
+    group.add_argument(
+        "--no-limits",
+        action="store_true",
+        help=f"run even when the estimated memory is over {MEMORY_BUDGET_GB:g} GB or the "
+        f"estimated time over {TIME_BUDGET_MIN:g} min (refused by default, before any work)",
+    )
+
+
+def check_budget(
+    args: argparse.Namespace, what: str, fix: str, *, memory_gb: float = 0.0, minutes: float = 0.0
+) -> None:
+    """Refuse work whose estimated memory or time is over the budget, unless ``--no-limits``.
+
+    Called before the long computation, so that a runaway input gets one sentence instead of
+    minutes of silence or an exhausted memory. Work of a minute or more that goes ahead is
+    announced on stderr with its estimate (not under ``--json``), so that it says something
+    from its start.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's arguments (``no_limits``).
+    what : str
+        The work, in the user's words (``"hsi with 1000 modes and 20 crossings"``).
+    fix : str
+        How to make it smaller, without a trailing full stop.
+    memory_gb, minutes : float
+        The command's estimates.
+
+    Raises
+    ------
+    UsageError
+        The estimate, the budget, the fix and ``--no-limits``, in one sentence.
+    """
+    from workbench.errors import UsageError
+
+    over = None
+    if memory_gb > MEMORY_BUDGET_GB:
+        over = f"about {memory_gb:.3g} GB of memory, over the {MEMORY_BUDGET_GB:g} GB budget"
+    elif minutes > TIME_BUDGET_MIN:
+        over = f"about {_duration(minutes)} of computing, over the {TIME_BUDGET_MIN:g} min budget"
+    if over is not None and not getattr(args, "no_limits", False):
+        raise UsageError(f"{what} needs {over}; {fix}, or add --no-limits to run it anyway")
+    if minutes >= 1 and not getattr(args, "json", False):
+        # A progress bar may first move only after a long first chunk: say what to expect.
+        print(f"workbench: {what}: about {_duration(minutes)} estimated", file=sys.stderr)
+
+
+def _duration(minutes: float) -> str:
+    return f"{minutes:.0f} min" if minutes < 120 else f"{minutes / 60:.3g} h"
 
 
 def check_out(path: str | os.PathLike[str], *, is_file: bool = False) -> None:

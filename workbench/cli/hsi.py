@@ -11,7 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from workbench.cli.common import emit, floats, seed_int, warn_many_workers
+from workbench.cli.common import (
+    add_no_limits,
+    check_budget,
+    emit,
+    floats,
+    seed_int,
+    warn_many_workers,
+)
 from workbench.errors import UsageError
 
 __all__ = ["add_hsi_parser"]
@@ -108,6 +115,28 @@ def _flag(parameter: str, flag: str) -> Iterator[None]:
         raise UsageError(err.naming({parameter: flag})) from None
 
 
+def _check_cost(args: argparse.Namespace, spec: Any) -> None:
+    """Refuse a Monte Carlo whose estimated time or memory is over the budget."""
+    from workbench.hsi.montecarlo import estimate_cost
+
+    seconds, task_bytes = estimate_cost(spec, args.crossings)
+    # Local workers share the time and each holds a chunk; a Dask cluster's size is unknown.
+    parallel = 1 if args.scheduler else max(1, min(args.workers, -(-args.crossings // 50)))
+    crowd = ""
+    if args.crowd == "stream":
+        size = f"{args.density:g} P/m^2" if args.density is not None else f"{args.flow:g} P/s"
+        crowd = f"a stream of {size} over {args.duration:g} s, "
+    check_budget(
+        args,
+        f"hsi with {crowd}{spec.structure.n_modes} mode(s) and {args.crossings} crossing(s) "
+        f"of {args.dt:g} s steps",
+        "keep fewer modes (--modes), a thinner or shorter stream (--density, --flow, "
+        "--duration) or fewer crossings",
+        memory_gb=task_bytes * parallel / 1e9,
+        minutes=seconds / parallel / 60,
+    )
+
+
 def _cmd_hsi(args: argparse.Namespace) -> int:
     from workbench.hsi.loads import setra_crowd_load
     from workbench.hsi.metrics import SETRA_LIMITS_M_S2
@@ -147,6 +176,7 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
         static_weight=args.static_weight,
         response_x_m=args.at,
     )
+    _check_cost(args, spec)
     if args.records is not None:
         from workbench.hsi.record_files import check_records_folder
 
@@ -335,6 +365,7 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=seed_int, default=0, help="random seed (0)")
     g.add_argument("--workers", type=int, default=1, metavar="N", help="local processes (1)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask scheduler")
+    add_no_limits(g)
     p.add_argument("--out", metavar="DIR", help="write crossings.csv, figures, summary.json")
     p.add_argument(
         "--records",

@@ -23,7 +23,7 @@ import pandas as pd
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
-from workbench.errors import UsageError
+from workbench.errors import UsageError, check_seed
 from workbench.executor import run_tasks
 from workbench.hsi.metrics import SETRA_LIMITS_M_S2, comfort_class, running_rms
 from workbench.hsi.modes import apparent_structure_modes
@@ -31,7 +31,13 @@ from workbench.hsi.pedestrians import PedestrianSampler, validate_pedestrians
 from workbench.hsi.simulate import CrowdBatch, Model, integrate
 from workbench.hsi.structure import ModalStructure
 
-__all__ = ["CrossingSpec", "crossing_metrics", "draw_crossing", "run_monte_carlo"]
+__all__ = [
+    "CrossingSpec",
+    "crossing_metrics",
+    "draw_crossing",
+    "estimate_cost",
+    "run_monte_carlo",
+]
 
 Crowd = Literal["single", "stream"]
 MODELS_COMPARED: tuple[Model, ...] = ("interaction", "moving_force")
@@ -196,6 +202,66 @@ def crossing_metrics(
     return pd.DataFrame(rows)
 
 
+# Cost model of :func:`run_monte_carlo`, fitted to wall times and peak resident sizes of the
+# command line (``hsi --json``) on one core: single walkers with 1-300 modes (20 crossings up
+# to 80 modes, 2 crossings at 200 and 300) and streams of density 2-16 P/m^2 (1 and 20 modes,
+# 10 s to 120 s); the estimates came within a factor of 1.6 of those runs. One scenario-step (both
+# models) costs a J + b J^2 + c J^3 s for J modes (the batched solve of the coupled modes is
+# cubic) and (d + e J) s per walker on it; each crossing ends in the eigen-analysis of the
+# occupied structure, 2 (J + walkers on the deck) first-order unknowns, f n^3 s and g n^2 bytes
+# (the matrix, its complex eigenvectors and LAPACK's copies).
+_S_PER_MODE = (3e-7, 6e-9, 2e-11)
+_S_PER_WALKER = (3e-7, 5.6e-8)
+_S_EIG_CUBE = 2.7e-10
+_B_EIG_SQUARE = 56.0
+_B_BASE = 180e6  # the interpreter and its libraries
+
+
+def estimate_cost(
+    spec: CrossingSpec, n_crossings: int, chunk_size: int = 50
+) -> tuple[float, float]:
+    """Estimate the computing time and the memory of :func:`run_monte_carlo`, before running it.
+
+    Computed from the modes, the time steps, the expected number of walkers (a stream's
+    density or flow times its length and duration) and the crossings, with coefficients
+    measured on small runs; a rough guide (a factor of 2), meant to catch runaway inputs.
+
+    Parameters
+    ----------
+    spec : CrossingSpec
+    n_crossings : int
+    chunk_size : int
+        As given to :func:`run_monte_carlo`.
+
+    Returns
+    -------
+    seconds : float
+        Computing time in one process [s].
+    peak_bytes : float
+        Peak memory of one process running one chunk [bytes].
+    """
+    s = spec.structure
+    j = float(s.n_modes)
+    speed = spec.mean_speed_m_s
+    if spec.crowd == "single":
+        duration, walkers, on_deck = s.span_m / speed, 1.0, 1.0
+    else:
+        rate = spec.arrival_rate_per_s
+        duration = spec.duration_s
+        walkers = rate * (duration + s.span_m / speed)  # everyone on the deck in the window
+        on_deck = rate * s.span_m / speed
+    steps = n_crossings * duration / spec.dt_s
+    a, b, c = _S_PER_MODE
+    d, e = _S_PER_WALKER
+    per_step = a * j + b * j**2 + c * j**3 + (d + e * j) * walkers
+    n_eig = 2 * (j + on_deck)
+    seconds = steps * per_step + n_crossings * _S_EIG_CUBE * n_eig**3
+    batch = min(n_crossings, chunk_size)
+    # Integration: some twenty (B, P, J + harmonics) temporaries and a few (B, J, J) systems.
+    integration = 8.0 * batch * (20 * walkers * (j + 3) + 4 * j**2)
+    return seconds, _B_BASE + integration + _B_EIG_SQUARE * n_eig**2
+
+
 def _run_chunk(spec: CrossingSpec, seed: int, indices: Sequence[int]) -> pd.DataFrame:
     draws = [draw_crossing(spec, seed, i) for i in indices]
     batch = CrowdBatch.from_scenarios([(f, x0, v) for f, x0, v, _ in draws])
@@ -260,6 +326,7 @@ def run_monte_carlo(
     """
     if int(n_crossings) != n_crossings or n_crossings < 1:
         raise UsageError(f"the number of crossings must be a positive integer, got {n_crossings}")
+    seed = check_seed(seed, "run_monte_carlo")
     if int(workers) != workers or workers < 1:
         raise UsageError(
             f"'workers' must be a positive integer, got {workers}", parameter="workers"

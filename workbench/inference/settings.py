@@ -64,9 +64,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from workbench.errors import InputError, UsageError
+from workbench.errors import InputError, UsageError, check_seed
 from workbench.inference.methods import METHODS, PF, RBPF, Method, as_method
 from workbench.inference.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
@@ -338,12 +336,7 @@ class IdentifySettings:
     method_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
-        seed = self.seed
-        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-            raise UsageError(
-                f"'seed' must be a whole number of 0 or more, got {seed!r}", parameter="seed"
-            )
-        object.__setattr__(self, "seed", int(seed))
+        object.__setattr__(self, "seed", check_seed(self.seed))
         object.__setattr__(self, "method", as_method(self.method))
 
     # -- the flat form ----------------------------------------------------------------------

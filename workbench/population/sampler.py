@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from workbench.errors import UsageError
+from workbench.errors import UsageError, check_seed
 from workbench.population.laws import LinearLaw, PopulationLaws
 
 __all__ = ["COLUMNS", "GRAVITY_M_S2", "sample_pedestrians"]
@@ -128,7 +128,7 @@ def sample_pedestrians(n: int, *, seed: int, laws: PopulationLaws | None = None)
         raise UsageError(f"the number of pedestrians must be a positive whole number, got {n}")
     n = int(n)
     laws = laws or PopulationLaws()
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed, "sample_pedestrians"))
     mass = _masses(rng, n, laws)
     p = laws.pacing
     pacing = _truncnorm(rng, np.full(n, p.mean_hz), p.sd_hz, p.low_hz, p.high_hz)

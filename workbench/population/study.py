@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from workbench.errors import UsageError
+from workbench.errors import UsageError, check_seed
 from workbench.population.laws import PopulationLaws
 from workbench.population.sampler import _truncnorm
 from workbench.records.record import Record
@@ -118,7 +118,7 @@ def study_plan(design: StudyDesign | None = None, *, seed: int = 0) -> pd.DataFr
     """
     d = design or StudyDesign()
     laws = d.laws
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed, "study_plan"))
     m = laws.mass
     masses = np.concatenate(
         [
