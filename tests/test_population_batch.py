@@ -189,7 +189,16 @@ def test_signal_to_the_main_process_stops_the_workers(study, tmp_path, signum):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "workbench", "batch", str(study / "manifest.csv")]
     cmd += ["--out", str(out), "--config", str(slow), "--workers", "2"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # A process started with SIGINT ignored keeps ignoring it (Python installs its Ctrl-C
+    # handler only over the default), and a test runner's worker may ignore it; start the
+    # batch as a terminal would, with the default.
+    proc = subprocess.Popen(
+        cmd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     main_process = psutil.Process(proc.pid)
     deadline = time.monotonic() + 120
     try:

@@ -560,8 +560,6 @@ def simulate_walking(
         "step_start_s": in_record,
         "step_duration_s": step_durations,
         "step_coefficients": knot_coef[1 : 1 + in_record.size],
-        "gait": None if gait is None else gait.to_json(),
-        "step_amplitude_factor": amplitude_factor[1 : 1 + in_record.size],
         "step_duration_sd": sd_d,
         "amplitude_sd": sd_a,
         "phase_sd_rad": sd_p,
@@ -574,6 +572,9 @@ def simulate_walking(
         "ground_motion": _describe(ground_acc_m_s2),
         "seed": seed_used,
     }
+    if gait is not None:  # only then: a steady walk's truth stays as it was
+        truth["gait"] = gait.to_json()
+        truth["step_amplitude_factor"] = amplitude_factor[1 : 1 + in_record.size]
     return _finish(
         model=model,
         time_s=time_s,
