@@ -156,6 +156,7 @@ def test_a_deck_pins_c_and_k_and_the_methods_agree(periodic_deck_walk):
         abs(pf.estimates[name] - exact.estimates[name]) / sd[name]
         for name in ("natural_frequency_hz", "damping_ratio")
     ]
+    assert np.all(np.isfinite(gaps)), gaps  # a NaN estimate must not pass as agreement
     if max(gaps) >= 0.5:
         assert pf.identifiability["level"] == "not identified", (gaps, pf.identifiability)
         assert "collapsed" in pf.identifiability["sentence"]
