@@ -329,7 +329,12 @@ def _deck(args: argparse.Namespace) -> Any:
 def _resolve_gait(args: argparse.Namespace) -> None:
     """Set the gait profile, and the duration and start it implies unless they were given."""
     from workbench.records.validation import pacing_problem
-    from workbench.synth.gait import GaitProfile
+    from workbench.synth.gait import (
+        BLF1_OFFSET_HZ,
+        MIN_WALKING_STEPS,
+        PACING_RATIO_RANGE,
+        GaitProfile,
+    )
 
     profile = None
     if args.gait == "overground":
@@ -338,27 +343,30 @@ def _resolve_gait(args: argparse.Namespace) -> None:
                 "--start steady with --gait overground: an overground walk starts from "
                 "standing; leave --start out (or give --start rest)"
             )
-        if args.walking_steps < 8:
+        if args.walking_steps < MIN_WALKING_STEPS:
             raise UsageError(
-                f"--walking-steps {args.walking_steps}: an overground walk needs at least 8 "
-                "steps (three to start, three to stop, two steady); give 8 or more"
+                f"--walking-steps {args.walking_steps}: an overground walk needs at least "
+                f"{MIN_WALKING_STEPS} steps (three to start, three to stop, two steady); give "
+                f"{MIN_WALKING_STEPS} or more"
             )
         profile = GaitProfile.overground(walking_steps=args.walking_steps)
     elif args.gait == "speed-change":
-        if not (np.isfinite(args.pacing_ratio) and 0.7 <= args.pacing_ratio <= 1.4):
+        lo, hi = PACING_RATIO_RANGE
+        if not (np.isfinite(args.pacing_ratio) and lo <= args.pacing_ratio <= hi):
             raise UsageError(
                 f"--pacing-ratio {args.pacing_ratio:g}: give the new pacing over the old one "
-                "as a ratio in 0.7-1.4"
+                f"as a ratio in {lo:g}-{hi:g}"
             )
-        if pacing_problem(args.pacing) is not None:
-            return  # the pacing check names the flag
-        if min(args.pacing, args.pacing * args.pacing_ratio) <= 0.95:
-            raise UsageError(
-                f"--pacing {args.pacing:g} with --pacing-ratio {args.pacing_ratio:g}: a speed "
-                "change scales its amplitudes by the BLF1 law 0.41 (f_p - 0.95), so both "
-                "pacings must stay above 0.95 Hz; give a faster pacing"
-            )
-        profile = GaitProfile.speed_change(args.pacing, pacing_ratio=args.pacing_ratio)
+        # A bad --pacing is left to the pacing check, which names the flag.
+        if pacing_problem(args.pacing) is None:
+            if min(args.pacing, args.pacing * args.pacing_ratio) <= BLF1_OFFSET_HZ:
+                raise UsageError(
+                    f"--pacing {args.pacing:g} with --pacing-ratio {args.pacing_ratio:g}: a "
+                    f"speed change scales its amplitudes by the BLF1 law 0.41 (f_p - "
+                    f"{BLF1_OFFSET_HZ:g}), so both pacings must stay above {BLF1_OFFSET_HZ:g} "
+                    "Hz; give a faster pacing"
+                )
+            profile = GaitProfile.speed_change(args.pacing, pacing_ratio=args.pacing_ratio)
     args.profile = profile
     if args.start is None:
         args.start = "rest" if args.gait == "overground" else "steady"

@@ -39,7 +39,11 @@ FloatArray = NDArray[np.float64]
 INITIATION_AMPLITUDE = (0.35, 0.70, 0.90)
 INITIATION_DURATION = (1.30, 1.12, 1.04)
 #: Young's BLF1 law's pacing offset [Hz]: BLF1 = 0.41 (f_p - 0.95).
-_BLF1_OFFSET_HZ = 0.95
+BLF1_OFFSET_HZ = 0.95
+#: Fewest steps of an overground walk: three to start, three to stop, two steady.
+MIN_WALKING_STEPS = 2 * len(INITIATION_AMPLITUDE) + 2
+#: Range of a speed change's new pacing over the old one.
+PACING_RATIO_RANGE = (0.7, 1.4)
 
 
 @dataclass(frozen=True)
@@ -86,9 +90,10 @@ class GaitProfile:
         standing_steps : int, default 3
             Step periods of standing before and after the walk.
         """
-        if int(walking_steps) != walking_steps or walking_steps < 8:
+        if int(walking_steps) != walking_steps or walking_steps < MIN_WALKING_STEPS:
             raise UsageError(
-                f"GaitProfile.overground: walking_steps must be a whole number of at least 8 "
+                "GaitProfile.overground: walking_steps must be a whole number of at least "
+                f"{MIN_WALKING_STEPS} "
                 f"(three to start, three to stop, two steady), got {walking_steps!r}"
             )
         if int(standing_steps) != standing_steps or standing_steps < 1:
@@ -124,11 +129,12 @@ class GaitProfile:
         steps_before, ramp_steps, steps_after : int
             Steps at the old pacing, of the linear ramp, and at the new pacing.
         """
-        if not (np.isfinite(pacing_ratio) and 0.7 <= pacing_ratio <= 1.4):
+        lo, hi = PACING_RATIO_RANGE
+        if not (np.isfinite(pacing_ratio) and lo <= pacing_ratio <= hi):
             raise UsageError(
                 f"GaitProfile.speed_change: pacing_ratio must lie in 0.7-1.4, got {pacing_ratio!r}"
             )
-        if pacing_hz <= _BLF1_OFFSET_HZ or pacing_hz * pacing_ratio <= _BLF1_OFFSET_HZ:
+        if pacing_hz <= BLF1_OFFSET_HZ or pacing_hz * pacing_ratio <= BLF1_OFFSET_HZ:
             raise UsageError(
                 "GaitProfile.speed_change: the pacing must stay above 0.95 Hz, where the "
                 "BLF1 law that scales the amplitudes is positive"
@@ -143,7 +149,7 @@ class GaitProfile:
                 np.full(int(steps_after), pacing_ratio),
             ]
         )
-        amp = (pacing_hz * ratio - _BLF1_OFFSET_HZ) / (pacing_hz - _BLF1_OFFSET_HZ)
+        amp = (pacing_hz * ratio - BLF1_OFFSET_HZ) / (pacing_hz - BLF1_OFFSET_HZ)
         return cls(
             tuple(float(x) for x in 1.0 / ratio),
             tuple(float(x) for x in amp),
