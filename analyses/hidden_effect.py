@@ -242,7 +242,8 @@ def sweep(
         if name == "none":
             print(
                 f"{label:<32} {'-':>9} {found:>3}/{n:<2}{'-':>6} {'-':>7} "
-                f"{'-':>7}  largest t ratio of any candidate {max_t:.1f} (threshold 3)"
+                f"{'-':>7}  largest t ratio of any candidate {max_t:.1f} (Holm's test over "
+                "the candidates decides)"
                 + "".join(f"; {k} significant {v}" for k, v in instead.items())
             )
             continue

@@ -49,6 +49,13 @@ class Candidate:
         False when the record cannot test the effect (e.g. no ground motion).
     separable_fraction : float
         Share of the effect's columns' variation outside the baseline's span.
+    p_value : float
+        One-sided p-value of the score from the step-paired t ratio (before Holm's
+        adjustment over the candidates).
+    detectable_score : float
+        For a testable candidate not called: the smallest score the record could have
+        called at its standard error (Holm's first step; at least the 1 % floor). 0 when
+        called or not testable.
     """
 
     effect: str
@@ -62,6 +69,8 @@ class Candidate:
     statistic: float = 0.0
     testable: bool = True
     separable_fraction: float = 1.0
+    p_value: float = 1.0
+    detectable_score: float = 0.0
 
     @property
     def headline(self) -> str:

@@ -89,6 +89,12 @@ class EffectContext:
     ground_motion : callable, optional
         ``t_s -> (disp_m, vel_m_s, acc_m_s2)``; when given, :meth:`ground_at` uses it instead
         of interpolating the arrays (the simulator passes its exact ground motion).
+    step_amplitude : ndarray, optional
+        The walker's force amplitude factor of each step, one per entry of
+        ``step_start_s`` (a gait profile, :mod:`workbench.synth.gait`: 0 while standing,
+        rising through gait initiation). Effects that are part of the walker's force (a
+        left/right asymmetry, heel impacts, a drift of the force) scale with it, so that
+        nothing strikes the floor while the walker stands. None is 1 for every step.
     extra : mapping, optional
         Anything else a user-written effect needs.
     """
@@ -103,6 +109,7 @@ class EffectContext:
     ground_vel_m_s: FloatArray | None = None
     ground_acc_m_s2: FloatArray | None = None
     ground_motion: Callable[[ArrayLike], tuple[Any, Any, Any]] | None = None
+    step_amplitude: FloatArray | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     def _require(self, attribute: str, who: str) -> Any:
@@ -121,6 +128,14 @@ class EffectContext:
     def step_phase_rad(self, t_s: ArrayLike) -> FloatArray:
         """Return the continuous step phase, ``2 pi`` per step (see ``force.step_phase_rad``)."""
         return step_phase_rad(t_s, self._require("step_start_s", "EffectContext.step_phase_rad"))
+
+    def amplitude_at(self, t_s: ArrayLike) -> FloatArray:
+        """Return the walker's force amplitude factor at each time (1 without a gait profile)."""
+        t = np.asarray(t_s, dtype=np.float64)
+        if self.step_amplitude is None:
+            return np.ones_like(t)
+        amp = np.asarray(self.step_amplitude, dtype=np.float64)
+        return np.asarray(amp[np.clip(self.step_index(t), 0, amp.size - 1)], dtype=np.float64)
 
     def ground_at(self, t_s: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Return ground displacement [m], velocity [m/s] and acceleration [m/s^2] at the times.

@@ -172,13 +172,14 @@ CATALOGUE = (
     "base_motion",
 )
 
-#: The pacing-rate columns join ``pacing_drift``'s criticism columns only when the slow
-#: pacing (averaged over ``SLOW_STEPS`` steps of the criticism) varies by more than this
-#: fraction of the mean pacing (sd): a change of walking speed. Step-to-step jitter of
+#: The pacing-rate columns join ``pacing_drift``'s criticism columns, and the baseline lets
+#: the force shape follow the pace, only when the slow pacing (averaged over ``SLOW_STEPS``
+#: steps of the criticism) varies by more than this fraction of the mean pacing (sd): a
+#: change of walking speed. Step-to-step jitter of
 #: durations (CoV 1-3 % in walking) wanders by CoV / sqrt(SLOW_STEPS), 0.4-1 %, and with the
 #: rate columns in, the candidate picked up the baseline's misfit of the response to that
 #: wander: false alarms on long simulated records without any effect
-#: (``analyses/hidden_effect.md``).
+#: (docs/validation/criticism.md).
 PACING_CHANGE_MIN = 0.02
 
 
@@ -294,7 +295,8 @@ class GaitAsymmetry(Effect):
         """Columns ``-cos(phi/2), -sin(phi/2), -cos(3 phi/2), -sin(3 phi/2)``."""
         _, _, t_b = self.broadcast(u, v, t_s)
         ctx = context if context is not None else EffectContext()
-        return -_half_phase_columns(ctx.step_phase_rad(t_b), (1, 3))
+        columns = -_half_phase_columns(ctx.step_phase_rad(t_b), (1, 3))
+        return np.asarray(columns * ctx.amplitude_at(t_b)[..., None], dtype=np.float64)
 
     reason = "the error repeats every second step: left and right steps differ"
 
@@ -481,7 +483,8 @@ class PacingDrift(Effect):
         f_ref = float(np.median(rates)) if ctx.pacing_hz is None else float(ctx.pacing_hz)
         df = f - f_ref
         c, s_ = np.cos(phi), np.sin(phi)
-        return np.stack([-t_b * c, -t_b * s_, -df * c, -df * s_], axis=-1)
+        columns = np.stack([-t_b * c, -t_b * s_, -df * c, -df * s_], axis=-1)
+        return np.asarray(columns * ctx.amplitude_at(t_b)[..., None], dtype=np.float64)
 
     reason = (
         "the force's timing and size drift along the record: the gait (pacing) changes, so "
@@ -563,7 +566,8 @@ class HeelImpact(Effect):
         starts = np.asarray(ctx._require("step_start_s", "HeelImpact"), dtype=np.float64)
         since = t_b - starts[ctx.step_index(t_b)]
         x = since / np.where(decay > 0, decay, np.inf)
-        return np.asarray(-impact * x * np.exp(1.0 - x), dtype=np.float64)
+        pulse = -impact * x * np.exp(1.0 - x) * ctx.amplitude_at(t_b)
+        return np.asarray(pulse, dtype=np.float64)
 
     reason = (
         "the error is a short, broadband transient locked to footfall: a heel impact the "

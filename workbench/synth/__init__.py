@@ -2,8 +2,9 @@
 
 See :mod:`workbench.synth.simulate` for the physics, the step-phase force model and the
 integration scheme, :mod:`workbench.synth.ground` for the surface motion and
-:mod:`workbench.synth.decks` for ready-made vibrating decks and :mod:`workbench.synth.gait`
-for walks that start, stop or change pace.
+:mod:`workbench.synth.decks` for ready-made vibrating decks, :mod:`workbench.synth.gait`
+for walks that start, stop or change pace and :mod:`workbench.synth.hidden` for the records
+of the detection studies.
 """
 
 from workbench.synth.decks import (
@@ -16,11 +17,11 @@ from workbench.synth.decks import (
 )
 from workbench.synth.gait import GaitProfile
 from workbench.synth.ground import surface_motion
+from workbench.synth.hidden import HIDDEN_EFFECT_LEVELS, WALK_KINDS, hidden_effect_walk
 from workbench.synth.simulate import (
     POPULATION_DAMPING_RATIO,
     POPULATION_NATURAL_FREQUENCY_HZ,
     Simulation,
-    hidden_effect_walk,
     population_damping_ratio,
     population_natural_frequency_hz,
     seed_numerical_example,
@@ -31,8 +32,10 @@ from workbench.synth.simulate import (
 
 __all__ = [
     "DECK_WALK_RANGES",
+    "HIDDEN_EFFECT_LEVELS",
     "POPULATION_DAMPING_RATIO",
     "POPULATION_NATURAL_FREQUENCY_HZ",
+    "WALK_KINDS",
     "GaitProfile",
     "NarrowBandDeck",
     "Simulation",

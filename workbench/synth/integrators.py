@@ -164,10 +164,13 @@ def _integrate_fine(
         ctx = dataclasses.replace(base, mass_kg=m, stiffness_n_per_m=k, damping_ns_per_m=c)
         previous_change = np.inf
         for _ in range(_PICARD_MAX_ITER):
-            extra = model.effect_force(disp, vel, solver.t_nodes, None, ctx)
-            new_disp, new_vel = solver.solve(drive - solver.extend(extra), initial)
-            scale = max(float(np.max(np.abs(new_disp))), 1e-300)
-            change = float(np.max(np.abs(new_disp - disp))) / scale
+            # A diverging iteration overflows before the test below sees it; it is then
+            # handed to the ODE solver, so the overflow is no news to the caller.
+            with np.errstate(over="ignore", invalid="ignore"):
+                extra = model.effect_force(disp, vel, solver.t_nodes, None, ctx)
+                new_disp, new_vel = solver.solve(drive - solver.extend(extra), initial)
+                scale = max(float(np.max(np.abs(new_disp))), 1e-300)
+                change = float(np.max(np.abs(new_disp - disp))) / scale
             disp, vel = new_disp, new_vel
             if not np.isfinite(change) or (change > 2.0 * previous_change and change > 1e-8):
                 return None  # diverging: leave it to the adaptive ODE solver

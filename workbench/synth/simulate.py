@@ -5,10 +5,11 @@ them, and neither can leave. :func:`simulate_walking` alone is about 325 lines (
 parameters are the walk's description, documented one by one, then the argument checks,
 the step-to-step variability and the truth, all of which must stay in one reproducible
 order of random draws), :func:`simulate_smd` about 130. The ready-made walks
-(:func:`seed_numerical_example`, :func:`varied_walk`, :func:`hidden_effect_walk`, about
-260 lines) call the entry points and are imported from this module, so a module of their
-own would import back the module that re-exports them (an import cycle); walks on
-vibrating decks, which nothing here re-exports, live in :mod:`workbench.synth.decks`. Both
+(:func:`seed_numerical_example`, :func:`varied_walk`, about 200 lines) call the entry
+points and are imported from this module, so a module of their own would import back the
+module that re-exports them (an import cycle); walks on vibrating decks and the records of
+the detection studies, which nothing here re-exports, live in :mod:`workbench.synth.decks`
+and :mod:`workbench.synth.hidden`. Both
 entry points choose their integration scheme through ``_integrate`` here, which calls
 ``_integrate_fine`` by this module's name so that replacing it (as the tests do) selects
 the ODE solver. Everything else -- argument checks, ground motion, the two integration
@@ -45,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from workbench.errors import UsageError
-from workbench.models.effects import Effect, EffectContext, Effects, as_effects, effect_from_name
+from workbench.models.effects import Effect, EffectContext, Effects, as_effects
 from workbench.models.force import FourierForce
 from workbench.models.smd import SMDModel
 from workbench.synth.checks import (
@@ -86,13 +87,13 @@ __all__ = [
     "POPULATION_DAMPING_RATIO",
     "POPULATION_NATURAL_FREQUENCY_HZ",
     "Simulation",
-    "hidden_effect_walk",
     "population_damping_ratio",
     "population_natural_frequency_hz",
     "seed_numerical_example",
     "simulate_smd",
     "simulate_walking",
     "varied_walk",
+    "varied_walk_details",
 ]
 
 
@@ -525,6 +526,8 @@ def simulate_walking(
         ground_vel_m_s=None if ground is None else ground.vel(time_s),
         ground_acc_m_s2=None if ground is None else ground.acc_at_samples,
         ground_motion=ground,
+        # The gait profile's factor of each step (knots 0..n are the steps' own).
+        step_amplitude=None if gait is None else amplitude_factor[1 : starts.size + 1],
     )
     disp, vel = _integrate(
         model,
@@ -706,6 +709,18 @@ def _draw_walk_details(
     return details
 
 
+def varied_walk_details(
+    seed: int, duration_s: tuple[float, float] = (20.0, 120.0)
+) -> dict[str, Any]:
+    """Return the generator details :func:`varied_walk` draws for a seed.
+
+    As :func:`simulate_walking` keyword arguments: ``amplitude_sd``, ``duration_s``,
+    ``sample_rate_hz``, ``noise_sd_n``, ``pacing_hz``, ``mass_kg``, ``step_duration_sd``,
+    ``phase_sd_rad``. Only ``duration_s`` depends on the range given.
+    """
+    return _draw_walk_details(np.random.default_rng([seed, 0x5EED]), VARIED_WALK_RANGES, duration_s)
+
+
 def varied_walk(
     seed: int,
     effects: Effect | Effects | Iterable[Effect | str] | Callable[[float], Any] = (),
@@ -717,8 +732,9 @@ def varied_walk(
     amplitude_sd: float | None = None,
     step_duration_sd: float | None = None,
     phase_sd_rad: float | None = None,
+    gait: GaitProfile | None = None,
 ) -> Simulation:
-    """Simulate a steady walk whose generator details are drawn from the seed.
+    """Simulate a walk whose generator details are drawn from the seed.
 
     Everything a diagnosis must not depend on varies with the seed, inside
     :data:`VARIED_WALK_RANGES`: duration, sample rate, GRF noise, pacing, mass, and the
@@ -748,6 +764,10 @@ def varied_walk(
     step_duration_sd, phase_sd_rad : float, optional
         Step-to-step variability of the step durations (a fraction) and of the harmonics'
         phases [rad] instead of the drawn ones.
+    gait : GaitProfile, optional
+        A walk that starts, stops or changes pace (:mod:`workbench.synth.gait`) instead of
+        a steady one: the record is then the profile's own length at the drawn pacing (the
+        drawn duration is not used) and starts from rest when the profile starts standing.
 
     Returns
     -------
@@ -766,96 +786,20 @@ def varied_walk(
         def ground(t: ArrayLike) -> FloatArray:
             return np.asarray(amp * np.sin(w * np.asarray(t)), dtype=np.float64)
 
-    details = _draw_walk_details(
-        np.random.default_rng([seed, 0x5EED]), VARIED_WALK_RANGES, duration_s
-    )
+    details = varied_walk_details(seed, duration_s)
     details["step_duration_sd"] = _drawn_or(details["step_duration_sd"], step_duration_sd)
     details["amplitude_sd"] = _drawn_or(details["amplitude_sd"], amplitude_sd)
     details["phase_sd_rad"] = _drawn_or(details["phase_sd_rad"], phase_sd_rad)
+    start: Literal["rest", "steady"] = "steady"
+    if gait is not None:
+        details["duration_s"] = gait.relative_length() / details["pacing_hz"]
+        start = "rest" if gait.amplitude_factors[0] == 0.0 else "steady"
     hidden = effects(details["duration_s"]) if callable(effects) else effects
     return simulate_walking(
         **details,
-        start="steady",
+        start=start,
         effects=hidden,
         ground_acc_m_s2=ground,
         seed=seed,
+        gait=gait,
     )
-
-
-#: Three sizes (small, middle, large) of every catalogued effect for detection studies:
-#: realistic, clearly present. Drifts are given as their total change over the record
-#: (``pacing_drift``: the first harmonic's coefficients [N], split 0.8 / -0.6 between cos and
-#: sin; ``stiffness_drift``: K [N/m]) so that a long record does not drift further than a
-#: short one; ``base_motion``: amplitude of a 2.7 Hz surface acceleration [m/s^2].
-HIDDEN_EFFECT_LEVELS: dict[str, tuple[float, float, float]] = {
-    "gait_asymmetry": (30.0, 60.0, 90.0),  # a_half_n (b_half_n is half of it)
-    "cubic_stiffness": (1e6, 2e6, 4e6),  # k3_n_per_m3
-    "quadratic_damping": (500.0, 1000.0, 2000.0),  # c2_ns2_per_m2
-    "heel_impact": (100.0, 150.0, 250.0),  # impact_n, decay 15 ms
-    "pacing_drift": (40.0, 80.0, 120.0),  # total change of the first harmonic [N]
-    "stiffness_drift": (1500.0, 3000.0, 4500.0),  # total change of K [N/m]
-    "base_motion": (0.5, 1.0, 1.5),  # surface acceleration amplitude [m/s^2]
-}
-
-
-def _hidden_effect(name: str, size: float, duration_s: float) -> Effect:
-    if name == "gait_asymmetry":
-        return effect_from_name(name, a_half_n=size, b_half_n=size / 2)
-    if name == "cubic_stiffness":
-        return effect_from_name(name, k3_n_per_m3=size)
-    if name == "quadratic_damping":
-        return effect_from_name(name, c2_ns2_per_m2=size)
-    if name == "heel_impact":
-        return effect_from_name(name, impact_n=size, decay_s=0.015)
-    if name == "pacing_drift":
-        rate = size / duration_s
-        return effect_from_name(name, drift_cos_n_per_s=0.8 * rate, drift_sin_n_per_s=-0.6 * rate)
-    if name == "stiffness_drift":
-        return effect_from_name(name, dk_n_per_m_s=size / duration_s)
-    raise UsageError(f"no detection level for effect {name!r}")
-
-
-def hidden_effect_walk(
-    names: str | Sequence[str],
-    seed: int,
-    level: int | None = None,
-    **kwargs: Any,
-) -> Simulation:
-    """Simulate a :func:`varied_walk` with catalogued effects hidden at set sizes.
-
-    The sizes are those of :data:`HIDDEN_EFFECT_LEVELS` (detection studies).
-
-    Parameters
-    ----------
-    names : str or sequence of str
-        Catalogue names of the hidden effects (``"none"`` or an empty sequence: none).
-    seed : int
-        Seed of the record.
-    level : {0, 1, 2}, optional
-        Size from :data:`HIDDEN_EFFECT_LEVELS`; default ``seed % 3`` (sizes in turn).
-    **kwargs
-        Passed to :func:`varied_walk` (e.g. ``amplitude_sd``, ``duration_s``).
-
-    Returns
-    -------
-    Simulation
-    """
-    wanted = [names] if isinstance(names, str) else list(names)
-    wanted = [n for n in wanted if n != "none"]
-    unknown = [n for n in wanted if n not in HIDDEN_EFFECT_LEVELS]
-    if unknown:
-        raise UsageError(
-            f"no detection level for effect {unknown[0]!r}; choose from "
-            + ", ".join(HIDDEN_EFFECT_LEVELS)
-        )
-    i = seed % 3 if level is None else int(level)
-    ground = HIDDEN_EFFECT_LEVELS["base_motion"][i] if "base_motion" in wanted else 0.0
-
-    def effects(duration_s: float) -> list[Effect]:
-        return [
-            _hidden_effect(n, HIDDEN_EFFECT_LEVELS[n][i], duration_s)
-            for n in wanted
-            if n != "base_motion"
-        ]
-
-    return varied_walk(seed, effects, ground_amplitude_m_s2=ground, **kwargs)
