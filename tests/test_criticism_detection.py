@@ -203,3 +203,24 @@ def test_overground_walks_find_force_effects_at_twice_the_size(name: str) -> Non
             mine.significant and top.effect in mine.indistinguishable_from
         )
     assert found >= binomial_floor(OVERGROUND_FOUND_AT_TWICE[name])
+
+
+# -- not found is not absent ---------------------------------------------------------------------
+def test_candidates_not_called_say_how_large_a_gain_the_record_could_call() -> None:
+    """The detectable score is Holm's first-step threshold at the candidate's standard error
+    (with the 1 % floor): a candidate whose score reaches it has a p-value below
+    ``FAMILY_ALPHA / m`` and is called unless the stepwise selection explains it away."""
+    _, diag, _ = _diagnose("overground", [], 101)
+    testable = [c for c in diag.candidates if c.testable]
+    t_needed = stats.t.isf(FAMILY_ALPHA / len(testable), diag.baseline["steps"] - 1)
+    for c in testable:
+        if c.significant:
+            assert c.detectable_score == 0.0
+            continue
+        expected = max(t_needed * c.score_se, SIGNIFICANCE_MIN_DROP)
+        assert c.detectable_score == pytest.approx(expected, rel=1e-9)
+        assert f"removed {100 * expected:.1f} % or more" in c.evidence
+        if c.score >= c.detectable_score:
+            assert "explained by" in c.evidence
+    if not any(c.significant for c in diag.candidates):
+        assert "had to remove at least" in diag.verdict

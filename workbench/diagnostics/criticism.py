@@ -680,11 +680,21 @@ def _verdict(results: Sequence[_Draft], base: ScoreRow, reasons: Mapping[str, st
             + " present."
         )
     if not sig:
+        seen = [c for c in results if c.testable and c.separable_fraction >= SEPARABLE_MIN]
+        reach = ""
+        if seen:
+            least = min(seen, key=lambda c: c.detectable_score)
+            reach = (
+                f" On this record an effect had to remove at least "
+                f"{100 * least.detectable_score:.1f} % of that error to be called "
+                f"({least.effect}; up to {100 * max(c.detectable_score for c in seen):.0f} % "
+                "for the others), so a smaller one may be present."
+            )
         return (
             f"No candidate effect removes a significant share of the held-out error "
             f"(baseline held-out RMSE {base.heldout_rmse_n:.3g} N, fit {base.fit_percent:.0f} %); "
             "what is left is not structured the way any tested effect would make it "
-            "(step-to-step variability of the force, noise)." + caveat
+            "(step-to-step variability of the force, noise)." + reach + caveat
         )
     top = sig[0]
     alike = (
