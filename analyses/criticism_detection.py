@@ -189,6 +189,14 @@ def table(results: list[dict[str, Any]], seeds: list[int]) -> list[str]:
         f"Wrong effects called significant: {wrong_total} of {effect_bearing} effect-bearing "
         "records.",
     ]
+    for kind in dict.fromkeys(r["kind"] for r in results):
+        recs = [r for r in results if r["kind"] == kind]
+        steps = [r["steps"] for r in recs]
+        length = [r["duration_s"] for r in recs]
+        lines.append(
+            f"{kind}: {min(steps)}-{max(steps)} whole steps diagnosed, records of "
+            f"{min(length):.1f}-{max(length):.1f} s."
+        )
     return lines
 
 

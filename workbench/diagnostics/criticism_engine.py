@@ -281,7 +281,7 @@ class _CV:
         of a shared shape carries over from step to step): a Bartlett-weighted
         (Newey-West) long-run variance of the paired differences with :data:`BLOCK_STEPS`
         lags. Its t ratio has :attr:`dof` degrees of freedom. Units of whole blocks were
-        used before; on the 17-27 steps of an overground walk that left 5-9 units, and
+        used before; on the 17-33 steps of an overground walk that left 5-11 units, and
         per step with these lags the false-alarm rate measured the same
         (docs/validation/criticism.md, "Family-wise control").
         """

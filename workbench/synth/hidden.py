@@ -19,7 +19,8 @@ variability all drawn from the seed) with effects of the catalogue at the sizes 
     new pacing 0.80-0.90 or 1.10-1.25 times the old, 12-25 steps before and after.
 ``deck``
     Steady walking for 20-60 s on a vibrating deck: RMS acceleration 0.3-1 m/s^2
-    (log-uniform), a sine or a narrow-band response (bandwidth 3-10 % of its centre); the
+    (log-uniform; a narrow-band deck's RMS is that over its 600 s period, so over the record
+    it is not exactly that), a sine or a narrow-band response (bandwidth 3-10 % of its centre); the
     centre frequency is 1.15-1.35 or 1.65-1.85 times the pacing. Near a multiple of half
     the pacing the deck drives the body at the frequency of the gait's own lines (the
     harmonics, or the stride lines of a left/right asymmetry), where no record can tell
@@ -83,8 +84,11 @@ def _hidden_effect(name: str, size: float, duration_s: float) -> Effect:
     raise UsageError(f"no detection level for effect {name!r}")
 
 
-def _kind_details(kind: str, seed: int) -> dict[str, Any]:
-    """Draw a kind's own details (module docstring) from their own generator."""
+def _kind_details(seed: int) -> dict[str, Any]:
+    """Draw the kinds' own details (module docstring) from their own generator.
+
+    Every kind's details are drawn whatever the kind, so they stay put if one is added.
+    """
     rng = np.random.default_rng([seed, 0x6A17])
     out: dict[str, Any] = {
         "walking_steps": int(rng.integers(20, 31)),
@@ -163,7 +167,7 @@ def hidden_effect_walk(
         )
     sizes = {n: size_factor * HIDDEN_EFFECT_LEVELS[n][i] for n in wanted}
     ground = sizes.get("base_motion", 0.0)
-    extra = _kind_details(kind, seed)
+    extra = _kind_details(seed)
     if kind == "overground":
         kwargs.setdefault("gait", GaitProfile.overground(walking_steps=extra["walking_steps"]))
     elif kind == "speed_change":
