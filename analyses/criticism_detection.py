@@ -5,6 +5,7 @@ Usage::
     python analyses/criticism_detection.py [--seeds 0-9] [--workers 2] [--markdown FILE]
     python analyses/criticism_detection.py --only overground:cubic_stiffness --seeds 0-19
     python analyses/criticism_detection.py --calibration --seeds 0-49   # family-wise rate
+    python analyses/criticism_detection.py --calibration --seeds 0-19 --no-pace
     python analyses/criticism_detection.py --budget                     # u^3, |u'|u' budget
     python analyses/criticism_detection.py --size-factor 2 --walking-steps 60 --only ...
 
@@ -73,13 +74,13 @@ def rows() -> list[tuple[str, tuple[str, ...]]]:
 
 
 #: A job: kind of record, hidden effects, seed, size factor, overground walking steps
-#: (0: drawn, 20-30).
-Job = tuple[str, tuple[str, ...], int, float, int]
+#: (0: drawn, 20-30), and whether the baseline lets the force follow the pace.
+Job = tuple[str, tuple[str, ...], int, float, int, bool]
 
 
 def one_record(job: Job) -> dict[str, Any]:
     """Diagnose one record of a row; return what the table counts."""
-    kind, hidden, seed, factor, steps = job
+    kind, hidden, seed, factor, steps, follow_pace = job
     extra: dict[str, Any] = {}
     if steps and kind == "overground":
         extra["gait"] = GaitProfile.overground(walking_steps=steps)
@@ -87,7 +88,7 @@ def one_record(job: Job) -> dict[str, Any]:
     rec = hidden_effect_walk(names, seed, kind=kind, size_factor=factor, **extra).record
     data = prepare(rec)
     surface = "coupled" if kind == "deck" else "rigid"
-    diag = diagnose(data, surface=surface)
+    diag = diagnose(data, surface=surface, follow_pace=follow_pace)
     cands = {c.effect: c for c in diag.candidates}
     top = diag.candidates[0]
     out: dict[str, Any] = {
@@ -124,7 +125,7 @@ def one_record(job: Job) -> dict[str, Any]:
         )
         out["inseparable"] = (not mine.significant) and "cannot be separated" in mine.evidence
         out["separable_fraction"] = mine.separable_fraction
-        row = compare(data, [name], surface=surface)[1]
+        row = compare(data, [name], surface=surface, follow_pace=follow_pace)[1]
         out["cut"] = bool(row.rmse_drop_fraction > row.rmse_drop_se)
     return out
 
@@ -204,7 +205,7 @@ def table(results: list[dict[str, Any]], seeds: list[int]) -> list[str]:
 CALIBRATION_LEVELS = (0.05, 0.10, 0.20)
 
 
-def calibration(seeds: list[int], workers: int) -> list[str]:
+def calibration(seeds: list[int], workers: int, follow_pace: bool = True) -> list[str]:
     """Return the measured family-wise false-alarm rate per kind of record without an effect.
 
     A record raises an alarm at level ``alpha`` when Holm's first step calls a candidate:
@@ -213,11 +214,12 @@ def calibration(seeds: list[int], workers: int) -> list[str]:
     ``alpha`` (the later stages only run after a first call).
     """
     kinds = ("steady", "overground", "speed_change", "deck")
-    results = run([(k, (), s, 1.0, 0) for k in kinds for s in seeds], workers)
+    results = run([(k, (), s, 1.0, 0, follow_pace) for k in kinds for s in seeds], workers)
     head = " | ".join(f"alarms at {a:g}" for a in CALIBRATION_LEVELS)
     lines = [
         f"Seeds {seeds[0]}-{seeds[-1]} of each kind, no effect hidden; the workbench's level "
-        f"is {FAMILY_ALPHA:g}.",
+        f"is {FAMILY_ALPHA:g}."
+        + ("" if follow_pace else " Without the baseline's force following the pace."),
         "",
         f"| kind | {head} | called by diagnose |",
         "|---|" + "---|" * len(CALIBRATION_LEVELS) + "---|",
@@ -307,13 +309,18 @@ def main(argv: list[str] | None = None) -> int:
         help="overground walks of this many walking steps instead of 20-30 drawn",
     )
     ap.add_argument(
+        "--no-pace",
+        action="store_true",
+        help="leave out the baseline's force following the pace (follow_pace=False)",
+    )
+    ap.add_argument(
         "--budget", action="store_true", help="the signal budget of u^3 and |u'|u' instead"
     )
     ap.add_argument("--markdown", type=Path, help="also write the table to this file")
     args = ap.parse_args(argv)
     seeds = _seeds(args.seeds)
     if args.calibration:
-        lines = calibration(seeds, args.workers)
+        lines = calibration(seeds, args.workers, follow_pace=not args.no_pace)
     elif args.budget:
         lines = budget(seeds)
     else:
@@ -324,7 +331,11 @@ def main(argv: list[str] | None = None) -> int:
                 kind, _, names = item.partition(":")
                 wanted.add((kind, tuple(n for n in names.split("+") if n != "none")))
             chosen = [r for r in chosen if r in wanted] or sorted(wanted)
-        jobs = [(k, h, s, args.size_factor, args.walking_steps) for k, h in chosen for s in seeds]
+        jobs = [
+            (k, h, s, args.size_factor, args.walking_steps, not args.no_pace)
+            for k, h in chosen
+            for s in seeds
+        ]
         lines = table(run(jobs, args.workers), seeds)
         if args.size_factor != 1.0:
             lines.insert(0, f"Effects at {args.size_factor:g} times HIDDEN_EFFECT_LEVELS.")

@@ -5,7 +5,7 @@ Usage::
     python analyses/hidden_effect.py [--seed 3] [--out DIR]      # the story
     python analyses/hidden_effect.py --sweep 10 [--raw-error]     # what is found, per effect
     python analyses/hidden_effect.py --sweep 10 --no-modulation   # without the nuisance block
-    python analyses/hidden_effect.py --real [--out DIR]           # the two embedded records
+    python analyses/hidden_effect.py --real [--out DIR] [--no-pace]  # the embedded records
     python analyses/hidden_effect.py --pairs 10                   # two effects hidden at once
     python analyses/hidden_effect.py --baseline-stiffness 6       # the baseline's own K, C
 
@@ -341,11 +341,17 @@ def baseline_stiffness(n: int) -> None:
         )
 
 
-def real(out: Path | None, step_variation: bool = True, response_modulation: bool = True) -> None:
+def real(
+    out: Path | None,
+    step_variation: bool = True,
+    response_modulation: bool = True,
+    follow_pace: bool = True,
+) -> None:
     """Diagnose the embedded real records and print the ranking and scoreboard."""
     opts: dict[str, Any] = {
         "step_variation": step_variation,
         "response_modulation": response_modulation,
+        "follow_pace": follow_pace,
     }
     for key in ("treadmill", "insole"):
         meta = EMBEDDED[key]
@@ -403,6 +409,11 @@ def main(argv: list[str] | None = None) -> int:
         "(response_modulation=False)",
     )
     ap.add_argument(
+        "--no-pace",
+        action="store_true",
+        help="--real: leave out the baseline's force following the pace (follow_pace=False)",
+    )
+    ap.add_argument(
         "--baseline-stiffness",
         type=int,
         metavar="N",
@@ -426,7 +437,10 @@ def main(argv: list[str] | None = None) -> int:
         )
     elif args.real:
         real(
-            args.out, step_variation=not args.raw_error, response_modulation=not args.no_modulation
+            args.out,
+            step_variation=not args.raw_error,
+            response_modulation=not args.no_modulation,
+            follow_pace=not args.no_pace,
         )
     else:
         story(args.seed, args.out, response_modulation=not args.no_modulation)

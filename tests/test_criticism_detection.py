@@ -224,3 +224,17 @@ def test_candidates_not_called_say_how_large_a_gain_the_record_could_call() -> N
             assert "explained by" in c.evidence
     if not any(c.significant for c in diag.candidates):
         assert "had to remove at least" in diag.verdict
+
+
+@pytest.mark.slow
+def test_without_the_pace_block_a_speed_change_raises_pacing_drift() -> None:
+    """The reason the baseline lets the force follow the pace: without that block, walks
+    that change pace and carry no effect raise ``pacing_drift`` (docs: 20 of 20, seeds
+    0-19, ``--calibration --no-pace``); with it the alarm test above holds."""
+    raised = 0
+    for seed in range(100, 105):
+        data = prepare(hidden_effect_walk("none", seed, kind="speed_change").record)
+        diag = diagnose(data, surface="rigid", follow_pace=False)
+        assert diag.baseline["follow_pace"] is False
+        raised += any(c.effect == "pacing_drift" and c.significant for c in diag.candidates)
+    assert raised >= binomial_floor(0.9, n=5)

@@ -348,6 +348,7 @@ def diagnose(
     step_variation: bool = True,
     response_modulation: bool = True,
     surface: str | None = None,
+    follow_pace: bool = True,
 ) -> Diagnosis:
     """Rank candidate effects by the held-out GRF error they remove.
 
@@ -381,6 +382,10 @@ def diagnose(
         ``"coupled"``. Coupled (or joint), ``K`` and ``C`` act on the motion relative to the
         surface and ``base_motion`` is not a candidate (it is in the model); ``"rigid"``
         ignores the surface, and ``base_motion`` is the candidate that finds it.
+    follow_pace : bool, default True
+        On a walk that changes pace, let each harmonic of the shared shape follow the slow
+        pacing in the baseline (module docstring, "A walk that changes pace"); False leaves
+        that block out, kept to measure what it changes.
 
     Returns
     -------
@@ -410,6 +415,7 @@ def diagnose(
         folds,
         step_variation,
         response_modulation,
+        follow_pace,
     )
     base_row = _row(cv, current, "baseline", None)
     resid = cv.y - cv.heldout_prediction(current)
@@ -505,6 +511,7 @@ def diagnose(
         "grf_rms_n": float(np.std(data.target_n)),
         "step_variation": bool(step_variation),
         "response_modulation": bool(response_modulation),
+        "follow_pace": bool(follow_pace),
         "surface": _surface_name(data),
     }
     candidates_out = tuple(c.freeze() for c in results)
@@ -718,6 +725,7 @@ def compare(
     step_variation: bool = True,
     response_modulation: bool = True,
     surface: str | None = None,
+    follow_pace: bool = True,
 ) -> Comparison:
     """Scoreboard: the baseline, then the baseline with each effect added in turn.
 
@@ -735,7 +743,7 @@ def compare(
         :data:`DEFAULT_HARMONICS`.
     folds : int, optional
         As in :func:`diagnose`.
-    step_variation, response_modulation : bool, default True
+    step_variation, response_modulation, follow_pace : bool, default True
         As in :func:`diagnose`.
     surface : {"coupled", "joint", "rigid"}, optional
         As in :func:`diagnose`.
@@ -767,7 +775,9 @@ def compare(
             "compare: give at least one effect in 'effects', e.g. gait_asymmetry",
             parameter="effects",
         )
-    cv, untestable = _build_cv(data, added, harmonics, folds, step_variation, response_modulation)
+    cv, untestable = _build_cv(
+        data, added, harmonics, folds, step_variation, response_modulation, follow_pace
+    )
     if untestable:
         raise UsageError(
             f"compare: effect '{untestable[0]}' cannot be tested on {data.source} (for "

@@ -83,11 +83,10 @@ def _pace_columns(data: CriticismData, harmonics: int) -> FloatArray | None:
     than :data:`~workbench.models.effects.PACING_CHANGE_MIN` each harmonic of the shared
     shape, and its timing, follow the slow pacing: ``(f - f_mean) / f_mean`` times the
     step-phase harmonics and ``S'(phi)``. That is the walker's ordinary gait at a changing
-    pace, part of the baseline, not a missing effect: without it every simulated
-    speed-change record without an effect raised ``pacing_drift``, and with the size and
-    timing of the whole shape alone 19 of 20 still did
-    (``analyses/criticism_detection.py --calibration``). ``pacing_drift`` is then judged on
-    a drift in time beyond the pace. None on a walk at a steady pace.
+    pace, part of the baseline, not a missing effect: without it nearly every simulated
+    speed-change record without an effect raised ``pacing_drift``
+    (``analyses/criticism_detection.py --calibration --no-pace``). ``pacing_drift`` is then
+    judged on a drift in time beyond the pace. None on a walk at a steady pace.
     """
     rate = data.slow_pacing_change()
     if rate is None or np.std(rate) <= PACING_CHANGE_MIN * data.pacing_hz:
@@ -368,6 +367,7 @@ def _build_cv(
     folds: int,
     step_variation: bool = True,
     response_modulation: bool = True,
+    follow_pace: bool = True,
 ) -> tuple[_CV, list[str]]:
     """Build the engine on the baseline and the effects' criticism columns.
 
@@ -377,7 +377,7 @@ def _build_cv(
     effects : iterable of Effect or str
         Effects (specs are read by :meth:`Effect.from_spec`); their names key the blocks.
     harmonics, folds : int
-    step_variation, response_modulation : bool, optional
+    step_variation, response_modulation, follow_pace : bool, optional
 
     Returns
     -------
@@ -388,7 +388,7 @@ def _build_cv(
     # The step-variation map needs the plain baseline (its shared shape); the modulation
     # columns are nuisance columns of the baseline block itself.
     jitter = StepVariation(data, harmonics, base) if step_variation else None
-    pace = _pace_columns(data, harmonics)
+    pace = _pace_columns(data, harmonics) if follow_pace else None
     if pace is not None:
         base = np.column_stack([base, pace])
     if response_modulation and RESPONSE_MODULATION_ORDERS:
