@@ -168,8 +168,8 @@ def test_state_effects_are_called_inseparable_with_nothing_else_significant(
 ) -> None:
     """u^3 and |u'|u' leave 0.02-0.2 % of their variation outside the baseline on these
     records (docs, "What a record can show of a nonlinear spring"): the diagnosis says the
-    record cannot separate them, with the measured share, in at least 9 of 10 (binomial
-    floor), and calls nothing else in their place."""
+    record cannot separate them, with the measured share, and calls nothing else in their
+    place: claimed in 9 of 10 or more, asserted at the binomial floor of that rate."""
     honest = 0
     for seed in SEEDS:
         _, diag, _ = _diagnose(kind, [name], seed)
