@@ -279,10 +279,10 @@ class _CV:
         neighbouring steps (the steps of a block are predicted by one fit, and the error
         of a shared shape carries over from step to step): a Bartlett-weighted
         (Newey-West) long-run variance of the paired differences with :data:`BLOCK_STEPS`
-        lags. Its t ratio has :attr:`dof` degrees of freedom. Units of whole blocks were
-        used before; on the 17-33 steps of an overground walk that left 5-11 units, and
-        per step with these lags the false-alarm rate measured the same
-        (docs/validation/criticism.md, "Family-wise control").
+        lags. Its t ratio has :attr:`dof` degrees of freedom. Whole blocks as units would
+        leave an overground walk only a third as many units as it has steps; the measured
+        false-alarm rate of this test is in docs/validation/criticism.md ("Family-wise
+        control").
         """
         sse_b = self.step_sse(base)
         sse_e = self.step_sse(extended)
