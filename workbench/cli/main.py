@@ -30,6 +30,7 @@ from workbench.cli import (
     identify,
     population,
     records,
+    recovery,
     sensitivity,
     simulate,
 )
@@ -83,6 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     sensitivity.add_sensitivity_parser(sub, out_opts)
     hsi.add_hsi_parser(sub, out_opts)
     population.add_population_parser(sub, out_opts)
+    recovery.add_recovery_parser(sub, out_opts)
     criticism.add_criticism_parser(sub, out_opts)
     crosscheck.add_crosscheck_parser(sub, out_opts)
     demo.add_demo_parser(sub, out_opts)

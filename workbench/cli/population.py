@@ -134,7 +134,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
         source=str(results_path(args.results_dir)),
     )
     files = write_population(fit, args.out)
-    files.update(population_report(results, fit, args.out, title=args.title))
+    recovery = None
+    if args.recovery:
+        from workbench.reporting.recovery import read_recovery
+
+        recovery = [read_recovery(path) for path in args.recovery]
+    files.update(population_report(results, fit, args.out, title=args.title, recovery=recovery))
     laws = fit.to_json()
     obj = {
         "report": files["html"],
@@ -240,5 +245,12 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="report folder")
     p.add_argument(
         "--title", default="Population laws of the SMD pedestrian model", help="report title"
+    )
+    p.add_argument(
+        "--recovery",
+        action="append",
+        metavar="DIR",
+        help="the --out folder of a 'workbench recovery' run (repeatable): the report shows "
+        "what the pipeline recovers and words its conclusions from it",
     )
     p.set_defaults(handler=_cmd_report)

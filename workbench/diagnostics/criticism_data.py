@@ -177,7 +177,12 @@ def prepare(
     mass = record.require_mass()
     com = preprocess(record, highpass_hz=highpass_hz)
     if steps is None:
-        steps = segment_steps(com, pacing_hz=pacing_hz or record.pacing_hz, min_steps=6)
+        steps = segment_steps(
+            com,
+            pacing_hz=pacing_hz or record.pacing_hz,
+            min_steps=6,
+            surface_acc_m_s2=record.ground_acc_m_s2,
+        )
     lo, hi, phase, footfalls = _fundamental_phase(com, steps)
     t = np.asarray(record.time_s[lo:hi], dtype=np.float64)
     n_steps = footfalls.size - 1

@@ -41,6 +41,7 @@ estimate, as ``workbench identify`` does.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -53,6 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from workbench.errors import InputError, UsageError, WorkbenchError
@@ -117,6 +119,10 @@ class BatchTask:
         :class:`~workbench.inference.settings.IdentifySettings` as JSON.
     allow_negative_force : bool
         Accept force samples below zero with a warning (synthetic benchmarks).
+    overrides : Overrides or None
+        What a sensitivity design point changes beyond the settings
+        (:class:`~workbench.sensitivity.design.Overrides`): applied through the problem
+        hooks of :func:`~workbench.inference.identify.identify`.
     """
 
     key: str
@@ -128,6 +134,7 @@ class BatchTask:
     seed: int
     settings: dict[str, Any] = field(default_factory=dict)
     allow_negative_force: bool = False
+    overrides: Any = None
 
 
 @dataclass
@@ -302,7 +309,13 @@ def run_task(task: BatchTask) -> dict[str, Any]:
             model = settings.model
             if model.pieces == "whole" and model.pacing_hz is None and record.pacing_hz:
                 settings = settings.replace(pacing_hz=float(record.pacing_hz))
-            result = identify(record, settings=settings)
+            ov = task.overrides
+            result = identify(
+                record,
+                settings=settings,
+                adjust_problem=None if ov is None else ov.adjust_problem,
+                adjust_noise=None if ov is None else ov.adjust_noise,
+            )
             out["row"] = result_row(result, task.path, record.subject, task.seed)
             out["status"] = "done"
         except WorkbenchError as err:
@@ -324,11 +337,14 @@ def _read_json(p: Path) -> dict[str, Any] | None:
 
 
 def _clean_json(obj: Any) -> Any:
+    """Return ``obj`` as strict JSON holds it: non-finite floats None, numpy scalars numbers."""
+    if isinstance(obj, np.generic):
+        obj = obj.item()
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, dict):
-        return {k: _clean_json(v) for k, v in obj.items()}
-    if isinstance(obj, list):
+        return {str(k): _clean_json(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
         return [_clean_json(v) for v in obj]
     return obj
 
@@ -350,6 +366,7 @@ def run_batch(
     on_record: Callable[[dict[str, Any]], None] | None = None,
     allow_negative_force: bool = False,
     allow_outside_paths: bool = False,
+    overrides: Any = None,
 ) -> BatchSummary:
     """Identify every record of a manifest (see the module docstring for the files).
 
@@ -379,6 +396,10 @@ def run_batch(
     allow_outside_paths : bool, default False
         Accept manifest paths outside the manifest's folder
         (:func:`~workbench.records.manifest.load_manifest`).
+    overrides : Overrides, optional
+        A sensitivity design point's changes beyond the settings
+        (:class:`~workbench.sensitivity.design.Overrides`), for every record; stored with the
+        settings, so ``resume`` refuses to mix them.
 
     Returns
     -------
@@ -397,7 +418,12 @@ def run_batch(
     rec_dir = out / "records"
     time_dir = out / "timings"
     meta_path = out / "batch.json"
-    settings_json = settings.to_json()
+    task_settings = settings.to_json()
+    # The overrides belong to the run, not to the settings a worker rebuilds, but resume must
+    # refuse to mix them as it refuses other settings.
+    settings_json = dict(task_settings)
+    if overrides is not None:
+        settings_json["overrides"] = dataclasses.asdict(overrides)
     meta = {"manifest": str(manifest), "settings": settings_json}
     if meta_path.exists() or (rec_dir.exists() and any(rec_dir.glob("*.json"))):
         if not resume:
@@ -451,8 +477,9 @@ def run_batch(
                 pacing_hz=e.pacing_hz,
                 subject=e.subject,
                 seed=record_seed(settings.seed, rel, content),
-                settings=settings_json,
+                settings=task_settings,
                 allow_negative_force=allow_negative_force,
+                overrides=overrides,
             )
         )
 

@@ -26,7 +26,7 @@ from workbench.records.pacing import (
 )
 from workbench.records.preprocess import COMResponse
 
-__all__ = ["detect_footfalls"]
+__all__ = ["detect_footfalls", "without_surface"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -76,8 +76,17 @@ def _step_phase(pacing_hz: FloatArray, sample_rate_hz: float) -> FloatArray:
     return phase
 
 
-def _detect_in_phase(acc: FloatArray, sample_rate_hz: float, pacing_hz: FloatArray) -> FloatArray:
-    """Footfall peak times [s from the first sample, fractional] given a local pacing."""
+def _detect_in_phase(
+    acc: FloatArray,
+    sample_rate_hz: float,
+    pacing_hz: FloatArray,
+    place_acc: FloatArray | None = None,
+) -> FloatArray:
+    """Footfall peak times [s from the first sample, fractional] given a local pacing.
+
+    Candidates come from ``acc``; each is placed on the dominant peak of ``place_acc``
+    (default ``acc``).
+    """
     n = acc.size
     time_s = np.arange(n) / sample_rate_hz
     phase = _step_phase(pacing_hz, sample_rate_hz)
@@ -90,6 +99,8 @@ def _detect_in_phase(acc: FloatArray, sample_rate_hz: float, pacing_hz: FloatArr
     low, high = _DETECT_BAND_CYCLES_PER_STEP
     sos = signal.butter(2, [low, high], btype="bandpass", fs=_SAMPLES_PER_STEP, output="sos")
     detector = signal.sosfiltfilt(sos, warped)
+    if place_acc is not None and place_acc is not acc:
+        warped = np.interp(grid, phase, _lowpass(place_acc, _ANTIALIAS_HZ, sample_rate_hz))
     shape = _lowpass(warped, _REFINE_CUTOFF_CYCLES_PER_STEP, _SAMPLES_PER_STEP)
 
     peaks, props = signal.find_peaks(
@@ -154,17 +165,92 @@ def _track_from_footfalls(
     return np.clip(track, 0.7 * fallback_hz, 1.3 * fallback_hz)
 
 
-def _footfalls(acc: FloatArray, sample_rate_hz: float, pacing_hz: float | None) -> FloatArray:
-    """Footfall times [s from the first sample, fractional]; see :func:`detect_footfalls`."""
+def _footfalls(
+    acc: FloatArray,
+    sample_rate_hz: float,
+    pacing_hz: float | None,
+    surface_acc: FloatArray | None = None,
+) -> FloatArray:
+    """Footfall times [s from the first sample, fractional]; see :func:`detect_footfalls`.
+
+    With a measured surface acceleration, the pacing and the candidate footfalls come from the
+    acceleration without its part that is a linear response to the surface
+    (:func:`without_surface`), so that a strong deck cannot pass for the walker's pacing; each
+    footfall is still placed on the dominant peak of the acceleration itself, as on a rigid
+    floor (placing it on the cleaned one picks the other hump of many steps on a deck, which
+    would change the step convention of every deck result).
+    """
     n = acc.size
     band = _search_band(pacing_hz)
     if n < 4 or n / sample_rate_hz < 2.0 / band[0]:
         return np.empty(0)
-    centres_s, track = _pacing_track(acc, sample_rate_hz, band)
+    detect = acc if surface_acc is None else without_surface(acc, surface_acc, sample_rate_hz)
+    centres_s, track = _pacing_track(detect, sample_rate_hz, band)
     spectral_track = np.interp(np.arange(n) / sample_rate_hz, centres_s, track)
-    first = _detect_in_phase(acc, sample_rate_hz, spectral_track)
+    first = _detect_in_phase(detect, sample_rate_hz, spectral_track, acc)
     refined_track = _track_from_footfalls(first, n, sample_rate_hz, spectral_track)
-    return _detect_in_phase(acc, sample_rate_hz, refined_track)
+    return _detect_in_phase(detect, sample_rate_hz, refined_track, acc)
+
+
+#: The filter from the surface's acceleration to the body's spans this window [s]: a little
+#: before (the zero-phase high-pass of the COM chain looks ahead) and after (the walker's
+#: response to the deck decays within a few tenths of a second at zeta 0.1-0.5 and f_n 1.5-4
+#: Hz).
+_COHERENT_LEAD_S = 0.25
+_COHERENT_LAG_S = 0.75
+#: Ridge on the filter's normal equations, a share of the surface's power: a sine deck makes
+#: them singular (two numbers describe a sine's response), and the ridge picks the smallest
+#: filter that reproduces it.
+_COHERENT_RIDGE = 1e-3
+
+
+def without_surface(acc: ArrayLike, surface_acc: ArrayLike, sample_rate_hz: float) -> FloatArray:
+    """Return the COM acceleration without the part that is a linear filter of the surface's.
+
+    On a vibrating deck the body's acceleration holds the walker's own force response and
+    the response to the deck, a linear filter of the deck's acceleration whatever C and K
+    are. A strong deck between the pacing harmonics can outweigh the walker's first harmonic
+    in the walking band, and the footfall detector would lock onto the deck. The filter (a
+    window of :data:`_COHERENT_LEAD_S` before to :data:`_COHERENT_LAG_S` after each sample)
+    is fitted by least squares -- the Wiener filter, from the correlations of the two
+    signals -- and its output subtracted, which leaves the walker's own response; the
+    walker's harmonics, uncorrelated with a deck that does not sit on them, stay. Working in
+    the time domain keeps the subtraction exact for a deck that is not periodic in the
+    record (a spectral division would leave its leakage).
+
+    Parameters
+    ----------
+    acc, surface_acc : array_like, shape (n,)
+        COM and surface accelerations on one time base [m/s^2].
+    sample_rate_hz : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    from scipy.linalg import solve_toeplitz
+
+    y = np.asarray(acc, dtype=np.float64)
+    x = np.asarray(surface_acc, dtype=np.float64)
+    n = y.size
+    lead = round(_COHERENT_LEAD_S * sample_rate_hz)
+    lag = round(_COHERENT_LAG_S * sample_rate_hz)
+    taps = lead + lag + 1
+    if x.shape != y.shape or n < 4 * taps or not np.any(x - x.mean()):
+        return y
+    x = x - x.mean()
+    yc = y - y.mean()
+    n_fft = 1 << math.ceil(math.log2(2 * n))
+    fx = np.fft.rfft(x, n_fft)
+    auto = np.fft.irfft(fx * np.conj(fx), n_fft)[:taps]
+    cross = np.fft.irfft(np.conj(fx) * np.fft.rfft(yc, n_fft), n_fft)  # sum_t x[t] y[t + k]
+    rhs = cross[np.arange(-lead, lag + 1) % n_fft]
+    column = auto.copy()
+    column[0] += _COHERENT_RIDGE * auto[0]
+    h = solve_toeplitz(column, rhs)
+    fitted = signal.fftconvolve(x, h)[lead : lead + n]
+    return np.asarray(y - fitted, dtype=np.float64)
 
 
 def detect_footfalls(

@@ -170,14 +170,16 @@ def inspect_record(
     record.require_mass()
     warnings = [str(w) for w in record.metadata.get("warnings", [])]
     com = preprocess(record, highpass_hz=highpass_hz)
-    steps = segment_steps(com, pacing_hz=record.pacing_hz)
+    steps = segment_steps(com, pacing_hz=record.pacing_hz, surface_acc_m_s2=record.ground_acc_m_s2)
     balance_raw = static_balance(record, steps)
     balance = balance_raw
     message = static_balance_warning(balance_raw, record.name, tolerance=balance_tolerance)
     if rescale and message is not None:
         record = rescale_to_mass(record, steps)
         com = preprocess(record, highpass_hz=highpass_hz)
-        steps = segment_steps(com, pacing_hz=record.pacing_hz)
+        steps = segment_steps(
+            com, pacing_hz=record.pacing_hz, surface_acc_m_s2=record.ground_acc_m_s2
+        )
         balance = static_balance(record, steps)
         warnings.append(
             f"{record.name}: GRF was rescaled by {1.0 / balance_raw:.4f} so that its mean over "

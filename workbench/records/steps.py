@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage, signal
 
 from workbench.errors import InputError, UsageError
@@ -150,7 +150,13 @@ class Steps:
         )
 
 
-def segment_steps(com: COMResponse, *, pacing_hz: float | None = None, min_steps: int = 3) -> Steps:
+def segment_steps(
+    com: COMResponse,
+    *,
+    pacing_hz: float | None = None,
+    min_steps: int = 3,
+    surface_acc_m_s2: ArrayLike | None = None,
+) -> Steps:
     """Cut a COM response into single footfall steps, peak to peak.
 
     Parameters
@@ -162,6 +168,10 @@ def segment_steps(com: COMResponse, *, pacing_hz: float | None = None, min_steps
         :func:`detect_footfalls`.
     min_steps : int, optional
         Fewest whole steps accepted (default 3).
+    surface_acc_m_s2 : array_like, optional
+        The measured surface acceleration on the record's time base (a vibrating deck): the
+        footfalls are then found without the deck's coherent part of the acceleration
+        (:func:`~workbench.records.footfalls.without_surface`).
 
     Returns
     -------
@@ -177,7 +187,8 @@ def segment_steps(com: COMResponse, *, pacing_hz: float | None = None, min_steps
         raise UsageError(f"segment_steps: min_steps must be a positive integer, got {min_steps!r}")
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
     fs = com.sample_rate_hz
-    times = _footfalls(acc, fs, pacing_hz)
+    surface = None if surface_acc_m_s2 is None else np.asarray(surface_acc_m_s2, dtype=np.float64)
+    times = _footfalls(acc, fs, pacing_hz, surface)
     indices = np.clip(np.rint(times * fs).astype(np.intp), 0, max(acc.size - 1, 0))
     _, first = np.unique(indices, return_index=True)
     indices, times = indices[first], times[first]

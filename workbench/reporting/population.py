@@ -322,6 +322,18 @@ def _surface_sentence(results: pd.DataFrame, s: dict[str, Any]) -> str:
     )
 
 
+def _counts_sentence(results: pd.DataFrame, s: dict[str, Any]) -> str:
+    """Count the records behind the laws, with the excluded and not-identified counts in view."""
+    not_identified = sum(
+        str(e["reason"]).startswith("C or K not identified") for e in s["excluded"]
+    )
+    return (
+        f"The laws of this study rest on {s['records_used']} of {len(results)} identified "
+        f"records: {not_identified} were excluded because C or K is not identified and "
+        f"{s['records_excluded'] - not_identified} for other reasons."
+    )
+
+
 def population_report(
     results: pd.DataFrame,
     fit: PopulationFit,
@@ -330,6 +342,7 @@ def population_report(
     title: str = "Population laws of the SMD pedestrian model",
     notes: list[str] | None = None,
     reference: PopulationLaws | None = None,
+    recovery: list[dict[str, Any]] | None = None,
 ) -> dict[str, str]:
     """Write the Table-2-style population report (HTML, Markdown, CSV tables, PNG figures).
 
@@ -347,6 +360,10 @@ def population_report(
         Extra bullet points (for example the generating laws of a synthetic study).
     reference : PopulationLaws, optional
         Laws drawn as dashed reference lines (default: the seed's).
+    recovery : list of dict, optional
+        ``recovery.json`` objects of recovery runs (:mod:`workbench.population.recovery`):
+        the report then shows what the pipeline recovers, and its conclusions say which of
+        its slopes can be read as findings.
 
     Returns
     -------
@@ -372,6 +389,19 @@ def population_report(
         files[f"{name}_csv"] = str(_write_table_csv(table, out / f"{name}.csv"))
     sec = report.add(Section("Comparison with published SMD parameters (Table 2)"))
     sec.table(t2)
+    sec.paragraph(_counts_sentence(results, s))
+    if recovery:
+        from workbench.reporting.recovery import recovery_conclusions, recovery_section
+
+        sec = report.add(Section("Conclusions"))
+        sec.bullets(recovery_conclusions(recovery, s["laws"]))
+        report.add(recovery_section(recovery))
+    else:
+        sec.paragraph(
+            "No recovery run accompanies this report, so it cannot say whether this "
+            "pipeline tells a pacing-dependent law from a constant one on these records: "
+            "run 'workbench recovery' with the same settings and pass it with --recovery."
+        )
     sec = report.add(Section("Mean laws against pacing frequency"))
     sec.table(laws_t)
     one = participant_figure(fit)

@@ -309,17 +309,25 @@ def parse_factors(text: str | None) -> list[str]:
     return names
 
 
-def parse_levels(items: Sequence[str], base: IdentifySettings) -> dict[str, list[Level]]:
+def parse_levels(
+    items: Sequence[str], base: IdentifySettings, factors: Sequence[str] | None = None
+) -> dict[str, list[Level]]:
     """Parse ``--levels NAME=V1,V2,...`` options into levels (the default level is added).
 
     Scale factors take multipliers (``obs_noise_ddu=1,4``); the others take values
-    (``harmonics=2,4``, ``pieces=steps,whole``).
+    (``harmonics=2,4``, ``pieces=steps,whole``). With ``factors`` given, a level for a
+    factor the design does not vary is refused rather than silently ignored.
     """
     out: dict[str, list[Level]] = {}
     for item in items:
         name, eq, values = item.partition("=")
         name = name.strip()
         factor = _factor(name, "levels")
+        if factors is not None and name not in factors:
+            raise UsageError(
+                f"--levels names {name!r}, which is not among --factors; add it there",
+                parameter="levels",
+            )
         raw = [v.strip() for v in values.split(",") if v.strip()]
         if not eq or not raw:
             raise UsageError(

@@ -1,0 +1,484 @@
+"""Can the population pipeline recover a law at all? Simulation-based calibration of it.
+
+``run_recovery(out_dir, design, settings)`` simulates a population of realistic walks whose
+SMD parameters follow a *known* law against pacing, identifies every record with the same
+settings a batch would use (:func:`~workbench.population.batch.run_batch`), fits the
+population laws as ``workbench population`` does
+(:func:`~workbench.population.fit.fit_population`) and compares the recovered laws with the
+truth, parameter by parameter.
+
+Truth laws (:data:`TRUTH_LAWS`, or any laws JSON :func:`~workbench.population.laws.read_laws`
+reads): ``seed`` (the seed study's laws, f_n = 0.3049 f_p + 1.3670, zeta = -0.2116 f_p +
+0.8737), ``constant`` (f_n 2.85 Hz and zeta 0.29 whatever the pacing: the frequency-response
+tests of occupied structures) and ``zhang`` (f_n = 1.1043 f_p, zeta 0.30). The residual sds
+and the load-factor laws are the documented defaults of
+:class:`~workbench.population.laws.PopulationLaws`.
+
+Records (:func:`recovery_plan`): the seed's eight metronome rates in turn, a walker's mass
+from the mass distribution, f_n, zeta and BLF1 from the truth's mean laws plus their
+residuals, BLF2-3 lognormal, and the step-to-step variability, GRF noise and record length of
+a realistic walk (:data:`RECORD_RANGES`), started in steady walking. On a ``deck`` the
+surface moves as a sine or a narrow-band deck of 0.3-1 m/s^2 RMS between the pacing
+harmonics (:data:`DECK_RATIOS`), and the record measures it (``ground_acc``); on a
+``rigid`` floor it does not move.
+
+Verdict of each law parameter (slope and intercept of f_n and zeta), from the 95 % interval
+of the fit:
+
+- ``recovered``: the interval holds the true value;
+- ``manufactured``: a slope whose truth is zero and whose interval excludes zero -- the
+  method makes a dependence on pacing that the walkers do not have;
+- ``biased``: any other interval that excludes the truth;
+- ``not fitted``: too few records are usable for a fit.
+
+Two fits are reported: the pipeline's (records whose C or K is flagged "not identified" are
+excluded, as ``workbench population`` does) and, beside it, the fit of every record with the
+flags ignored -- what a pipeline without identifiability checks, such as the seed's, would
+have printed. The records' own truths give a third line, the law a perfect identification
+would fit to these very records (``sample``), which separates the method's error from the
+population's sampling scatter.
+
+Files in ``out_dir``: ``plan.csv`` (the truth of every record), ``records/`` (CSV and JSON
+sidecar each) and ``manifest.csv``, ``batch/`` (the batch's files), ``recovery.json``.
+Every file is written atomically; ``resume`` keeps the records already simulated and the
+batch's finished records. The seed fixes every record and every identification, whatever
+the number of workers.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from workbench.errors import InputError, UsageError
+from workbench.executor import run_tasks
+from workbench.fileutil import atomic_path, atomic_write_json
+from workbench.inference.settings import IdentifySettings
+from workbench.population.laws import PopulationLaws
+from workbench.population.recovery_design import (
+    FLOORS,
+    RECORD_RANGES,
+    TRUTH_LAWS,
+    RecoveryDesign,
+    _RecordTask,
+    _write_record,
+    recovery_plan,
+    simulate_recovery_record,
+    truth_laws,
+)
+
+__all__ = [
+    "FLOORS",
+    "RECORD_RANGES",
+    "TRUTH_LAWS",
+    "RecoveryDesign",
+    "RecoveryResult",
+    "law_verdicts",
+    "recovery_plan",
+    "run_recovery",
+    "simulate_recovery_record",
+    "truth_laws",
+]
+
+#: The law parameters a recovery judges: (law, parameter).
+JUDGED = tuple(
+    (law, par)
+    for law in ("natural_frequency_hz", "damping_ratio")
+    for par in ("slope", "intercept")
+)
+
+
+def law_verdicts(truth: PopulationLaws, fitted: dict[str, Any] | None) -> dict[str, Any]:
+    """Judge each law parameter of a fit against the truth (module docstring).
+
+    Parameters
+    ----------
+    truth : PopulationLaws
+        The true laws.
+    fitted : dict or None
+        The ``laws`` object of a population fit; None when no fit was possible.
+
+    Returns
+    -------
+    dict
+        ``{law: {parameter: verdict}}`` for the f_n and zeta laws' slope and intercept.
+    """
+    out: dict[str, dict[str, str]] = {}
+    for law, par in JUDGED:
+        true = float(getattr(getattr(truth, law), par))
+        if fitted is None:
+            verdict = "not fitted"
+        else:
+            lo, hi = fitted[law][f"{par}_ci"]
+            if lo <= true <= hi:
+                verdict = "recovered"
+            elif par == "slope" and true == 0.0:
+                verdict = "manufactured"
+            else:
+                verdict = "biased"
+        out.setdefault(law, {})[par] = verdict
+    return out
+
+
+def _law_json(law: dict[str, Any]) -> dict[str, Any]:
+    keep = ("slope", "intercept", "slope_ci", "intercept_ci", "residual_sd", "n")
+    return {k: law[k] for k in keep}
+
+
+def _fit(results: pd.DataFrame, keep: bool, source: str) -> tuple[dict[str, Any], str | None]:
+    """Fit the laws as ``workbench population`` does; the reason when it cannot."""
+    from workbench.population.fit import fit_population
+
+    try:
+        fit = fit_population(results, keep_not_identified=keep, source=source)
+    except UsageError as err:
+        return {}, str(err)
+    s = fit.to_json()
+    return {
+        "laws": {k: _law_json(s["laws"][k]) for k in ("natural_frequency_hz", "damping_ratio")},
+        "records_used": int(s["records_used"]),
+        "records_excluded": int(s["records_excluded"]),
+    }, None
+
+
+def _sample_law(plan: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:
+    """Fit the law a perfect identification would fit: the records' truths on their pacing."""
+    from workbench.population.fit import _ols
+
+    merged = results[["path", "pacing_hz"]].merge(
+        plan.drop(columns="pacing_hz"), on="path", how="inner"
+    )
+    fp = merged["pacing_hz"].to_numpy(float)
+    grid = np.array([1.5, 2.25])
+    return {
+        law: _law_json(_ols(fp, merged[law].to_numpy(float), grid)[0])
+        for law in ("natural_frequency_hz", "damping_ratio")
+    }
+
+
+def _identified(results: pd.DataFrame) -> pd.Series:
+    """Mark the records whose C and K are both identified (flags read as the fit reads them)."""
+    from workbench.population.fit import _flag
+
+    return results["identified_damping"].map(_flag) & results["identified_stiffness"].map(_flag)
+
+
+def _record_errors(plan: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:
+    """Per-record error of the identified f_n and zeta: median, and how often the band holds."""
+    merged = results.merge(plan[["path", "natural_frequency_hz", "damping_ratio"]], on="path")
+    out: dict[str, Any] = {}
+    identified = _identified(merged)
+    for law in ("natural_frequency_hz", "damping_ratio"):
+        est, true = merged[f"{law}_x"].to_numpy(float), merged[f"{law}_y"].to_numpy(float)
+        sd = merged[f"{law}_sd"].to_numpy(float)
+        held = np.abs(est - true) <= 1.96 * sd
+        ok = identified.to_numpy()
+        out[law] = {
+            "median_error": float(np.median(est - true)) if est.size else math.nan,
+            "median_error_identified": float(np.median((est - true)[ok])) if ok.any() else None,
+            "band_holds_truth_identified": f"{int(held[ok].sum())}/{int(ok.sum())}",
+        }
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class RecoveryResult:
+    """Truth, recovered laws and verdicts of one recovery run.
+
+    Attributes
+    ----------
+    truth : PopulationLaws
+        The simulated truth.
+    design : RecoveryDesign
+        What was simulated.
+    settings : IdentifySettings
+        How every record was identified.
+    recovered : dict
+        ``pipeline`` (the fit ``workbench population`` makes), ``flags_ignored`` (every
+        record, as a pipeline without identifiability checks) and ``sample`` (the records'
+        true parameters, the best any identification could fit), each ``{"laws": ...}`` or
+        ``{"error": reason}``.
+    verdict : dict
+        ``pipeline`` and ``flags_ignored``: :func:`law_verdicts` of each.
+    records : dict
+        Counts (simulated, identified, failed, not identified) and per-record errors.
+    out_dir : Path
+        Where the files are.
+    sensitivity : list of dict
+        One entry per sensitivity design point (empty without factors): ``point``,
+        ``changed``, ``recovered`` and ``verdict`` of its pipeline fit, and ``slope_change``:
+        the change of each law's slope from the baseline, paired over the records both
+        identify, with its 95 % interval and whether the setting ``moves`` it.
+    """
+
+    truth: PopulationLaws
+    design: RecoveryDesign
+    settings: IdentifySettings
+    recovered: dict[str, Any]
+    verdict: dict[str, Any]
+    records: dict[str, Any]
+    out_dir: Path
+    sensitivity: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the ``workbench recovery --json`` object (docs/contracts.md)."""
+        t = self.truth
+        return {
+            "truth": {
+                "source": t.source,
+                "floor": self.design.floor,
+                "laws": {
+                    law: {
+                        "slope": getattr(t, law).slope,
+                        "intercept": getattr(t, law).intercept,
+                        "residual_sd": getattr(t, law).residual_sd,
+                    }
+                    for law in ("natural_frequency_hz", "damping_ratio")
+                },
+            },
+            "recovered": self.recovered,
+            "verdict": self.verdict,
+            "records": self.records,
+            "sensitivity": self.sensitivity,
+            "settings": self.settings.to_json(),
+            "design": self.design.to_json(),
+            "out": str(self.out_dir),
+        }
+
+    def summary(self) -> str:
+        """Return truth, recovered laws and verdicts as text."""
+        from workbench.reporting.recovery import recovery_text
+
+        return recovery_text(self.to_json())
+
+
+def run_recovery(
+    out_dir: str | os.PathLike[str],
+    design: RecoveryDesign,
+    settings: IdentifySettings | None = None,
+    *,
+    seed: int = 0,
+    workers: int = 1,
+    scheduler: str | None = None,
+    resume: bool = False,
+    progress: bool = False,
+    on_record: Callable[[dict[str, Any]], None] | None = None,
+    factors: list[str] | None = None,
+    levels: dict[str, Any] | None = None,
+) -> RecoveryResult:
+    """Simulate the population, identify it in batch, fit the laws and judge them.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Output folder (module docstring); must be empty unless ``resume``.
+    design : RecoveryDesign
+        Truth, floor and records.
+    settings : IdentifySettings, optional
+        Identification settings, exactly as ``workbench batch`` takes them.
+    seed : int
+        Seed of the population (the batch's seed is ``settings.seed``).
+    workers, scheduler : int, str
+        As for :func:`~workbench.population.batch.run_batch`.
+    resume : bool
+        Continue a recovery in ``out_dir``.
+    progress : bool
+        Show progress bars on stderr.
+    on_record : callable, optional
+        Called with each identified record's outcome.
+    factors : list of str, optional
+        Sensitivity of the recovered laws: settings factors of
+        :mod:`workbench.sensitivity.design` varied one at a time around ``settings``; every
+        design point identifies the same records again (``OUT/sensitivity/<point>/``).
+    levels : dict, optional
+        Levels of those factors (:func:`~workbench.sensitivity.design.parse_levels`); the
+        factors' default levels otherwise.
+
+    Returns
+    -------
+    RecoveryResult
+    """
+    from tqdm import tqdm
+
+    from workbench.population.batch import _clean_json, run_batch
+    from workbench.population.files import read_results
+
+    settings = settings or IdentifySettings()
+    out = Path(out_dir)
+    meta_path = out / "recovery_design.json"
+    meta = json.loads(json.dumps({"design": design.to_json(), "seed": int(seed)}))
+    if meta_path.exists():
+        if not resume:
+            raise UsageError(
+                f"the output folder {out} already holds a recovery; pass 'resume' to continue "
+                "it, or choose an empty folder",
+                parameter="resume",
+            )
+        try:
+            old = json.loads(meta_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            old = None
+        if old != meta:
+            raise UsageError(
+                f"'resume': the recovery in {out} was run with another truth, floor, seed or "
+                "population; use the same ones, or a new output folder",
+                parameter="resume",
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(meta_path, meta)
+    plan = recovery_plan(design, seed=seed)
+    with atomic_path(out / "plan.csv") as tmp:
+        plan.to_csv(tmp, index=False, float_format="%.10g", lineterminator="\n")
+    todo = [
+        _RecordTask(row, str(out / row["path"]), float(design.sample_rate_hz))
+        for row in plan.to_dict(orient="records")
+        if not (resume and (out / row["path"]).exists())
+    ]
+    (out / "records").mkdir(exist_ok=True)
+    bar = tqdm(total=len(todo), desc="simulate", unit="record", disable=not progress)
+    try:
+        for _ in run_tasks(
+            _write_record,
+            todo,
+            workers=min(int(workers), max(len(todo), 1)),
+            scheduler=scheduler,
+            keys=[f"workbench-recovery-{Path(t.file).stem}" for t in todo],
+        ):
+            bar.update(1)
+    finally:
+        bar.close()
+    manifest = out / "manifest.csv"
+    with atomic_path(manifest) as tmp:
+        plan[["path", "mass_kg"]].to_csv(tmp, index=False, float_format="%.10g")
+    summary = run_batch(
+        manifest,
+        out / "batch",
+        settings=settings,
+        workers=workers,
+        scheduler=scheduler,
+        resume=resume,
+        progress=progress,
+        on_record=on_record,
+    )
+    try:
+        results = read_results(out / "batch")
+    except InputError:
+        results = pd.DataFrame()
+    recovered: dict[str, Any] = {}
+    verdict: dict[str, Any] = {}
+    source = "recovery batch"
+    for which, keep in (("pipeline", False), ("flags_ignored", True)):
+        fit, error = _fit(results, keep, source) if len(results) else ({}, "no record identified")
+        recovered[which] = fit if error is None else {"error": error}
+        verdict[which] = law_verdicts(design.truth, fit.get("laws"))
+    if len(results) >= 3:
+        recovered["sample"] = {"laws": _sample_law(plan, results)}
+        verdict["sample"] = law_verdicts(design.truth, recovered["sample"]["laws"])
+    else:
+        recovered["sample"] = {"error": "fewer than 3 records identified"}
+    not_identified = 0
+    if len(results):
+        not_identified = int((~_identified(results)).sum())
+    records = {
+        "simulated": len(plan),
+        "identified": len(results),
+        "failed": int(summary.failed),
+        "not_identified": not_identified,
+        "errors": _record_errors(plan, results) if len(results) else {},
+    }
+    sensitivity: list[dict[str, Any]] = []
+    if factors:
+        run = {"workers": workers, "scheduler": scheduler, "resume": resume, "progress": progress}
+        sensitivity = _sensitivity(out, manifest, design, settings, results, factors, levels, run)
+    result = RecoveryResult(
+        design.truth, design, settings, recovered, verdict, records, out.resolve(), sensitivity
+    )
+    atomic_write_json(out / "recovery.json", _clean_json(result.to_json()))
+    return result
+
+
+#: Fewest records a paired slope change is computed over.
+MIN_PAIRED = 5
+
+
+def _paired_slope_change(base: pd.DataFrame, point: pd.DataFrame) -> dict[str, Any]:
+    """Change of each law's slope between two identifications of the same records.
+
+    Paired: the per-record differences of the estimate regressed on the baseline's pacing,
+    over the records both identify with C and K (the records' own scatter about the law
+    cancels, so a setting's effect is measured far more tightly than two separate fits).
+    """
+    from workbench.population.fit import _ols
+
+    merged = base[_identified(base)].merge(
+        point[_identified(point)], on="path", suffixes=("", "_point")
+    )
+    over = "identified in both"
+    if len(merged) < MIN_PAIRED:
+        # Nothing to pair among the identified (a rigid floor): the slopes as fitted with the
+        # flags ignored, so the study still says which settings move them.
+        merged = base.merge(point, on="path", suffixes=("", "_point"))
+        over = "all records (too few identified in both)"
+    out: dict[str, Any] = {"records": len(merged), "over": over}
+    if len(merged) < MIN_PAIRED:
+        return out
+    fp = merged["pacing_hz"].to_numpy(float)
+    for law in ("natural_frequency_hz", "damping_ratio"):
+        diff = merged[f"{law}_point"].to_numpy(float) - merged[law].to_numpy(float)
+        fit = _ols(fp, diff, np.array([1.5, 2.25]))[0]
+        lo, hi = fit["slope_ci"]
+        out[law] = {"change": fit["slope"], "change_ci": [lo, hi], "moves": not lo <= 0.0 <= hi}
+    return out
+
+
+def _slug(key: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_.=" else "_" for c in key.replace("; ", "+"))
+
+
+def _sensitivity(
+    out: Path,
+    manifest: Path,
+    design: RecoveryDesign,
+    settings: IdentifySettings,
+    baseline: pd.DataFrame,
+    factors: list[str],
+    levels: dict[str, Any] | None,
+    run: dict[str, Any],
+) -> list[dict[str, Any]]:
+    """Identify the records again at every one-at-a-time design point and refit the laws."""
+    from workbench.population.batch import run_batch
+    from workbench.population.files import read_results
+    from workbench.sensitivity.design import build_design, default_levels
+
+    chosen = {name: (levels or {}).get(name) or default_levels(name, settings) for name in factors}
+    _, points = build_design("oat", chosen)
+    rows = []
+    for point in points[1:]:
+        point_settings, overrides = point.configure(settings)
+        folder = out / "sensitivity" / _slug(point.key)
+        run_batch(manifest, folder, settings=point_settings, overrides=overrides, **run)
+        try:
+            results = read_results(folder)
+        except InputError:
+            results = pd.DataFrame()
+        fit, error = _fit(results, False, str(folder)) if len(results) else ({}, "none identified")
+        rows.append(
+            {
+                "point": point.key,
+                "changed": point.changed,
+                "recovered": fit if error is None else {"error": error},
+                "verdict": law_verdicts(design.truth, fit.get("laws")),
+                "slope_change": _paired_slope_change(baseline, results)
+                if len(results) and len(baseline)
+                else {"records": 0},
+            }
+        )
+    return rows
