@@ -2,6 +2,8 @@
 
 Run ``python analyses/make_demo_data.py``; the output is bit-for-bit reproducible (fixed
 seeds). Each record is a CSV with a JSON sidecar holding its mass and the simulator's truth.
+``--out`` is the datasets folder: the walks go to its ``synthetic/``, the benchmark signal to
+its ``benchmark/``.
 
 - ``seed_individual``: the seed study's identified individual (58 kg, f_p 1.75 Hz,
   C 434 N s/m, K 8940 N/m, BLF 0.212 / 0.042 / 0.049), 30 s, steady start.
@@ -10,6 +12,16 @@ seeds). Each record is a CSV with a JSON sidecar holding its mass and the simula
   identifies C and K) is in the record.
 - ``cubic_stiffness``: as ``population_typical`` with a hardening leg spring
   (``K3 = 2e6 N/m^3``), a hidden effect for the model-criticism loop.
+- ``seed_individual_deck``: the seed's individual on a vibrating deck (narrow-band, 0.5 m/s^2
+  RMS at 2.3 Hz, about 1.3 times the pacing, bandwidth 5 %), the record carrying the deck's
+  acceleration: the kind of record on which C and K are identified (the demo's individual
+  identification).
+- ``benchmark/seed_numerical_example``: the seed's numerical example (section 4; 75 kg, f_n
+  2.5 Hz, zeta 0.4, the sum of sines of its eq. 24, 10 s at 1 kHz from rest, noise-free). Its
+  sidecar carries the force model it was made with (``identify``: ten harmonics of 0.5 Hz on
+  absolute time, one piece, no high-pass, the seed's 10 % observation noise), so ``workbench
+  identify seed_numerical_example`` runs it as the seed did, and ``load``:
+  ``allow_negative_force`` (its force is not a walking GRF and dips below zero).
 """
 
 from __future__ import annotations
@@ -20,9 +32,19 @@ from pathlib import Path
 from workbench.models.conversions import damping_ratio, natural_frequency_hz
 from workbench.models.effects import CubicStiffness
 from workbench.records.io import save_record
-from workbench.synth.simulate import simulate_walking
+from workbench.synth.decks import NarrowBandDeck
+from workbench.synth.simulate import seed_numerical_example, simulate_walking
 
-OUT = Path(__file__).resolve().parents[1] / "workbench" / "datasets" / "synthetic"
+OUT = Path(__file__).resolve().parents[1] / "workbench" / "datasets"
+#: How the benchmark is identified and loaded: the sidecar's ``identify`` and ``load``.
+NUMERICAL_EXAMPLE_SETTINGS = {
+    "harmonics": 10,
+    "pacing_hz": 0.5,
+    "time_basis": "absolute",
+    "pieces": "whole",
+    "highpass_hz": 0.0,
+    "obs_noise": "seed",
+}
 
 COMMON = dict(duration_s=30.0, sample_rate_hz=200.0, noise_sd_n=2.0)
 
@@ -50,6 +72,18 @@ def records() -> dict[str, dict]:
             effects=[CubicStiffness(k3_n_per_m3=2e6)],
             **COMMON,
         ),
+        "seed_individual_deck": dict(
+            mass_kg=individual_m,
+            pacing_hz=1.75,
+            natural_frequency_hz=float(natural_frequency_hz(individual_k, individual_m)),
+            damping_ratio=float(damping_ratio(individual_c, individual_k, individual_m)),
+            blf=(0.212, 0.042, 0.049),
+            start="steady",
+            seed=3,
+            # Period = the record's length, so the deck's RMS over the record is exact.
+            ground_acc_m_s2=NarrowBandDeck(0.5, 2.3, 0.115, seed=7, period_s=30.0),
+            **COMMON,
+        ),
     }
 
 
@@ -57,10 +91,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=OUT, help="output folder")
     args = parser.parse_args()
-    for name, kwargs in records().items():
-        sim = simulate_walking(**kwargs)
+    sims = {name: simulate_walking(**kwargs) for name, kwargs in records().items()}
+    sims["seed_numerical_example"] = seed_numerical_example(duration_s=10.0)
+    for name, sim in sims.items():
         record = sim.record.replace(subject=name)
-        csv_path, _ = save_record(record, args.out / f"{name}.csv")
+        if name == "seed_numerical_example":
+            extra = {"load": {"allow_negative_force": True}, "identify": NUMERICAL_EXAMPLE_SETTINGS}
+            csv_path, _ = save_record(
+                record, args.out / "benchmark" / f"{name}.csv", extra_metadata=extra
+            )
+        else:
+            csv_path, _ = save_record(record, args.out / "synthetic" / f"{name}.csv")
         truth = sim.truth
         print(
             f"{csv_path.name}: {record.duration_s:.1f} s, truth K "

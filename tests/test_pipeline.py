@@ -240,6 +240,23 @@ def test_demo_writes_report(tmp_path, capsys):
     assert "This study" in table2 and "Zhang 2015" in table2
     assert (out / "population" / "index.html").is_file()
     assert "Table 2" in md and "This study" in md
+    # Individual identification (seed 5.3): the deck walk identified, its truth inside the
+    # 95 % intervals, C and K converging, and the treadmill under both settings.
+    assert "Individual identification" in md
+    for name in ("individual_convergence", "individual_force"):
+        assert f"{name}.png" in figures
+    deck = res["individual"]["deck"]
+    assert deck["identified"]
+    for key in ("natural_frequency_hz", "damping_ratio", "stiffness_n_per_m"):
+        _, lo, hi = deck["estimates"][key]
+        assert lo <= deck["truth"][key] <= hi, key
+    assert deck["convergence"]["first_identified_s"] is not None
+    assert set(res["individual"]["treadmill"]) == {"default", "seed-faithful (pf, seed noise)"}
+    assert res["individual"]["treadmill"]["default"]["level"] == "not identified"
+    # The Table-2 report says what this pipeline recovers, from a recovery run beside it.
+    pop_md = (out / "population" / "report.md").read_text()
+    assert "What this pipeline recovers" in pop_md and "Conclusions" in pop_md
+    assert res["recovery"]["records"]["simulated"] == 12
 
 
 def test_preprocessed_response_from_rest_matches_inside_the_edge_margin():
@@ -255,16 +272,16 @@ def test_embedded_synthetic_set_regenerates_bit_for_bit(tmp_path):
     import subprocess
     import sys
 
-    from workbench.datasets import synthetic_paths
+    from workbench.datasets import benchmark_paths, synthetic_paths
 
     script = Path(__file__).resolve().parents[1] / "analyses" / "make_demo_data.py"
     subprocess.run(
         [sys.executable, str(script), "--out", str(tmp_path)], check=True, capture_output=True
     )
-    shipped = synthetic_paths()
-    assert len(shipped) == 3
+    shipped = [*synthetic_paths(), *benchmark_paths()]
+    assert len(shipped) == 5
     for path in shipped:
         for suffix in (".csv", ".json"):
             a = path.with_suffix(suffix).read_bytes()
-            b = (tmp_path / path.with_suffix(suffix).name).read_bytes()
+            b = (tmp_path / path.parent.name / path.with_suffix(suffix).name).read_bytes()
             assert a == b, path.with_suffix(suffix).name

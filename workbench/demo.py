@@ -8,9 +8,13 @@ The chain, on the embedded real records (treadmill and insole) and the small syn
    record (``workbench diagnose`` / ``compare``): its speed changes are found as a pacing
    drift and a small left/right difference beyond it, both added, and the held-out error
    falls (criticism fits regressions, not a filter, so the whole trial is cheap);
-3. sensitivity: a small study of how the filter's settings move the identified parameters on
+3. individual identification, as the seed's section 5.3: the embedded deck walk of the
+   seed's individual identified (C and K converging as more of the record is used, the
+   biomechanical force, its load factors, the identifiability sentence) and the real
+   treadmill stretch under the default and the seed-faithful settings side by side;
+4. sensitivity: a small study of how the filter's settings move the identified parameters on
    a simulated record with known truth;
-4. population: a subset of the synthetic study plus steady stretches of the two real
+5. population: a subset of the synthetic study plus steady stretches of the two real
    records identified in batch, the population laws fitted, and the Table-2-style report.
 
 The real stretches (the first steady-pacing plateau of the treadmill record, the first
@@ -43,6 +47,8 @@ Job = tuple[str, str, Path, float | None, str, str]
 REAL_STRETCH_S = 30.0
 #: Participants (male, female) of the synthetic study subset in the demo.
 DEMO_PARTICIPANTS = (2, 1)
+#: Records of the demo's recovery (the smallest design: one per metronome rate and a half).
+RECOVERY_RECORDS = 12
 
 
 def _jobs() -> list[Job]:
@@ -133,16 +139,18 @@ def run_demo(
             "known calibration error) and a small seeded synthetic set. Each record is "
             "validated, turned into a COM response (acceleration from GRF, zero-phase high-pass, "
             "trapezoidal integration with drift control) and split into footfall steps; then "
-            "the model is criticised on a real record, the sensitivity of the identification "
-            "to its settings is measured, and a population of records is identified in batch "
-            "and summarised in the Table-2-style report (population/index.html)."
+            "the model is criticised on a real record, one walker is identified end to end "
+            "(on a vibrating deck, and the real treadmill under two settings), the "
+            "sensitivity of the identification to its settings is measured, and a population "
+            "of records is identified in batch and summarised in the Table-2-style report "
+            "(population/index.html)."
         ),
     )
     summary = report.add(Section("Summary"))
     inspected: list[tuple[str, Inspection]] = []
     sections: list[Section] = []
     jobs = _jobs()
-    stages = tqdm(total=len(jobs) + 3, desc="demo", unit="stage", disable=not progress)
+    stages = tqdm(total=len(jobs) + 4, desc="demo", unit="stage", disable=not progress)
     records: dict[str, tuple[Record, Inspection]] = {}
     for key, label, path, mass, attribution, display in jobs:
         record = load_record(path, mass_kg=mass, subject=label).replace(source=display)
@@ -163,6 +171,11 @@ def run_demo(
     # The whole trial, not the steady stretch: its speed changes are what criticism finds.
     report.add(criticism_demo_section(records["treadmill"][0], out_dir, seed))
     stages.update()
+    from workbench.reporting.individual import individual_demo_section
+
+    individual, individual_json = individual_demo_section(out_dir, seed, stretches["treadmill"])
+    report.add(individual)
+    stages.update()
     from workbench.reporting.sensitivity import sensitivity_demo_section
 
     report.add(sensitivity_demo_section(out_dir, seed))
@@ -170,12 +183,14 @@ def run_demo(
     from workbench.reporting.population import run_population_demo, table2_rows
 
     manifest = _write_stretches(stretches, out_dir / "population" / "real_stretches")
+    recovery = _recovery(out_dir / "population" / "recovery", seed)
     population = run_population_demo(
         out_dir / "population",
         seed,
         participants=DEMO_PARTICIPANTS,
         include_real=True,
         real_manifest=manifest,
+        recovery=[recovery],
     )
     stages.update()
     stages.close()
@@ -220,8 +235,30 @@ def run_demo(
         "population": {
             k: population[k] for k in ("records", "records_used", "records_excluded", "failed")
         },
+        "individual": individual_json,
+        "recovery": {k: recovery[k] for k in ("truth", "verdict", "records")},
         "text": "\n".join(lines),
     }
+
+
+def _recovery(folder: Path, seed: int) -> dict[str, Any]:
+    """Run a small recovery with the real records' settings: rigid floors, no pacing law.
+
+    Can the default pipeline tell a pacing-dependent law from a constant one on rigid-floor
+    walks? :data:`RECOVERY_RECORDS` realistic walks of a population whose f_n and zeta do not
+    depend on pacing, identified as the demo's real records are; ``workbench recovery`` and
+    ``analyses/recovery_table.py`` do it at full size (docs/validation/recovery.md).
+    """
+    from workbench.inference.settings import IdentifySettings
+    from workbench.population.recovery import RecoveryDesign, run_recovery, truth_laws
+
+    design = RecoveryDesign(
+        truth_laws("constant"), "rigid", RECOVERY_RECORDS, ranges={"duration_s": (12.0, 14.0)}
+    )
+    settings = IdentifySettings().replace(seed=seed)
+    # Like the population batches, a demo run again in its folder continues what is there.
+    resume = (folder / "recovery_design.json").is_file()
+    return run_recovery(folder, design, settings, seed=seed, workers=2, resume=resume).to_json()
 
 
 def _real_stretches(records: dict[str, tuple[Record, Inspection]]) -> dict[str, Record]:

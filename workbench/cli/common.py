@@ -322,9 +322,12 @@ def load(args: argparse.Namespace) -> Any:
     -------
     Record
     """
+    from workbench import datasets
     from workbench.records.io import load_record
 
-    record = load_record(
+    name = datasets.named(args.record)
+    reader: Any = load_record if name is None else datasets.load
+    record = reader(
         args.record,
         fmt=args.fmt,
         mass_kg=args.mass,
@@ -431,6 +434,7 @@ def identify_settings(args: argparse.Namespace) -> Any:
     -------
     IdentifySettings
     """
+    from workbench import datasets
     from workbench.inference.settings import IdentifySettings
 
     def flag(name: str) -> Any:
@@ -457,6 +461,8 @@ def identify_settings(args: argparse.Namespace) -> Any:
     }
     if flag("config"):
         return IdentifySettings.from_toml(args.config, **overrides)
+    if (name := datasets.named(flag("record"))) is not None:  # its own force model, flags win
+        return datasets.settings(name, **{k: v for k, v in overrides.items() if v is not None})
     return IdentifySettings().replace(**overrides)
 
 

@@ -201,7 +201,9 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "the held-out error each removes, with a significance decision that respects "
         "autocorrelation (step-blocked cross-validation).",
     )
-    p.add_argument("record", help="the record file")
+    p.add_argument(
+        "record", help="the record file, or an embedded record by name, e.g. seed_individual"
+    )
     p.add_argument("--effects", metavar="NAME,...", help="effects already in the model")
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report")
     p.add_argument(
@@ -219,6 +221,8 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         description="Held-out RMSE, fit %, Ljung-Box p and predictive score of the baseline "
         "and of the baseline with the given effects added one after another.",
     )
-    p.add_argument("record", help="the record file")
+    p.add_argument(
+        "record", help="the record file, or an embedded record by name, e.g. seed_individual"
+    )
     p.add_argument("--effects", required=True, metavar="NAME,...", help="effects to add in turn")
     p.set_defaults(handler=_cmd_compare)

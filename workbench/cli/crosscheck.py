@@ -171,7 +171,9 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "report per step the filter's and the MCMC's mean and sd, z-score, sd ratio, "
         "1-Wasserstein distance, convergence, and flags with reasons.",
     )
-    p.add_argument("record", help="the record file")
+    p.add_argument(
+        "record", help="the record file, or an embedded record by name, e.g. seed_individual"
+    )
     p.add_argument("--method", choices=["rbpf", "pf"], default="rbpf", help="filter (rbpf)")
     p.add_argument("--particles", type=int, metavar="N", help="particles (rbpf 256, pf 4000)")
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")

@@ -101,7 +101,9 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "seed-faithful particle filter or the exact marginal posterior, with posterior sd and "
         "an identifiability report. Flags override the --config TOML file.",
     )
-    p.add_argument("record", help="the record file")
+    p.add_argument(
+        "record", help="the record file, or an embedded record by name, e.g. seed_individual"
+    )
     p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default rbpf)")
     p.add_argument("--particles", type=int, metavar="N", help="particles (rbpf 256, pf 4000)")
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")

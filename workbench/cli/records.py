@@ -72,6 +72,10 @@ def add_records_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         description="Validate a GRF record, preprocess it, split it into steps and report "
         "duration, sample rate, pacing, steps, mean GRF and static balance.",
     )
-    p.add_argument("record", help="CSV (+ JSON sidecar), OpenSim .mot, PhysioNet insole text, C3D")
+    p.add_argument(
+        "record",
+        help="CSV (+ JSON sidecar), OpenSim .mot, PhysioNet insole text, C3D, or an embedded "
+        "record by name, e.g. seed_individual",
+    )
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report with figures")
     p.set_defaults(handler=_cmd_inspect)

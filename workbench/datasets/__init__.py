@@ -13,9 +13,16 @@ copy.
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+from typing import Any
+
 from workbench.datasets.catalogue import (
     EMBEDDED,
     EmbeddedRecord,
+    benchmark_paths,
+    dataset_options,
+    dataset_path,
     embedded_path,
     names,
     synthetic_paths,
@@ -24,33 +31,90 @@ from workbench.errors import UsageError
 from workbench.records.io import load_record
 from workbench.records.record import Record
 
-__all__ = ["EMBEDDED", "EmbeddedRecord", "embedded_path", "load", "names", "synthetic_paths"]
+__all__ = [
+    "EMBEDDED",
+    "EmbeddedRecord",
+    "benchmark_paths",
+    "dataset_options",
+    "dataset_path",
+    "embedded_path",
+    "load",
+    "named",
+    "names",
+    "settings",
+    "synthetic_paths",
+]
 
 
-def load(name: str, **options: object) -> Record:
+def load(name: str, **options: Any) -> Record:
     """Load an embedded record by name.
 
     Parameters
     ----------
     name : str
-        ``"treadmill"`` or ``"insole"`` (real records) or the name of a synthetic record
-        (``"seed_individual"``, ...); :func:`names` lists them.
+        ``"treadmill"`` or ``"insole"`` (real records), the name of a synthetic walk
+        (``"seed_individual"``, ``"seed_individual_deck"``, ...) or of a benchmark
+        (``"seed_numerical_example"``); :func:`names` lists them.
     **options
         Passed to :func:`~workbench.records.io.load_record` (``mass_kg=...``,
-        ``allow_negative_force=...``).
+        ``allow_negative_force=...``), over the record's own loader options.
 
     Returns
     -------
     Record
     """
-    if name in EMBEDDED:
-        path = embedded_path(name)
-    else:
-        path = next((p for p in synthetic_paths() if p.stem == name), None)  # type: ignore[assignment]
-        if path is None:
-            raise UsageError(
-                f"no embedded record is called {name!r}; choose one of {', '.join(names())}"
-            )
-    record = load_record(path, **options)  # type: ignore[arg-type]
+    path = dataset_path(name)
+    if path is None:
+        raise UsageError(
+            f"no embedded record is called {name!r}; choose one of {', '.join(names())}"
+        )
+    own, _ = dataset_options(name)
+    merged = {**own, **options}
+    # A permission the record needs is not taken back by a caller's default of False.
+    merged["allow_negative_force"] = bool(own.get("allow_negative_force")) or bool(
+        options.get("allow_negative_force")
+    )
+    record = load_record(path, **merged)
     # Named from the package, not from wherever it is installed.
     return record.replace(source=f"workbench/datasets/{path.parent.name}/{path.name}")
+
+
+def named(argument: object) -> str | None:
+    """Return the embedded record a record argument names, or None when it is a path.
+
+    A file of that name in the current folder wins, so a user's ``treadmill`` file is
+    never shadowed by the embedded one; anything but a single string or path is None.
+    """
+    if not isinstance(argument, str | os.PathLike):
+        return None
+    text = os.fspath(argument)
+    if not isinstance(text, str) or Path(text).exists() or dataset_path(text) is None:
+        return None
+    return text
+
+
+def settings(name: str, **overrides: Any) -> Any:
+    """Return the identification settings an embedded record was made for.
+
+    Parameters
+    ----------
+    name : str
+        An embedded record (:func:`names`).
+    **overrides
+        Flat settings (``method="exact"``) over the record's own.
+
+    Returns
+    -------
+    IdentifySettings
+        The defaults for a walk, the force model it was simulated with for a benchmark
+        (the seed's numerical example: ten harmonics of 0.5 Hz on absolute time, one piece,
+        no high-pass).
+    """
+    from workbench.inference.settings import IdentifySettings
+
+    if dataset_path(name) is None:
+        raise UsageError(
+            f"no embedded record is called {name!r}; choose one of {', '.join(names())}"
+        )
+    _, own = dataset_options(name)
+    return IdentifySettings.from_flat(**{**own, **overrides})

@@ -11,7 +11,16 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-__all__ = ["EMBEDDED", "EmbeddedRecord", "embedded_path", "names", "synthetic_paths"]
+__all__ = [
+    "EMBEDDED",
+    "EmbeddedRecord",
+    "benchmark_paths",
+    "dataset_options",
+    "dataset_path",
+    "embedded_path",
+    "names",
+    "synthetic_paths",
+]
 
 
 @dataclass(frozen=True)
@@ -66,10 +75,45 @@ def embedded_path(key: str) -> Path:
 
 
 def names() -> tuple[str, ...]:
-    """Names of every embedded record: the real ones, then the synthetic set's file stems."""
-    return (*EMBEDDED, *(p.stem for p in synthetic_paths()))
+    """Names of every embedded record: the real ones, the synthetic walks, the benchmarks."""
+    return (*EMBEDDED, *(p.stem for p in (*synthetic_paths(), *benchmark_paths())))
 
 
 def synthetic_paths() -> list[Path]:
-    """CSV files of the embedded synthetic set, sorted by name."""
+    """CSV files of the embedded synthetic walks, sorted by name."""
     return sorted((_root() / "synthetic").glob("*.csv"))
+
+
+def benchmark_paths() -> list[Path]:
+    """CSV files of the embedded benchmark signals (not walks: the seed's numerical example)."""
+    return sorted((_root() / "benchmark").glob("*.csv"))
+
+
+def dataset_path(name: str) -> Path | None:
+    """Path of the embedded record called ``name`` (:func:`names`), or None if none is."""
+    if name in EMBEDDED:
+        return embedded_path(name)
+    return next((p for p in (*synthetic_paths(), *benchmark_paths()) if p.stem == name), None)
+
+
+def dataset_options(name: str) -> tuple[dict[str, object], dict[str, object]]:
+    """Loader options and identification settings an embedded record was made for.
+
+    A synthetic sidecar may carry ``"load"`` (keyword arguments of the loader, e.g.
+    ``allow_negative_force`` for the seed's benchmark force, which is not a walking GRF and
+    dips below zero) and ``"identify"`` (flat identification settings: the force model it
+    was simulated with). Only embedded records named by name get them; a file given by its
+    path is read as any other.
+
+    Returns
+    -------
+    (dict, dict)
+        Loader options and flat settings; both empty for a record without them.
+    """
+    import json
+
+    path = dataset_path(name)
+    if path is None or name in EMBEDDED:
+        return {}, {}
+    sidecar = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
+    return dict(sidecar.get("load") or {}), dict(sidecar.get("identify") or {})

@@ -389,7 +389,7 @@ def run_recovery(
         not_identified = int((~_identified(results)).sum())
     records = {
         "simulated": len(plan),
-        "identified": len(results),
+        "processed": len(results),
         "failed": int(summary.failed),
         "not_identified": not_identified,
         "errors": _record_errors(plan, results) if len(results) else {},

@@ -170,6 +170,8 @@ def _footfalls(
     sample_rate_hz: float,
     pacing_hz: float | None,
     surface_acc: FloatArray | None = None,
+    *,
+    place_on_cleaned: bool = False,
 ) -> FloatArray:
     """Footfall times [s from the first sample, fractional]; see :func:`detect_footfalls`.
 
@@ -178,7 +180,9 @@ def _footfalls(
     (:func:`without_surface`), so that a strong deck cannot pass for the walker's pacing; each
     footfall is still placed on the dominant peak of the acceleration itself, as on a rigid
     floor (placing it on the cleaned one picks the other hump of many steps on a deck, which
-    would change the step convention of every deck result).
+    would change the step convention of every deck result). ``place_on_cleaned`` places
+    them on the cleaned acceleration instead; ``analyses/deck_footfalls.py`` measures both
+    against the true steps of simulated deck walks.
     """
     n = acc.size
     band = _search_band(pacing_hz)
@@ -187,9 +191,10 @@ def _footfalls(
     detect = acc if surface_acc is None else without_surface(acc, surface_acc, sample_rate_hz)
     centres_s, track = _pacing_track(detect, sample_rate_hz, band)
     spectral_track = np.interp(np.arange(n) / sample_rate_hz, centres_s, track)
-    first = _detect_in_phase(detect, sample_rate_hz, spectral_track, acc)
+    place = detect if place_on_cleaned else acc
+    first = _detect_in_phase(detect, sample_rate_hz, spectral_track, place)
     refined_track = _track_from_footfalls(first, n, sample_rate_hz, spectral_track)
-    return _detect_in_phase(detect, sample_rate_hz, refined_track, acc)
+    return _detect_in_phase(detect, sample_rate_hz, refined_track, place)
 
 
 #: The filter from the surface's acceleration to the body's spans this window [s]: a little

@@ -465,6 +465,7 @@ def run_population_demo(
     real_manifest: str | Path | None = None,
     workers: int = 1,
     progress: bool = False,
+    recovery: list[dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Run the population chain on a subset of the synthetic study (and the real records).
 
@@ -491,6 +492,9 @@ def run_population_demo(
         Local worker processes of the batches.
     progress : bool
         Show progress bars.
+    recovery : list of dict, optional
+        Recovery results (``RecoveryResult.to_json()``) for the report's section "What this
+        pipeline recovers" and its conclusions.
 
     Returns
     -------
@@ -563,7 +567,7 @@ def run_population_demo(
             )
             + ", identified per footfall step with the default settings."
         )
-    files = population_report(results, fit, out, notes=notes)
+    files = population_report(results, fit, out, notes=notes, recovery=recovery)
     summary = fit.population_json
     fn = summary["laws"]["natural_frequency_hz"]
     return {

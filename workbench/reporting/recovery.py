@@ -72,8 +72,9 @@ def recovery_text(obj: dict[str, Any]) -> str:
     truth, rec = obj["truth"], obj["records"]
     lines = [
         f"recovery of {truth['source']} on a {truth['floor']} floor; {_settings_text(obj)}",
-        f"records: {rec['simulated']} simulated, {rec['identified']} identified, "
-        f"{rec['failed']} failed, {rec['not_identified']} flagged not identified",
+        f"records: {rec['simulated']} simulated, {rec['processed']} identified without error "
+        f"({rec['not_identified']} of them flagged C or K not identified), {rec['failed']} "
+        "failed",
     ]
     for law, name in NAMES.items():
         tl = truth["laws"][law]
