@@ -52,17 +52,17 @@ COMMON = dict(duration_s=30.0, sample_rate_hz=200.0, noise_sd_n=2.0)
 def records() -> dict[str, dict]:
     """Return the synthetic set: name -> keyword arguments of ``simulate_walking``."""
     individual_k, individual_c, individual_m = 8940.0, 434.0, 58.0
+    individual = dict(
+        mass_kg=individual_m,
+        pacing_hz=1.75,
+        natural_frequency_hz=float(natural_frequency_hz(individual_k, individual_m)),
+        damping_ratio=float(damping_ratio(individual_c, individual_k, individual_m)),
+        blf=(0.212, 0.042, 0.049),
+        start="steady",
+        **COMMON,
+    )
     return {
-        "seed_individual": dict(
-            mass_kg=individual_m,
-            pacing_hz=1.75,
-            natural_frequency_hz=float(natural_frequency_hz(individual_k, individual_m)),
-            damping_ratio=float(damping_ratio(individual_c, individual_k, individual_m)),
-            blf=(0.212, 0.042, 0.049),
-            start="steady",
-            seed=1,
-            **COMMON,
-        ),
+        "seed_individual": dict(individual, seed=1),
         "population_typical": dict(mass_kg=70.0, pacing_hz=1.9, start="rest", seed=2, **COMMON),
         "cubic_stiffness": dict(
             mass_kg=70.0,
@@ -73,16 +73,10 @@ def records() -> dict[str, dict]:
             **COMMON,
         ),
         "seed_individual_deck": dict(
-            mass_kg=individual_m,
-            pacing_hz=1.75,
-            natural_frequency_hz=float(natural_frequency_hz(individual_k, individual_m)),
-            damping_ratio=float(damping_ratio(individual_c, individual_k, individual_m)),
-            blf=(0.212, 0.042, 0.049),
-            start="steady",
+            individual,
             seed=3,
             # Period = the record's length, so the deck's RMS over the record is exact.
             ground_acc_m_s2=NarrowBandDeck(0.5, 2.3, 0.115, seed=7, period_s=30.0),
-            **COMMON,
         ),
     }
 

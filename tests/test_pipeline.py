@@ -257,6 +257,10 @@ def test_demo_writes_report(tmp_path, capsys):
     pop_md = (out / "population" / "report.md").read_text()
     assert "What this pipeline recovers" in pop_md and "Conclusions" in pop_md
     assert res["recovery"]["records"]["simulated"] == 12
+    # As at full size (docs/validation/recovery.md: 0 of 360 rigid-floor walks identified),
+    # the pipeline identifies none of them and declines to fit a law.
+    assert res["recovery"]["records"]["not_identified"] == res["recovery"]["records"]["processed"]
+    assert res["recovery"]["verdict"]["pipeline"]["natural_frequency_hz"]["slope"] == "not fitted"
 
 
 def test_preprocessed_response_from_rest_matches_inside_the_edge_margin():

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from workbench.errors import UsageError
@@ -96,6 +97,58 @@ def test_ordinary_decks_keep_their_footfalls():
             com, pacing_hz=rec.pacing_hz, min_steps=6, surface_acc_m_s2=rec.ground_acc_m_s2
         )
         assert np.array_equal(plain.boundaries, aware.boundaries), seed
+
+
+def test_paired_slope_change_is_exact_for_a_setting_that_moves_nothing():
+    from workbench.population.recovery import _paired_slope_change
+
+    rng = np.random.default_rng(5)
+    pacing = np.repeat([1.5, 1.75, 2.0, 2.25], 5)
+    base = pd.DataFrame(
+        {
+            "path": [f"r{i}.csv" for i in range(pacing.size)],
+            "pacing_hz": pacing,
+            "natural_frequency_hz": 2.85 + 0.15 * rng.standard_normal(pacing.size),
+            "damping_ratio": 0.29 + 0.05 * rng.standard_normal(pacing.size),
+            "identified_damping": True,
+            "identified_stiffness": True,
+        }
+    )
+    same = _paired_slope_change(base, base.copy())  # no statsmodels warning (errors here)
+    assert same["records"] == pacing.size and same["over"] == "identified in both"
+    assert same["natural_frequency_hz"] == {"change": 0.0, "change_ci": [0.0, 0.0], "moves": False}
+    # A setting that tilts every record's f_n by 0.2 Hz per Hz of pacing, plus 0.01 Hz noise.
+    tilted = base.copy()
+    tilted["natural_frequency_hz"] += 0.2 * (pacing - 1.8) + 0.01 * rng.standard_normal(pacing.size)
+    moved = _paired_slope_change(base, tilted)["natural_frequency_hz"]
+    lo, hi = moved["change_ci"]
+    assert moved["moves"] and lo < 0.2 < hi and hi - lo < 0.05
+
+
+def test_a_strong_deck_is_not_taken_for_the_pacing():
+    """A 1.5 Hz walker on a 1 m/s^2 RMS sine deck at 1.3 f_p (seeds 0-3, all of them).
+
+    The deck outweighs the walker's first harmonic in the walking band: segmented on the
+    acceleration alone, the steps follow the deck (about 1.95 per second); with the deck's
+    linear response taken out first, they follow the walker.
+    """
+    from workbench.synth.decks import SineDeck
+    from workbench.synth.simulate import simulate_walking
+
+    duration_s, pacing_hz = 24.0, 1.5
+    true_steps = duration_s * pacing_hz - 1  # whole steps between the first and last footfall
+    for seed in range(4):
+        rec = simulate_walking(
+            mass_kg=70.0, pacing_hz=pacing_hz, duration_s=duration_s,
+            natural_frequency_hz=2.3, damping_ratio=0.35, blf=(0.25, 0.08, 0.06),
+            start="steady", seed=seed, noise_sd_n=5.0, sample_rate_hz=100.0,
+            ground_acc_m_s2=SineDeck(1.0, 1.3 * pacing_hz, 0.3),
+        ).record  # fmt: skip
+        com = preprocess(rec)
+        plain = segment_steps(com)
+        aware = segment_steps(com, surface_acc_m_s2=rec.ground_acc_m_s2)
+        assert plain.n_steps > 1.2 * true_steps, seed  # locked on the deck
+        assert abs(aware.n_steps - true_steps) <= 0.1 * true_steps, seed
 
 
 @pytest.mark.slow

@@ -433,6 +433,11 @@ def _paired_slope_change(base: pd.DataFrame, point: pd.DataFrame) -> dict[str, A
     fp = merged["pacing_hz"].to_numpy(float)
     for law in ("natural_frequency_hz", "damping_ratio"):
         diff = merged[f"{law}_point"].to_numpy(float) - merged[law].to_numpy(float)
+        if np.ptp(diff) == 0.0:
+            # Every record moved by the same amount (on a deck, C and K come from the
+            # transmissibility and most settings move nothing): no slope change, exactly.
+            out[law] = {"change": 0.0, "change_ci": [0.0, 0.0], "moves": False}
+            continue
         fit = _ols(fp, diff, np.array([1.5, 2.25]))[0]
         lo, hi = fit["slope_ci"]
         out[law] = {"change": fit["slope"], "change_ci": [lo, hi], "moves": not lo <= 0.0 <= hi}

@@ -23,6 +23,7 @@ IdentificationResult = Any
 
 __all__ = [
     "convergence_figure",
+    "draw_force_window",
     "force_figure",
     "identification_section",
     "plot_diagnostics",
@@ -70,25 +71,31 @@ def convergence_figure(result: IdentificationResult, truth: dict | None = None) 
     return fig
 
 
-def force_figure(result: IdentificationResult, *, window_s: float = 6.0) -> Figure:
-    """Reconstructed biomechanical force (seed fig. 9) and Fourier amplitudes (fig. 10)."""
-    fig = Figure(figsize=(10, 6), layout="constrained")
-    ax_t, ax_f = fig.subplots(2, 1)
+def draw_force_window(ax: Any, result: IdentificationResult, window_s: float) -> None:
+    """Draw the identified biomechanical force and M u'' over a window mid-record (fig. 9)."""
     p = result.problem
     force = result.biomechanical_force_n()
     t = p.time_s
     mid = t[0] + 0.5 * (t[-1] - t[0])
     keep = np.abs(t - mid) <= window_s / 2
-    ax_t.plot(t[keep], force[keep], lw=1.0, label="identified F_bio")
+    ax.plot(t[keep], force[keep], lw=1.0, label="identified F_bio")
     grf = result.mass_kg * p.absolute_y[keep, 2]
-    ax_t.plot(t[keep], grf, lw=0.8, alpha=0.7, label="M u'' (measured)")
+    ax.plot(t[keep], grf, lw=0.8, alpha=0.7, label="M u'' (measured)")
     for s in p.piece_starts[:-1]:
         if keep[s]:
-            ax_t.axvline(t[s], color="C3", lw=0.5, alpha=0.5)
-    ax_t.set_xlabel("time [s]")
-    ax_t.set_ylabel("force [N]")
-    ax_t.set_title("Reconstructed biomechanical force (step boundaries in red)")
-    ax_t.legend(fontsize=8)
+            ax.axvline(t[s], color="C3", lw=0.5, alpha=0.5)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("force [N]")
+    ax.set_title("Reconstructed biomechanical force (step boundaries in red)")
+    ax.legend(fontsize=8)
+
+
+def force_figure(result: IdentificationResult, *, window_s: float = 6.0) -> Figure:
+    """Reconstructed biomechanical force (seed fig. 9) and Fourier amplitudes (fig. 10)."""
+    fig = Figure(figsize=(10, 6), layout="constrained")
+    ax_t, ax_f = fig.subplots(2, 1)
+    p = result.problem
+    draw_force_window(ax_t, result, window_s)
     harmonics = np.arange(1, p.harmonics + 1)
     ax_f.bar(
         harmonics,

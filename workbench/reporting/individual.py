@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 
 from workbench.reporting.document import Section, Table
 from workbench.reporting.figures import save_figure
+from workbench.reporting.identification import draw_force_window
 
 __all__ = [
     "DECK_RECORD",
@@ -122,18 +123,7 @@ def force_amplitudes_figure(
     fig = Figure(figsize=(10, 6), layout="constrained")
     ax_t, ax_f = fig.subplots(2, 1)
     p = result.problem
-    t, force = p.time_s, result.biomechanical_force_n()
-    mid = t[0] + 0.5 * (t[-1] - t[0])
-    keep = np.abs(t - mid) <= window_s / 2
-    ax_t.plot(t[keep], force[keep], lw=1.0, label="identified biomechanical force")
-    ax_t.plot(t[keep], result.mass_kg * p.absolute_y[keep, 2], lw=0.8, alpha=0.7, label="M u''")
-    for s in p.piece_starts[:-1]:
-        if keep[s]:
-            ax_t.axvline(t[s], color="C3", lw=0.5, alpha=0.5)
-    ax_t.set_xlabel("time [s]")
-    ax_t.set_ylabel("force [N]")
-    ax_t.set_title("Reconstructed biomechanical force (footfalls in red)")
-    ax_t.legend(fontsize=8)
+    draw_force_window(ax_t, result, window_s)
     ci = result.conf_int()
     n = min(p.harmonics, 6)
     harmonics = np.arange(1, n + 1)
