@@ -51,8 +51,10 @@ def test_identify_runs_the_numerical_example_by_name(capsys):
     code = main(
         ["identify", "seed_numerical_example", "--method", "exact", "--no-force-check", "--json"]
     )
-    out = json.loads(capsys.readouterr().out)
+    text = capsys.readouterr().out
+    out = json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} is not JSON"))
     assert code == 0
+    assert out["posterior_sd"]["blf"][0] is None  # one piece: no spread over steps
     truth = datasets.load("seed_numerical_example").metadata["truth"]
     for key in ("stiffness_n_per_m", "damping_ns_per_m"):
         lo, hi = out["interval_95"][key]

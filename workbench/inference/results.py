@@ -449,7 +449,8 @@ class IdentificationResult:
         out.update({k: float(est[k]) for k in SCALAR_KEYS})
         out["blf"] = [float(x) for x in self.blf]
         out["posterior_sd"] = {k: float(sd[k]) for k in SCALAR_KEYS}
-        out["posterior_sd"]["blf"] = [float(x) for x in self.blf_sd]
+        # One piece has no step-to-step spread: null, not NaN, which strict JSON lacks.
+        out["posterior_sd"]["blf"] = [float(x) if np.isfinite(x) else None for x in self.blf_sd]
         out["interval_95"] = {k: list(ci[k]) for k in SCALAR_KEYS}
         out["identifiability"] = self.identifiability
         out["steps"] = int(self.problem.n_pieces)
