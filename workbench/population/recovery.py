@@ -207,9 +207,11 @@ class RecoveryResult:
         true parameters, the best any identification could fit), each ``{"laws": ...}`` or
         ``{"error": reason}``.
     verdict : dict
-        ``pipeline`` and ``flags_ignored``: :func:`law_verdicts` of each.
+        ``pipeline``, ``flags_ignored`` and ``sample``: :func:`law_verdicts` of each.
     records : dict
-        Counts (simulated, identified, failed, not identified) and per-record errors.
+        Counts (``simulated``, ``processed`` -- identified without error, flagged or not --,
+        ``failed``, ``not_identified``) and per-record errors (the band is the estimate
+        +- 1.96 posterior sd).
     out_dir : Path
         Where the files are.
     sensitivity : list of dict
