@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numpy as np
@@ -314,15 +315,17 @@ def test_piece_filter_chain_and_predictive_match_dense(walking_steps_problem) ->
 
 
 def test_chunked_piece_filter_equals_one_chunk(walking_steps_problem, monkeypatch) -> None:
-    # The piece filter works through a piece in chunks of samples (bounded memory); chunk
+    # The numpy loop works through a piece in chunks of samples (bounded memory); chunk
     # boundaries must not change anything, the predictive output included.
+    from workbench.inference import kalman_loop
+
     problem, c, k = walking_steps_problem
     pairs = ([c, 0.8 * c, 1.3 * c], [k, 1.1 * k, 0.7 * k])
-    whole = kf.record_loglik(problem, *pairs, return_pieces=True)
+    whole = kf.record_loglik(problem, *pairs, return_pieces=True, engine="numpy")
     x_mean, x_cov = kf.initial_state(problem, 3)
     first = kf.piece_filter(problem, 0, *pairs, x_mean, x_cov, predictive=True)
-    monkeypatch.setattr(kf, "_MAX_CHUNK", 7)
-    chunked = kf.record_loglik(problem, *pairs, return_pieces=True)
+    monkeypatch.setattr(kalman_loop, "_MAX_CHUNK", 7)
+    chunked = kf.record_loglik(problem, *pairs, return_pieces=True, engine="numpy")
     np.testing.assert_allclose(chunked.piece_loglik, whole.piece_loglik, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(chunked.theta_mean, whole.theta_mean, rtol=1e-10, atol=1e-9)
     np.testing.assert_allclose(chunked.theta_cov, whole.theta_cov, rtol=1e-10, atol=1e-12)
@@ -330,6 +333,41 @@ def test_chunked_piece_filter_equals_one_chunk(walking_steps_problem, monkeypatc
     again = kf.piece_filter(problem, 0, *pairs, x_mean, x_cov, predictive=True)
     np.testing.assert_allclose(again.predicted_obs, first.predicted_obs, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(again.partial_loglik, first.partial_loglik, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("discretisation", kf.DISCRETISATIONS)
+@pytest.mark.parametrize("process_noise", [False, True])
+def test_compiled_loop_equals_the_numpy_loop(
+    walking_steps_problem, discretisation: str, process_noise: bool
+) -> None:
+    # The compiled per-sample loop is the numpy loop's algebra in the same order: the whole
+    # record's likelihood, every piece's force posterior and hand-over state agree to
+    # rounding, with and without process noise on (u, u').
+    problem, c, k = walking_steps_problem
+    if process_noise:
+        problem = problem.with_noise(
+            dataclasses.replace(problem.noise, state_sd=0.01 * problem.rms[:2])
+        )
+    rng = np.random.default_rng(3)
+    pairs = (c * rng.uniform(0.3, 2.0, 6), k * rng.uniform(0.5, 1.5, 6))
+    ref = kf.record_loglik(
+        problem, *pairs, discretisation=discretisation, return_pieces=True, engine="numpy"
+    )
+    out = kf.record_loglik(problem, *pairs, discretisation=discretisation, return_pieces=True)
+    assert np.all(np.isfinite(ref.loglik))
+    np.testing.assert_allclose(out.piece_loglik, ref.piece_loglik, rtol=1e-11, atol=1e-8)
+    np.testing.assert_allclose(out.loglik, ref.loglik, rtol=1e-12)
+    scale = np.abs(ref.theta_mean).max()
+    np.testing.assert_allclose(out.theta_mean, ref.theta_mean, rtol=1e-9, atol=1e-11 * scale)
+    np.testing.assert_allclose(out.theta_cov, ref.theta_cov, rtol=1e-8, atol=1e-12 * scale**2)
+    np.testing.assert_allclose(out.x_mean, ref.x_mean, rtol=1e-8, atol=1e-13)
+    np.testing.assert_allclose(out.x_cov, ref.x_cov, rtol=1e-8, atol=1e-18)
+
+
+def test_unknown_engine_is_refused(walking_steps_problem) -> None:
+    problem, c, k = walking_steps_problem
+    with pytest.raises(UsageError, match="engine must be one of compiled, numpy"):
+        kf.record_loglik(problem, [c], [k], engine="fortran")
 
 
 # -- physics ------------------------------------------------------------------------------

@@ -1,13 +1,11 @@
 """Exact likelihood of the linear-Gaussian SMD model given (C, K), batched over many (C, K).
 
-Why this module is long: it is one algorithm, the batched structured piece filter, whose
-parts share one buffer layout and one chunking of the samples -- ``_filter_piece``, the 2x2
-Riccati recursion it drives sample by sample (``_Riccati``), the gains and whitening of a
-chunk of samples at once (``_step_coefficients``), the Cholesky solves of the piece's Gram
-matrix and the one-step predictive -- plus :func:`record_loglik`, which runs it over the
-pieces, and about 75 lines are this docstring (the algebra the code implements). The
-discretisation (:mod:`workbench.inference.discretisation`), the result containers
-(:mod:`workbench.inference.kalman_results`) and the readable reference filter
+The module runs the batched structured piece filter: ``_filter_piece`` prepares a piece,
+runs its per-sample loop (compiled, :mod:`workbench.inference._kalman_kernel`, or the numpy
+reference with the one-step predictive, :mod:`workbench.inference.kalman_loop`), then
+integrates the piece's force coefficients out; :func:`record_loglik` runs it over the
+pieces. The discretisation (:mod:`workbench.inference.discretisation`), the result
+containers (:mod:`workbench.inference.kalman_results`) and the readable reference filter
 (:mod:`workbench.inference.kalman_reference`) live in their own modules.
 
 Given damping C and stiffness K the model of :mod:`workbench.inference.problem` is
@@ -35,11 +33,9 @@ Structure used for speed (:func:`piece_filter`, :func:`record_loglik`)
     prior makes ``J >= I``, so its Cholesky factor never fails and is well conditioned).
     The posterior of ``eta`` given the piece is ``N(J^-1 h, J^-1)``, that of ``theta``
     ``N(mu + s J^-1 h, diag(s) J^-1 diag(s))``. Per sample the work is a 2x2 Riccati step
-    on (B,) arrays (it does not depend on the data, so the Kalman gains and whitening
-    factors of a chunk of samples are then formed at once) and two batched small matrix
-    products that update the sensitivity and the mean together and whiten the innovation;
-    the sums over k are batched matrix products over chunks of samples (``_filter_piece``
-    explains the layout).
+    (it does not depend on the data) and one small product that updates the sensitivity and
+    the mean together and whitens the innovation; the sums over k are a Gram matrix of the
+    whitened rows (``_filter_piece`` explains the layout).
 
 Time convention at piece boundaries
     The problem's generative model drives the interval ``t_k -> t_{k+1}`` with the force of
@@ -72,7 +68,7 @@ Noise
     one that crosses a piece boundary), ``v_k ~ N(0, diag(obs_sd^2))``. The covariance
     update keeps the 2x2 covariance symmetric and positive definite by construction (a
     product form for u and u', a rank-one downdate bounded by the u'' noise, see
-    ``_Riccati``; the filtered state at a piece's end uses the Joseph form); S and J are
+    ``kalman_loop._Riccati``; the filtered state at a piece's end uses the Joseph form); S and J are
     factorised by Cholesky, never inverted.
 """
 
@@ -84,6 +80,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
+from workbench.inference import _kalman_kernel as _kernel
 from workbench.inference.discretisation import (
     DISCRETISATIONS,
     _check_discretisation,
@@ -91,6 +88,12 @@ from workbench.inference.discretisation import (
     _dynamics,
     _pairs,
     transition_matrices,
+)
+from workbench.inference.kalman_loop import (
+    SampleLoop,
+    cholesky_solve_lower,
+    sample_loop,
+    solve_lower_transposed,
 )
 from workbench.inference.kalman_reference import (
     dense_kalman_loglik,
@@ -119,14 +122,6 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
-# The piece filter works through a piece in chunks of samples whose whitened-sensitivity
-# buffer holds about this many doubles (2 MB): small enough to stay in the processor's
-# cache between the per-sample products that write it and the Gram product that reads it
-# (a whole-piece buffer of several MB made the per-sample copies many times slower), and
-# independent of the piece's length.
-_CHUNK_DOUBLES = 1 << 18
-# At most this many samples per chunk (small batches: the per-chunk work is amortised).
-_MAX_CHUNK = 64
 
 
 # -- the batched piece filter -------------------------------------------------------------
@@ -161,6 +156,7 @@ def piece_filter(
     *,
     discretisation: str = "foh",
     predictive: bool = False,
+    engine: str = "compiled",
 ) -> PieceResult:
     """Filter one piece for B (C, K) pairs with the piece's ``theta`` integrated out.
 
@@ -182,6 +178,9 @@ def piece_filter(
     predictive : bool, default False
         Also return the one-step-ahead predictive means and partial log-likelihoods of the
         piece's samples (costs memory ``B L m^2`` doubles and B L Cholesky factorisations).
+    engine : {"compiled", "numpy"}
+        ``"compiled"`` runs the per-sample loop compiled; ``"numpy"`` runs the numpy
+        reference (:mod:`workbench.inference.kalman_loop`), equal to rounding.
 
     Returns
     -------
@@ -198,8 +197,19 @@ def piece_filter(
             f"x_mean and x_cov must have shapes ({c.size}, 2) and ({c.size}, 2, 2), got "
             f"{xm.shape} and {xc.shape}"
         )
+    _check_engine(engine)
     dyn = _dynamics(problem, c, k, discretisation)
-    return _filter_piece(problem, int(piece), dyn, xm, xc, _force_input(problem), predictive)
+    return _filter_piece(
+        problem, int(piece), dyn, xm, xc, _force_input(problem), predictive, engine=engine
+    )
+
+
+ENGINES = ("compiled", "numpy")
+
+
+def _check_engine(engine: str) -> None:
+    if engine not in ENGINES:
+        raise UsageError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
 
 
 class _ForceInput(NamedTuple):
@@ -228,8 +238,13 @@ def _filter_piece(
     force: _ForceInput,
     predictive: bool,
     want_theta_cov: bool = True,
+    engine: str = "compiled",
 ) -> PieceResult:
     """Run the structured filter over one piece (see the module docstring for the algebra).
+
+    ``engine="compiled"`` runs the per-sample loop in :mod:`workbench.inference._kalman_kernel`;
+    ``"numpy"`` (and every call with ``predictive``) runs the numpy loop of
+    :mod:`workbench.inference.kalman_loop`, the reference it is tested and benchmarked against.
 
     Implementation. With ``V_k`` the sensitivity and ``x_k`` the mean at ``eta = 0`` of the
     predicted state at sample k, let ``Vt_k = V_k - Gamma1 b_k s`` and
@@ -247,12 +262,9 @@ def _filter_piece(
     whitened innovation (``S_k = L_k L_k^T``).
 
     The 5 x 4 coefficients depend on the data only through ``y_k`` and the 2x2 covariance
-    recursion not at all, so each chunk of samples runs (1) the covariance recursion alone on
-    (B,) arrays (:class:`_Riccati`), (2) the coefficients of all its samples at once,
-    vectorised over samples and particles (:func:`_step_coefficients`), and (3) the
-    per-sample products. The Gram matrix ``sum_k W_k^T W_k`` holds ``J - I`` (top-left
-    m x m block), ``-h`` (last column) and ``sum_k |L_k^-1 e0_k|^2`` (corner); it is one
-    batched matrix product per chunk.
+    recursion not at all. The Gram matrix ``sum_k W_k^T W_k`` holds ``J - I`` (top-left
+    m x m block), ``-h`` (last column) and ``sum_k |L_k^-1 e0_k|^2`` (corner). Both loops
+    (compiled and numpy) form it from chunks of whitened rows, one matrix product a chunk.
     """
     start = int(problem.piece_starts[piece])
     end = int(problem.piece_starts[piece + 1])
@@ -269,78 +281,56 @@ def _filter_piece(
     g1 = dyn.g1
     end_share = dyn.has_end_share
 
-    chunk = max(1, min(length, _MAX_CHUNK, max(4, _CHUNK_DOUBLES // (b * 3 * n1))))
-    # Two (B, 8, m + 1) blocks used in turn: rows 0-2 W, rows 3-4 X, row 5 the force input
-    # [b_k s | F0_k], row 6 the constant [0 | 1]. The product reads rows 3-6 of one block and
-    # writes rows 0-4 of the other (numpy would copy an operand that overlaps the output).
-    blocks = (np.zeros((b, 4, n1)), np.zeros((b, 4, n1)))
-    for blk in blocks:
-        blk[:, 3, m] = 1.0
-    cur = blocks[0]
-    cf = np.empty((5, 4, chunk, b))  # coefficients (row, column, sample, pair)
-    wbuf = np.empty((b, chunk, 3, n1))  # each particle's rows contiguous for the Gram
-    gram = np.zeros((b, n1, n1))
-    sum_log_diag = np.zeros(b)
-    if predictive:
-        w_all = np.empty((b, length, 3, n1))
-        l_all = np.empty((length, 6, b))
-
     # Initial X: [V | x] at the piece's first sample minus its end share (module docstring).
-    cur[:, 0, m] = xm[:, 0]
-    cur[:, 1, m] = xm[:, 1]
+    x_start = np.zeros((b, 2, n1))
+    x_start[:, 0, m] = xm[:, 0]
+    x_start[:, 1, m] = xm[:, 1]
     if piece == 0 and end_share:
-        cur[:, 0, :m] = -g1[0][:, None] * bs[start]
-        cur[:, 1, :m] = -g1[1][:, None] * bs[start]
-        cur[:, 0, m] -= g1[0] * fb[start]
-        cur[:, 1, m] -= g1[1] * fb[start]
-    p = np.empty((3, b))  # predicted (p00, p01, p11)
-    p[0] = xc[:, 0, 0]
-    p[1] = 0.5 * (xc[:, 0, 1] + xc[:, 1, 0])
-    p[2] = xc[:, 1, 1]
-    riccati = _Riccati(dyn, r, np.square(problem.noise.state_sd))
+        x_start[:, 0, :m] = -g1[0][:, None] * bs[start]
+        x_start[:, 1, :m] = -g1[1][:, None] * bs[start]
+        x_start[:, 0, m] -= g1[0] * fb[start]
+        x_start[:, 1, m] -= g1[1] * fb[start]
+    p_start = np.empty((3, b))  # predicted (p00, p01, p11)
+    p_start[0] = xc[:, 0, 0]
+    p_start[1] = 0.5 * (xc[:, 0, 1] + xc[:, 1, 0])
+    p_start[2] = xc[:, 1, 1]
     inputs = np.empty((length, n1))
     inputs[:, :m] = bs[start:end]
     inputs[:, m] = fb[start:end]
-
-    for c0 in range(0, length, chunk):
-        cl = min(chunk, length - c0)
-        # (1) Predicted covariance of every sample of the chunk and of the one after it.
-        pk = np.empty((3, cl + 1, b))
-        pk[:, 0] = p
-        for i in range(cl):
-            riccati.step(pk[:, i], pk[:, i + 1])
-        p = pk[:, cl]
-        # (2) The coefficients of every sample of the chunk.
-        fac = _step_coefficients(pk[:, :cl], y[start + c0 : start + c0 + cl], dyn, r, mass, cf)
-        # One copy per chunk into (sample, pair, row, column): each sample's coefficients are
-        # then a contiguous (B, 5, 4) operand (numpy's batched product is slower on a strided one).
-        cf_s = np.ascontiguousarray(cf[:, :, :cl].transpose(2, 3, 0, 1))
-        sum_log_diag += np.sum(np.log(fac[0] * fac[3] * fac[5]), axis=0)
-        if predictive:
-            l_all[c0 : c0 + cl] = fac[:6].transpose(1, 0, 2)
-        # (3) Sensitivity and mean, sample by sample.
-        for i in range(cl):
-            nxt_blk = blocks[1] if cur is blocks[0] else blocks[0]
-            cur[:, 2] = inputs[c0 + i]
-            coef = cf_s[i]  # (B, 5, 4)
-            np.matmul(coef[:, :3], cur, out=wbuf[:, i])
-            np.matmul(coef[:, 3:], cur, out=nxt_blk[:, :2])
-            if c0 + i == length - 1:
-                last_x = cur[:, :2].copy()
-            cur = nxt_blk
-        w = wbuf[:, :cl].reshape(b, 3 * cl, n1)
-        gram += w.transpose(0, 2, 1) @ w
-        if predictive:
-            w_all[:, c0 : c0 + cl] = wbuf[:, :cl]
+    state_var = np.square(problem.noise.state_sd)
+    if predictive or engine == "numpy":
+        loop = sample_loop(
+            y[start:end], inputs, dyn, r, state_var, mass, x_start, p_start, predictive
+        )
+    else:
+        loop = SampleLoop(
+            *_kernel.filter_piece(
+                np.ascontiguousarray(y[start:end]),
+                inputs,
+                k_m,
+                c_m,
+                dyn.phi,
+                dyn.g0,
+                g1,
+                dyn.h_in,
+                end_share,
+                r,
+                state_var,
+                mass,
+                x_start,
+                p_start,
+            )
+        )
+    gram, sum_log_diag = loop.gram, loop.sum_log_diag
 
     # Filtered state at the last sample: the Kalman update of [V | x] there (Joseph form).
     kk = end - 1
     last_p = np.empty((b, 2, 2))
-    last_p[:, 0, 0] = pk[0, cl - 1]
-    last_p[:, 0, 1] = last_p[:, 1, 0] = pk[1, cl - 1]
-    last_p[:, 1, 1] = pk[2, cl - 1]
-    gain = fac[6:12, cl - 1].T.reshape(b, 2, 3)  # K[j, c] at the last sample
-    state = last_x
+    last_p[:, 0, 0] = loop.p_last[0]
+    last_p[:, 0, 1] = last_p[:, 1, 0] = loop.p_last[1]
+    last_p[:, 1, 1] = loop.p_last[2]
+    gain = loop.gain_last
+    state = loop.x_last
     if end_share:
         state += g1.T[:, :, None] * inputs[length - 1][None, None, :]
     h_mat = np.zeros((b, 3, 2))
@@ -352,8 +342,9 @@ def _filter_piece(
     filtered[:, :, m] += (gain @ y[kk, :, None])[:, :, 0] - gain[:, :, 2] * (fb[kk] / mass)
     p_filt = a_mat @ last_p @ a_mat.transpose(0, 2, 1)
     p_filt += (gain * r) @ gain.transpose(0, 2, 1)
+    p = loop.p_next
     has_next = end < problem.n_samples
-    nxt = cur[:, :2] if has_next else filtered
+    nxt = loop.x_next if has_next else filtered
     p_next = np.empty((b, 2, 2))
     p_next[:, 0, 0] = p[0]
     p_next[:, 0, 1] = p_next[:, 1, 0] = p[1]
@@ -364,7 +355,8 @@ def _filter_piece(
     rhs = [gram[:, :m, m:], filtered[:, :, :m].transpose(0, 2, 1), nxt[:, :, :m].transpose(0, 2, 1)]
     if want_theta_cov:
         rhs.append(np.broadcast_to(np.eye(m), (b, m, m)))
-    chol, solved = _cholesky_solve_lower(gram[:, :m, :m], np.concatenate(rhs, axis=2))
+    solve = cholesky_solve_lower if engine == "numpy" else _kernel.cholesky_solve_lower
+    chol, solved = solve(np.ascontiguousarray(gram[:, :m, :m]), np.concatenate(rhs, axis=2))
     half = -solved[:, :, 0]  # L_J^-1 h
     logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
     loglik = (
@@ -380,7 +372,8 @@ def _filter_piece(
         eta = np.einsum("bij,bi->bj", chol_inv, half)
         theta_cov = (chol_inv.transpose(0, 2, 1) @ chol_inv) * sd[None, :, None] * sd[None, None, :]
     else:
-        eta = _solve_lower_transposed(chol, half)
+        lower_t = solve_lower_transposed if engine == "numpy" else _kernel.solve_lower_transposed
+        eta = lower_t(chol, np.ascontiguousarray(half))
         theta_cov = None
     theta_mean = problem.force_prior.mean_n + eta * sd
 
@@ -400,7 +393,8 @@ def _filter_piece(
 
     predicted = partial = None
     if predictive:
-        predicted, partial = _predictive(y[start:end], w_all, l_all, m)
+        assert loop.w_all is not None and loop.l_all is not None
+        predicted, partial = _predictive(y[start:end], loop.w_all, loop.l_all, m)
     return PieceResult(
         loglik=loglik,
         x_mean_end=x_mean_end,
@@ -412,186 +406,6 @@ def _filter_piece(
         predicted_obs=predicted,
         partial_loglik=partial,
     )
-
-
-class _Riccati:
-    """The 2x2 covariance recursion of ``(u, u')`` given (C, K), one sample at a time.
-
-    ``step(p, out)`` maps the predicted covariance ``(p00, p01, p11)`` (rows of a (3, B)
-    array) of one sample to that of the next. The update by u and u' together (they are
-    observed directly, with diagonal noise ``D = diag(r0, r1)``) is written as a product,
-    ``P_f = D (P + D)^-1 P``, with entries ``r0 (det P + p00 r1) / det(P + D)``,
-    ``r0 r1 p01 / det(P + D)`` and ``r1 (det P + p11 r0) / det(P + D)``, which stay positive
-    definite whatever the rounding; the update by u'' subtracts ``(P h)(P h)^T / s2`` with
-    ``s2 = h P h^T + r2 > h P h^T``; the prediction ``Phi P Phi^T + Q`` is one 3x3 map of
-    the three distinct entries per pair. A covariance stored by its three distinct entries
-    stays exactly symmetric. About 25 operations on (B,) arrays per sample: this loop is the
-    only per-sample work that does not involve m.
-    """
-
-    def __init__(self, dyn: _Dynamics, obs_var: FloatArray, state_var: FloatArray) -> None:
-        r0, r1, r2 = (float(v) for v in obs_var)
-        self.r01 = r0 * r1
-        self.r2 = r2
-        self.cross = np.array([[r1], [r0]])  # (p00, p11) * cross = (p00 r1, p11 r0)
-        self.scale = np.array([[r0], [r0 * r1], [r1]])
-        self.h = np.stack([-dyn.k_m, -dyn.c_m])  # (2, B): the u'' row of H
-        f00, f01, f10, f11 = dyn.phi[0, 0], dyn.phi[0, 1], dyn.phi[1, 0], dyn.phi[1, 1]
-        # (Phi P Phi^T)[i] = sum_j pred[i, j] p[j] over the entries (p00, p01, p11).
-        self.pred = np.array(
-            [
-                [f00 * f00, 2.0 * f00 * f01, f01 * f01],
-                [f00 * f10, f00 * f11 + f01 * f10, f01 * f11],
-                [f10 * f10, 2.0 * f10 * f11, f11 * f11],
-            ]
-        )
-        q0, q1 = (float(v) for v in state_var)
-        self.q = np.array([[q0], [0.0], [q1]]) if (q0 or q1) else None
-        self.g = np.empty((3, dyn.k_m.size))
-
-    def step(self, p: FloatArray, out: FloatArray) -> None:
-        """Write the predicted covariance of the next sample into ``out`` (3, B)."""
-        g = self.g
-        # u and u': g = (det P + p00 r1, p01, det P + p11 r0) * (r0, r0 r1, r1) / det(P + D).
-        det_p = p[0] * p[2] - p[1] * p[1]
-        diag = p[0::2] * self.cross
-        np.add(diag, det_p, out=g[0::2])
-        g[1] = p[1]
-        g *= self.scale / (g[0] + diag[1] + self.r01)
-        # u'': h = (-K/M, -C/M), hp = P h^T, P -= hp hp^T / (h P h^T + r2).
-        h = self.h
-        hp = h[0] * g[0:2] + h[1] * g[1:3]
-        u = hp / (h[0] * hp[0] + h[1] * hp[1] + self.r2)
-        g[0:2] -= hp[0] * u
-        g[2] -= hp[1] * u[1]
-        # Prediction.
-        np.sum(self.pred * g, axis=1, out=out)
-        if self.q is not None:
-            out += self.q
-
-
-def _step_coefficients(
-    pk: FloatArray,
-    y: FloatArray,
-    dyn: _Dynamics,
-    obs_var: FloatArray,
-    mass: float,
-    cf: FloatArray,
-) -> FloatArray:
-    """Coefficients of the per-sample product of :func:`_filter_piece` for L samples at once.
-
-    Parameters
-    ----------
-    pk : ndarray, shape (3, L, B)
-        Predicted covariance ``(p00, p01, p11)`` of each sample.
-    y : ndarray, shape (L, 3)
-        The samples' observations.
-    dyn : _Dynamics
-        Per-pair constants.
-    obs_var : ndarray, shape (3,)
-        Observation noise variances.
-    mass : float
-        Body mass [kg].
-    cf : ndarray, shape (5, 4, >= L, B)
-        Filled with ``[L^-1 [H | H Gamma1 + d | -y_k] ; T_k | ct_k | Phi K_k y_k]`` of each
-        sample (row, column, sample, pair).
-
-    Returns
-    -------
-    ndarray, shape (12, L, B)
-        ``(l00, l10, l20, l11, l21, l22)``, the Cholesky factor of ``S_k``, then the gain
-        ``K[j, c]`` in the order ``K00, K01, K02, K10, K11, K12``.
-    """
-    r0, r1, r2 = (float(v) for v in obs_var)
-    k_m, c_m, phi, g0, g1 = dyn.k_m, dyn.c_m, dyn.phi, dyn.g0, dyn.g1
-    h_in = dyn.h_in
-    n = pk.shape[1]
-    out = np.empty((12, n, k_m.size))
-    l00, l10, l20, l11, l21, l22 = out[:6]
-    # Rows of H P, each (2, L, B) over the column j: (p00, p01), (p01, p11), -(K P0 + C P1)/M.
-    hp0 = pk[0:2]
-    hp1 = pk[1:3]
-    hp2 = -(k_m * hp0 + c_m * hp1)
-    np.sqrt(hp0[0] + r0, out=l00)
-    i00 = 1.0 / l00
-    np.multiply(hp0[1], i00, out=l10)
-    np.multiply(hp2[0], i00, out=l20)
-    np.sqrt(hp1[1] + r1 - l10 * l10, out=l11)
-    i11 = 1.0 / l11
-    np.multiply(hp2[1] - l20 * l10, i11, out=l21)
-    np.sqrt(r2 - k_m * hp2[0] - c_m * hp2[1] - l20 * l20 - l21 * l21, out=l22)
-    i22 = 1.0 / l22
-    i10 = -l10 * i00 * i11
-    i21 = -l21 * i11 * i22
-    i20 = -(l20 * i00 + l21 * i10) * i22
-    # Gain K = P H^T S^-1: Z = L^-1 H P, K^T = L^-T Z (each row of Z indexed by j).
-    z0 = i00 * hp0
-    z1 = i10 * hp0 + i11 * hp1
-    z2 = i20 * hp0 + i21 * hp1 + i22 * hp2
-    gain = out[6:].reshape(2, 3, n, -1)  # gain[j, c] = K[j, c]
-    np.multiply(i22, z2, out=gain[:, 2])
-    np.add(i11 * z1, i21 * z2, out=gain[:, 1])
-    np.add(i00 * z0 + i10 * z1, i20 * z2, out=gain[:, 0])
-    # Phi K (index i of each is the row of Phi), T = Phi (I - K H), ct, Phi K y.
-    phi0, phi1 = phi[:, 0, None], phi[:, 1, None]  # columns of Phi, (2, 1, B)
-    phk = [phi0 * gain[0, c] + phi1 * gain[1, c] for c in range(3)]
-    t0 = cf[3:, 0, :n]
-    t1 = cf[3:, 1, :n]
-    ct = cf[3:, 2, :n]
-    np.subtract(phi0, phk[0], out=t0)
-    t0 += phk[2] * k_m
-    np.subtract(phi1, phk[1], out=t1)
-    t1 += phk[2] * c_m
-    np.subtract(g0[:, None], phk[2] / mass, out=ct)
-    if dyn.has_end_share:
-        ct += t0 * g1[0, None] + t1 * g1[1, None]
-    y0, y1, y2 = y[:, 0, None], y[:, 1, None], y[:, 2, None]
-    cf[3:, 3, :n] = phk[0] * y0 + phk[1] * y1 + phk[2] * y2
-    cf[0, 0, :n] = i00
-    cf[0, 1, :n] = 0.0
-    cf[0, 2, :n] = i00 * h_in[0]
-    cf[0, 3, :n] = -i00 * y0
-    cf[1, 0, :n] = i10
-    cf[1, 1, :n] = i11
-    cf[1, 2, :n] = i10 * h_in[0] + i11 * h_in[1]
-    cf[1, 3, :n] = -(i10 * y0 + i11 * y1)
-    np.subtract(i20, i22 * k_m, out=cf[2, 0, :n])
-    np.subtract(i21, i22 * c_m, out=cf[2, 1, :n])
-    cf[2, 2, :n] = i20 * h_in[0] + i21 * h_in[1] + i22 * h_in[2]
-    cf[2, 3, :n] = -(i20 * y0 + i21 * y1 + i22 * y2)
-    return out
-
-
-def _cholesky_solve_lower(gram_j: FloatArray, rhs: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Cholesky factor ``L_J`` of ``J = I + gram_j`` and ``L_J^-1 rhs``, batched over B.
-
-    numpy has no batched triangular solve and a general ``solve`` costs far more than the
-    factorisation, so the forward substitution runs row by row, vectorised over the batch
-    and the right-hand sides, with the batch on the last axis (contiguous operands).
-    """
-    m = gram_j.shape[1]
-    chol = np.asarray(np.linalg.cholesky(gram_j + np.eye(m)), dtype=np.float64)
-    lt = np.ascontiguousarray(chol.transpose(1, 2, 0))  # (m, m, B)
-    rt = rhs.transpose(1, 2, 0)  # (m, k, B)
-    inv_diag = 1.0 / np.diagonal(lt).T  # (m, B)
-    out = np.empty(rt.shape)
-    np.multiply(rt[0], inv_diag[0], out=out[0])
-    for i in range(1, m):
-        acc = np.einsum("jb,jkb->kb", lt[i, :i], out[:i])
-        np.multiply(rt[i] - acc, inv_diag[i], out=out[i])
-    return chol, out.transpose(2, 0, 1)
-
-
-def _solve_lower_transposed(chol: FloatArray, rhs: FloatArray) -> FloatArray:
-    """Solve ``L^T x = rhs`` for batched lower-triangular L (B, m, m), rhs (B, m)."""
-    m = chol.shape[1]
-    lt = np.ascontiguousarray(chol.transpose(2, 1, 0))  # lt[j, i] = L[i, j], (m, m, B)
-    rt = rhs.T
-    x = np.empty(rt.shape)
-    for i in range(m - 1, -1, -1):
-        acc = np.einsum("jb,jb->b", lt[i, i + 1 :], x[i + 1 :])
-        np.divide(rt[i] - acc, lt[i, i], out=x[i])
-    return x.T
 
 
 def _predictive(
@@ -641,6 +455,7 @@ def record_loglik(
     *,
     discretisation: str = "foh",
     return_pieces: bool = False,
+    engine: str = "compiled",
 ) -> RecordResult:
     """Exact ``log p(y | C, K)`` of the whole record for B (C, K) pairs.
 
@@ -654,6 +469,8 @@ def record_loglik(
         See :func:`transition_matrices`.
     return_pieces : bool, default False
         Also return each piece's force-coefficient posterior and filtered end state.
+    engine : {"compiled", "numpy"}
+        The per-sample loop compiled (default) or the numpy reference, equal to rounding.
 
     Returns
     -------
@@ -668,6 +485,7 @@ def record_loglik(
     """
     c, k = _pairs(damping, stiffness)
     _check_discretisation(discretisation)
+    _check_engine(engine)
     dyn = _dynamics(problem, c, k, discretisation)
     force = _force_input(problem)
     b, n_p, m = c.size, problem.n_pieces, problem.n_coefficients
@@ -679,7 +497,7 @@ def record_loglik(
         x_cov = np.empty((b, n_p, 2, 2))
     xm, xc = initial_state(problem, b)
     for j in range(n_p):
-        res = _filter_piece(problem, j, dyn, xm, xc, force, False, return_pieces)
+        res = _filter_piece(problem, j, dyn, xm, xc, force, False, return_pieces, engine)
         piece_ll[:, j] = res.loglik
         xm, xc = res.x_mean_next, res.x_cov_next
         if return_pieces:
