@@ -90,7 +90,6 @@ from workbench.inference.discretisation import (
     transition_matrices,
 )
 from workbench.inference.kalman_loop import (
-    SampleLoop,
     cholesky_solve_lower,
     sample_loop,
     solve_lower_transposed,
@@ -217,16 +216,92 @@ class _ForceInput(NamedTuple):
 
     base: FloatArray  # (N,) force at the prior mean [N]
     scaled: FloatArray  # (N, m) basis row times the prior sd [N per unit eta]
+    inputs: FloatArray  # (N, m + 1) [scaled | base], the compiled filter's input rows
+
+
+# The force input of the last few problems: noise estimates, grids and Metropolis moves call
+# the filter hundreds of times on one record, and forming the (N, m + 1) input costs as much
+# as filtering a few pairs. Keyed by the identity of what it is made of, which the entry
+# keeps alive so that an identity is never reused while it is cached.
+_INPUT_CACHE: list[tuple[tuple[object, ...], _ForceInput]] = []
+_INPUT_CACHE_SIZE = 8
 
 
 def _force_input(problem: IdentificationProblem) -> _ForceInput:
     fp = problem.force_prior
-    base = problem.basis @ fp.mean_n
     known = problem.surface_force_n
+    key = (problem.basis, fp.mean_n, fp.sd_n, known)
+    for cached_key, value in _INPUT_CACHE:
+        if all(a is b for a, b in zip(cached_key, key, strict=True)):
+            return value
+    base = problem.basis @ fp.mean_n
     if known is not None:
         # A moving surface's inertial load is a known input (problem module docstring).
         base = base + known
-    return _ForceInput(base, problem.basis * fp.sd_n)
+    scaled = problem.basis * fp.sd_n
+    inputs = np.ascontiguousarray(np.column_stack([scaled, base]))
+    value = _ForceInput(base, scaled, inputs)
+    _INPUT_CACHE.insert(0, (key, value))
+    del _INPUT_CACHE[_INPUT_CACHE_SIZE:]
+    return value
+
+
+def _pair_constants(dyn: _Dynamics) -> FloatArray:
+    """Return the compiled filter's per-pair constants (``_kalman_kernel.PAIR_CONSTANTS``)."""
+    phi = dyn.phi
+    return np.ascontiguousarray(
+        np.column_stack(
+            [
+                dyn.k_m,
+                dyn.c_m,
+                phi[0, 0],
+                phi[0, 1],
+                phi[1, 0],
+                phi[1, 1],
+                dyn.g0[0],
+                dyn.g0[1],
+                dyn.g1[0],
+                dyn.g1[1],
+                dyn.h_in[0],
+                dyn.h_in[1],
+                dyn.h_in[2],
+            ]
+        )
+    )
+
+
+def _run_compiled(
+    problem: IdentificationProblem,
+    dyn: _Dynamics,
+    force: _ForceInput,
+    first: int,
+    stop: int,
+    xm: FloatArray,
+    xc: FloatArray,
+    want_theta_cov: bool,
+) -> tuple[
+    FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, FloatArray
+]:
+    """Run pieces ``first .. stop - 1`` compiled; the kernel's outputs, theta in N."""
+    loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _kernel.filter_record(
+        problem.y,
+        force.inputs,
+        problem.piece_starts,
+        first,
+        stop,
+        _pair_constants(dyn),
+        dyn.has_end_share,
+        np.square(problem.noise.obs_sd),
+        np.square(problem.noise.state_sd),
+        problem.mass_kg,
+        np.ascontiguousarray(xm, dtype=np.float64),
+        np.ascontiguousarray(xc, dtype=np.float64),
+        want_theta_cov,
+    )
+    fp = problem.force_prior
+    theta_mean = fp.mean_n + eta * fp.sd_n
+    theta_cov = eta_cov * fp.sd_n[:, None] * fp.sd_n[None, :] if want_theta_cov else None
+    return loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next
 
 
 def _filter_piece(
@@ -266,6 +341,19 @@ def _filter_piece(
     m x m block), ``-h`` (last column) and ``sum_k |L_k^-1 e0_k|^2`` (corner). Both loops
     (compiled and numpy) form it from chunks of whitened rows, one matrix product a chunk.
     """
+    if engine != "numpy" and not predictive:
+        loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next = _run_compiled(
+            problem, dyn, force, piece, piece + 1, xm, xc, want_theta_cov
+        )
+        return PieceResult(
+            loglik=loglik[:, 0],
+            x_mean_end=xm_end[:, 0],
+            x_cov_end=xc_end[:, 0],
+            x_mean_next=xm_next,
+            x_cov_next=xc_next,
+            theta_mean=theta_mean[:, 0],
+            theta_cov=None if theta_cov is None else theta_cov[:, 0],
+        )
     start = int(problem.piece_starts[piece])
     end = int(problem.piece_starts[piece + 1])
     length = end - start
@@ -298,29 +386,7 @@ def _filter_piece(
     inputs[:, :m] = bs[start:end]
     inputs[:, m] = fb[start:end]
     state_var = np.square(problem.noise.state_sd)
-    if predictive or engine == "numpy":
-        loop = sample_loop(
-            y[start:end], inputs, dyn, r, state_var, mass, x_start, p_start, predictive
-        )
-    else:
-        loop = SampleLoop(
-            *_kernel.filter_piece(
-                np.ascontiguousarray(y[start:end]),
-                inputs,
-                k_m,
-                c_m,
-                dyn.phi,
-                dyn.g0,
-                g1,
-                dyn.h_in,
-                end_share,
-                r,
-                state_var,
-                mass,
-                x_start,
-                p_start,
-            )
-        )
+    loop = sample_loop(y[start:end], inputs, dyn, r, state_var, mass, x_start, p_start, predictive)
     gram, sum_log_diag = loop.gram, loop.sum_log_diag
 
     # Filtered state at the last sample: the Kalman update of [V | x] there (Joseph form).
@@ -355,8 +421,7 @@ def _filter_piece(
     rhs = [gram[:, :m, m:], filtered[:, :, :m].transpose(0, 2, 1), nxt[:, :, :m].transpose(0, 2, 1)]
     if want_theta_cov:
         rhs.append(np.broadcast_to(np.eye(m), (b, m, m)))
-    solve = cholesky_solve_lower if engine == "numpy" else _kernel.cholesky_solve_lower
-    chol, solved = solve(np.ascontiguousarray(gram[:, :m, :m]), np.concatenate(rhs, axis=2))
+    chol, solved = cholesky_solve_lower(gram[:, :m, :m], np.concatenate(rhs, axis=2))
     half = -solved[:, :, 0]  # L_J^-1 h
     logdet = 2.0 * np.sum(np.log(np.diagonal(chol, axis1=1, axis2=2)), axis=1)
     loglik = (
@@ -372,8 +437,7 @@ def _filter_piece(
         eta = np.einsum("bij,bi->bj", chol_inv, half)
         theta_cov = (chol_inv.transpose(0, 2, 1) @ chol_inv) * sd[None, :, None] * sd[None, None, :]
     else:
-        lower_t = solve_lower_transposed if engine == "numpy" else _kernel.solve_lower_transposed
-        eta = lower_t(chol, np.ascontiguousarray(half))
+        eta = solve_lower_transposed(chol, half)
         theta_cov = None
     theta_mean = problem.force_prior.mean_n + eta * sd
 
@@ -489,6 +553,18 @@ def record_loglik(
     dyn = _dynamics(problem, c, k, discretisation)
     force = _force_input(problem)
     b, n_p, m = c.size, problem.n_pieces, problem.n_coefficients
+    if engine == "compiled":
+        run = _run_compiled(problem, dyn, force, 0, n_p, *initial_state(problem, b), return_pieces)
+        if not return_pieces:
+            return RecordResult(loglik=run[0].sum(axis=1), piece_loglik=run[0])
+        return RecordResult(
+            loglik=run[0].sum(axis=1),
+            piece_loglik=run[0],
+            theta_mean=run[1],
+            theta_cov=run[2],
+            x_mean=run[3],
+            x_cov=run[4],
+        )
     piece_ll = np.empty((b, n_p))
     if return_pieces:
         theta_mean = np.empty((b, n_p, m))
