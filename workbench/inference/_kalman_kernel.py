@@ -98,6 +98,9 @@ def _sample_loop(
     p11 = p[2]
     gram[:, :] = 0.0
     acc_log = 0.0
+    # log det L_k summed through a running product, its log taken when it leaves [1e-200,
+    # 1e200] and at the end: one logarithm per many samples instead of one per sample.
+    acc_prod = 1.0
     filled = 0
     for k in range(length):
         # Whitening of the innovation: Cholesky factor of S = H P H^T + R.
@@ -115,7 +118,10 @@ def _sample_loop(
         i10 = -l10 * i00 * i11
         i21 = -l21 * i11 * i22
         i20 = -(l20 * i00 + l21 * i10) * i22
-        acc_log += math.log(l00 * l11 * l22)
+        acc_prod *= l00 * l11 * l22
+        if not 1e-200 < acc_prod < 1e200:
+            acc_log += math.log(acc_prod)
+            acc_prod = 1.0
         # Gain K = P H^T S^-1, row j: K[j] from z = L^-1 H P.
         z00 = i00 * p00
         z01 = i00 * p01
@@ -220,7 +226,7 @@ def _sample_loop(
     p[0] = p00
     p[1] = p01
     p[2] = p11
-    return acc_log
+    return acc_log + math.log(acc_prod)
 
 
 @_jit
