@@ -1,0 +1,115 @@
+"""The compiled Kalman filter against the numpy filter it replaced, on a realistic record.
+
+Usage: ``python analyses/benchmarks/kalman_engine.py [--record seed_individual]
+[--pairs 1 16 256] [--repeats 3] [--json]`` (main environment, one pinned core by default).
+
+Every method, the noise estimate and the checks spend their time in
+:func:`workbench.inference.kalman.record_loglik` (or its piece-by-piece form inside the
+rbpf). This benchmark times the exact log-likelihood of a whole embedded record (default the
+30 s, 200 Hz walk ``seed_individual`` under the identification defaults: footfall pieces,
+n = 10, the noise estimated from the record) for batches of B (C, K) pairs with
+``engine="compiled"`` (the default) and ``engine="numpy"`` (the previous implementation,
+kept in :mod:`workbench.inference.kalman_loop` as the pinned reference), interleaved repeat
+by repeat, best CPU time of each. It prints microseconds per pair and sample, the ratio, and
+the largest difference of the two log-likelihoods (rounding).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+from _cores import affinity, pin_cores
+
+_CORES = pin_cores(sys.argv)
+
+import numpy as np  # noqa: E402  (after the thread-pool settings above)
+
+import workbench as wb  # noqa: E402
+from workbench.inference.identify import _Prepared, _set_noise, compile_problem  # noqa: E402
+from workbench.inference.kalman import record_loglik  # noqa: E402
+from workbench.inference.settings import IdentifySettings  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--record", default="seed_individual", help="embedded record name")
+    ap.add_argument("--pairs", type=int, nargs="+", default=[1, 16, 256])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--cores", type=int, default=1, help="CPUs to pin to (read before numpy)")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+
+    settings = IdentifySettings()
+    record = wb.datasets.load(args.record)
+    problem = compile_problem(_Prepared.of(record, settings), settings)
+    problem, _ = _set_noise(problem, settings)
+    rng = np.random.default_rng(0)
+    box = problem.prior
+    largest = max(args.pairs)
+    damping, stiffness = box.sample(largest, rng)
+    record_loglik(problem, damping[:2], stiffness[:2])  # compile (or load the cache) first
+    rows = []
+    for b in args.pairs:
+        best = {"compiled": np.inf, "numpy": np.inf}
+        out = {}
+        for _ in range(args.repeats):
+            for engine in ("compiled", "numpy"):
+                t0 = time.process_time()
+                out[engine] = record_loglik(problem, damping[:b], stiffness[:b], engine=engine)
+                best[engine] = min(best[engine], time.process_time() - t0)
+        per = {e: 1e6 * best[e] / (b * problem.n_samples) for e in best}
+        rows.append(
+            {
+                "pairs": b,
+                "compiled_cpu_s": best["compiled"],
+                "numpy_cpu_s": best["numpy"],
+                "compiled_us_per_pair_sample": per["compiled"],
+                "numpy_us_per_pair_sample": per["numpy"],
+                "speedup": best["numpy"] / best["compiled"],
+                "max_abs_loglik_difference": float(
+                    np.max(np.abs(out["compiled"].loglik - out["numpy"].loglik))
+                ),
+            }
+        )
+    report = {
+        "benchmark": "kalman_engine",
+        "reference": "record_loglik(engine='numpy'), the numpy filter the compiled one replaced",
+        "record": args.record,
+        "problem": {
+            "n_samples": problem.n_samples,
+            "n_pieces": problem.n_pieces,
+            "n_coefficients": problem.n_coefficients,
+        },
+        "environment": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "cpus": affinity(),
+            "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None,
+        },
+        "rows": rows,
+    }
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    load = report["environment"]["load_average"]
+    print(
+        f"{args.record}: {problem.n_samples} samples, {problem.n_pieces} pieces, "
+        f"m = {problem.n_coefficients}; CPUs {affinity()}, load {load}"
+    )
+    print(f"{'pairs':>6} {'compiled s':>11} {'numpy s':>9} {'us/pair-sample':>15} {'x numpy':>8}")
+    for r in rows:
+        print(
+            f"{r['pairs']:>6} {r['compiled_cpu_s']:>11.4f} {r['numpy_cpu_s']:>9.4f} "
+            f"{r['compiled_us_per_pair_sample']:>7.3f}/{r['numpy_us_per_pair_sample']:<7.3f} "
+            f"{r['speedup']:>8.1f}  (max |d loglik| {r['max_abs_loglik_difference']:.1e})"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
