@@ -13,6 +13,7 @@ from scipy.stats import multivariate_normal
 
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
+from workbench.inference.harmonic_statistics import harmonic_statistics
 from workbench.inference.problem import (
     ForcePrior,
     IdentificationProblem,
@@ -362,6 +363,84 @@ def test_compiled_loop_equals_the_numpy_loop(
     np.testing.assert_allclose(out.theta_cov, ref.theta_cov, rtol=1e-8, atol=1e-12 * scale**2)
     np.testing.assert_allclose(out.x_mean, ref.x_mean, rtol=1e-8, atol=1e-13)
     np.testing.assert_allclose(out.x_cov, ref.x_cov, rtol=1e-8, atol=1e-18)
+
+
+@pytest.mark.parametrize("discretisation", ["foh", "zoh", "euler"])
+@pytest.mark.parametrize("time_basis", ["step_phase", "absolute"])
+def test_harmonic_route_equals_brute_force_joint_gaussian(
+    discretisation: str, time_basis: str
+) -> None:
+    # Without process noise the record's harmonic statistics carry the exact likelihood:
+    # the whole record's density and every piece's force posterior against the joint
+    # Gaussian written out sample by sample.
+    base = _tiny_problem(seed=7)
+    noise = dataclasses.replace(base.noise, state_sd=np.zeros(2))
+    basis = base.basis
+    if time_basis == "absolute":
+        basis = FourierForce(base.harmonics).basis(base.time_s, base.pacing_hz * 1.13)
+    problem = dataclasses.replace(base, noise=noise, basis=basis, time_basis=time_basis)
+    a, mean_z, var_z = _joint_map(problem, DAMPING, STIFFNESS, discretisation)
+    z = mean_z + np.sqrt(var_z) * np.random.default_rng(8).standard_normal(mean_z.size)
+    problem = dataclasses.replace(problem, y=(a @ z).reshape(problem.n_samples, 3))
+    assert harmonic_statistics(problem) is not None
+    pairs = np.array([[DAMPING, STIFFNESS], [600.0, 20000.0], [1400.0, 9000.0]])
+    res = kf.record_loglik(
+        problem, pairs[:, 0], pairs[:, 1], discretisation=discretisation, return_pieces=True
+    )
+    y = problem.y.ravel()
+    m, n_p = problem.n_coefficients, problem.n_pieces
+    for b, (c, k) in enumerate(pairs):
+        a, mean_z, var_z = _joint_map(problem, c, k, discretisation)
+        cov = (a * var_z) @ a.T
+        expected = multivariate_normal(a @ mean_z, cov).logpdf(y)
+        assert res.loglik[b] == pytest.approx(expected, abs=1e-8, rel=1e-12)
+        cols = slice(2 + (n_p - 1) * m, 2 + n_p * m)
+        cross = (a * var_z)[:, cols]
+        gain = np.linalg.solve(cov, cross).T
+        np.testing.assert_allclose(
+            res.theta_mean[b, -1], mean_z[cols] + gain @ (y - a @ mean_z), rtol=1e-8, atol=1e-8
+        )
+        np.testing.assert_allclose(
+            res.theta_cov[b, -1], np.diag(var_z[cols]) - gain @ cross, rtol=1e-7, atol=1e-8
+        )
+
+
+@pytest.mark.parametrize("discretisation", kf.DISCRETISATIONS)
+def test_harmonic_route_equals_the_kalman_loop(
+    walking_steps_problem, discretisation: str, monkeypatch
+) -> None:
+    # On a realistic walk the two compiled routes agree to rounding: likelihoods, every
+    # piece's force posterior, the filtered states and one piece's hand-over.
+    problem, c, k = walking_steps_problem
+    problem = problem.with_noise(dataclasses.replace(problem.noise, state_sd=np.zeros(2)))
+    assert harmonic_statistics(problem) is not None
+    rng = np.random.default_rng(4)
+    pairs = (c * rng.uniform(0.3, 2.0, 5), k * rng.uniform(0.5, 1.5, 5))
+    fast = kf.record_loglik(problem, *pairs, discretisation=discretisation, return_pieces=True)
+    x_mean, x_cov = fast.x_mean[:, 2], fast.x_cov[:, 2]
+    piece = kf.piece_filter(problem, 3, *pairs, x_mean, x_cov, discretisation=discretisation)
+    monkeypatch.setattr(kf, "_HARMONIC", False)
+    slow = kf.record_loglik(problem, *pairs, discretisation=discretisation, return_pieces=True)
+    ref = kf.piece_filter(problem, 3, *pairs, x_mean, x_cov, discretisation=discretisation)
+    np.testing.assert_allclose(fast.piece_loglik, slow.piece_loglik, rtol=1e-10, atol=1e-7)
+    scale = np.abs(slow.theta_mean).max()
+    np.testing.assert_allclose(fast.theta_mean, slow.theta_mean, rtol=1e-7, atol=1e-9 * scale)
+    np.testing.assert_allclose(fast.theta_cov, slow.theta_cov, rtol=1e-6, atol=1e-10 * scale**2)
+    np.testing.assert_allclose(fast.x_mean, slow.x_mean, rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(fast.x_cov, slow.x_cov, rtol=1e-6, atol=1e-16)
+    for name in ("loglik", "x_mean_next", "x_cov_next", "theta_mean"):
+        np.testing.assert_allclose(
+            getattr(piece, name), getattr(ref, name), rtol=1e-7, atol=1e-12, err_msg=name
+        )
+
+
+def test_harmonic_statistics_decline_a_basis_that_is_not_harmonic(walking_steps_problem) -> None:
+    problem, _, _ = walking_steps_problem
+    extra = np.column_stack([problem.basis, problem.y[:, 0]])  # an effect's column
+    assert harmonic_statistics(dataclasses.replace(problem, basis=extra)) is None
+    bent = problem.basis.copy()
+    bent[5, 3] += 1e-6  # one sample off its harmonic
+    assert harmonic_statistics(dataclasses.replace(problem, basis=bent)) is None
 
 
 def test_unknown_engine_is_refused(walking_steps_problem) -> None:

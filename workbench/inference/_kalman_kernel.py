@@ -91,6 +91,7 @@ def _sample_loop(
     hi0 = prm[10]
     hi1 = prm[11]
     hi2 = prm[12]
+    inv_mass = 1.0 / mass
     xa = xs[0]
     xb = xs[1]
     p00 = p[0]
@@ -146,8 +147,8 @@ def _sample_loop(
         t01 = f01 - pk01 + pk02 * cm
         t10 = f10 - pk10 + pk12 * km
         t11 = f11 - pk11 + pk12 * cm
-        ct0 = g00 - pk02 / mass
-        ct1 = g01 - pk12 / mass
+        ct0 = g00 - pk02 * inv_mass
+        ct1 = g01 - pk12 * inv_mass
         if end_share:
             ct0 += t00 * g10 + t01 * g11
             ct1 += t10 * g10 + t11 * g11
@@ -208,15 +209,15 @@ def _sample_loop(
         s0 = d0 + det_p
         s1 = p01
         s2 = d1 + det_p
-        denom = s0 + d1 + r01
-        s0 *= r0 / denom
-        s1 *= r01 / denom
-        s2 *= r1 / denom
+        inv_denom = 1.0 / (s0 + d1 + r01)
+        s0 *= r0 * inv_denom
+        s1 *= r01 * inv_denom
+        s2 *= r1 * inv_denom
         hq0 = -km * s0 - cm * s1
         hq1 = -km * s1 - cm * s2
-        s_u = -km * hq0 - cm * hq1 + r2
-        u0 = hq0 / s_u
-        u1 = hq1 / s_u
+        inv_s = 1.0 / (-km * hq0 - cm * hq1 + r2)
+        u0 = hq0 * inv_s
+        u1 = hq1 * inv_s
         s0 -= hq0 * u0
         s1 -= hq0 * u1
         s2 -= hq1 * u1

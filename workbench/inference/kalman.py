@@ -80,6 +80,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
+from workbench.inference import _harmonic_kernel as _harmonic
 from workbench.inference import _kalman_kernel as _kernel
 from workbench.inference.discretisation import (
     DISCRETISATIONS,
@@ -89,6 +90,7 @@ from workbench.inference.discretisation import (
     _pairs,
     transition_matrices,
 )
+from workbench.inference.harmonic_statistics import harmonic_statistics
 from workbench.inference.kalman_loop import (
     cholesky_solve_lower,
     sample_loop,
@@ -204,6 +206,8 @@ def piece_filter(
 
 
 ENGINES = ("compiled", "numpy")
+# The compiled engine's harmonic route (module switch for tests and benchmarks).
+_HARMONIC = True
 
 
 def _check_engine(engine: str) -> None:
@@ -282,7 +286,40 @@ def _run_compiled(
 ) -> tuple[
     FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, FloatArray
 ]:
-    """Run pieces ``first .. stop - 1`` compiled; the kernel's outputs, theta in N."""
+    """Run pieces ``first .. stop - 1`` compiled; the kernel's outputs, theta in N.
+
+    Without process noise or a known surface load, and with a harmonic force basis (the
+    identification defaults), the pieces run from the record's harmonic sufficient
+    statistics (:mod:`workbench.inference._harmonic_kernel`); otherwise, and with
+    ``_HARMONIC = False``, through the Kalman loop (:mod:`workbench.inference._kalman_kernel`).
+    Both are exact and agree to rounding.
+    """
+    fp = problem.force_prior
+    xm = np.ascontiguousarray(xm, dtype=np.float64)
+    xc = np.ascontiguousarray(xc, dtype=np.float64)
+    stats = None
+    if _HARMONIC and problem.surface_force_n is None and not np.any(problem.noise.state_sd):
+        stats = harmonic_statistics(problem)
+    if stats is not None:
+        loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _harmonic.filter_record(
+            problem.y,
+            problem.piece_starts,
+            first,
+            stop,
+            _pair_constants(dyn),
+            dyn.has_end_share,
+            np.square(problem.noise.obs_sd),
+            problem.mass_kg,
+            xm,
+            xc,
+            want_theta_cov,
+            *stats,
+            np.ascontiguousarray(fp.mean_n, dtype=np.float64),
+            np.ascontiguousarray(fp.sd_n, dtype=np.float64),
+        )
+        theta_mean = fp.mean_n + eta * fp.sd_n
+        theta_cov = eta_cov * fp.sd_n[:, None] * fp.sd_n[None, :] if want_theta_cov else None
+        return loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next
     loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _kernel.filter_record(
         problem.y,
         force.inputs,
@@ -294,8 +331,8 @@ def _run_compiled(
         np.square(problem.noise.obs_sd),
         np.square(problem.noise.state_sd),
         problem.mass_kg,
-        np.ascontiguousarray(xm, dtype=np.float64),
-        np.ascontiguousarray(xc, dtype=np.float64),
+        xm,
+        xc,
         want_theta_cov,
     )
     fp = problem.force_prior
