@@ -1,4 +1,4 @@
-"""The compiled Kalman filter against the numpy filter it replaced, on a realistic record.
+"""The compiled likelihood routes against the numpy filter they replaced, on a realistic record.
 
 Usage: ``python analyses/benchmarks/kalman_engine.py [--record seed_individual]
 [--pairs 1 16 256] [--repeats 3] [--json]`` (main environment, one pinned core by default).
@@ -7,11 +7,18 @@ Every method, the noise estimate and the checks spend their time in
 :func:`workbench.inference.kalman.record_loglik` (or its piece-by-piece form inside the
 rbpf). This benchmark times the exact log-likelihood of a whole embedded record (default the
 30 s, 200 Hz walk ``seed_individual`` under the identification defaults: footfall pieces,
-n = 10, the noise estimated from the record) for batches of B (C, K) pairs with
-``engine="compiled"`` (the default) and ``engine="numpy"`` (the previous implementation,
-kept in :mod:`workbench.inference.kalman_loop` as the pinned reference), interleaved repeat
-by repeat, best CPU time of each. It prints microseconds per pair and sample, the ratio, and
-the largest difference of the two log-likelihoods (rounding).
+n = 10, the noise estimated from the record) for batches of B (C, K) pairs by three routes,
+interleaved repeat by repeat, best CPU time of each:
+
+- ``harmonic``: the default compiled route, from the record's harmonic sufficient
+  statistics (:mod:`workbench.inference._harmonic_kernel`);
+- ``kalman``: the compiled Kalman loop (:mod:`workbench.inference._kalman_kernel`), which
+  the default takes with process noise, effects or a known surface load;
+- ``numpy``: ``engine="numpy"``, the numpy filter both replaced, kept in
+  :mod:`workbench.inference.kalman_loop` as the pinned reference.
+
+It prints microseconds per pair and sample, the ratios to numpy, and the largest difference
+of each compiled route's log-likelihoods from numpy's (rounding).
 """
 
 from __future__ import annotations
@@ -30,6 +37,7 @@ _CORES = pin_cores(sys.argv)
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
 import workbench as wb  # noqa: E402
+from workbench.inference import kalman  # noqa: E402
 from workbench.inference.identify import _Prepared, _set_noise, compile_problem  # noqa: E402
 from workbench.inference.kalman import record_loglik  # noqa: E402
 from workbench.inference.settings import IdentifySettings  # noqa: E402
@@ -53,32 +61,38 @@ def main(argv: list[str] | None = None) -> int:
     largest = max(args.pairs)
     damping, stiffness = box.sample(largest, rng)
     record_loglik(problem, damping[:2], stiffness[:2])  # compile (or load the cache) first
+    routes = ("harmonic", "kalman", "numpy")
+
+    def run(route: str, b: int) -> np.ndarray:
+        kalman._HARMONIC = route == "harmonic"
+        engine = "numpy" if route == "numpy" else "compiled"
+        return record_loglik(problem, damping[:b], stiffness[:b], engine=engine).loglik
+
+    for route in routes[:2]:
+        run(route, 2)  # compile (or load the cache) first
     rows = []
     for b in args.pairs:
-        best = {"compiled": np.inf, "numpy": np.inf}
+        best = dict.fromkeys(routes, np.inf)
         out = {}
         for _ in range(args.repeats):
-            for engine in ("compiled", "numpy"):
+            for route in routes:
                 t0 = time.process_time()
-                out[engine] = record_loglik(problem, damping[:b], stiffness[:b], engine=engine)
-                best[engine] = min(best[engine], time.process_time() - t0)
-        per = {e: 1e6 * best[e] / (b * problem.n_samples) for e in best}
-        rows.append(
-            {
-                "pairs": b,
-                "compiled_cpu_s": best["compiled"],
-                "numpy_cpu_s": best["numpy"],
-                "compiled_us_per_pair_sample": per["compiled"],
-                "numpy_us_per_pair_sample": per["numpy"],
-                "speedup": best["numpy"] / best["compiled"],
-                "max_abs_loglik_difference": float(
-                    np.max(np.abs(out["compiled"].loglik - out["numpy"].loglik))
-                ),
-            }
-        )
+                out[route] = run(route, b)
+                best[route] = min(best[route], time.process_time() - t0)
+        row: dict[str, float] = {"pairs": b}
+        for route in routes:
+            row[f"{route}_cpu_s"] = best[route]
+            row[f"{route}_us_per_pair_sample"] = 1e6 * best[route] / (b * problem.n_samples)
+        for route in routes[:2]:
+            row[f"{route}_speedup"] = best["numpy"] / best[route]
+            row[f"{route}_max_abs_loglik_difference"] = float(
+                np.max(np.abs(out[route] - out["numpy"]))
+            )
+        rows.append(row)
+    kalman._HARMONIC = True
     report = {
         "benchmark": "kalman_engine",
-        "reference": "record_loglik(engine='numpy'), the numpy filter the compiled one replaced",
+        "reference": "record_loglik(engine='numpy'), the numpy filter the compiled routes replaced",
         "record": args.record,
         "problem": {
             "n_samples": problem.n_samples,
@@ -101,12 +115,17 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.record}: {problem.n_samples} samples, {problem.n_pieces} pieces, "
         f"m = {problem.n_coefficients}; CPUs {affinity()}, load {load}"
     )
-    print(f"{'pairs':>6} {'compiled s':>11} {'numpy s':>9} {'us/pair-sample':>15} {'x numpy':>8}")
+    print(
+        f"{'pairs':>6} {'harmonic us':>12} {'kalman us':>10} {'numpy us':>9} "
+        f"{'x numpy (harmonic, kalman)':>27}  max |d loglik| (per pair and sample)"
+    )
     for r in rows:
         print(
-            f"{r['pairs']:>6} {r['compiled_cpu_s']:>11.4f} {r['numpy_cpu_s']:>9.4f} "
-            f"{r['compiled_us_per_pair_sample']:>7.3f}/{r['numpy_us_per_pair_sample']:<7.3f} "
-            f"{r['speedup']:>8.1f}  (max |d loglik| {r['max_abs_loglik_difference']:.1e})"
+            f"{r['pairs']:>6} {r['harmonic_us_per_pair_sample']:>12.3f} "
+            f"{r['kalman_us_per_pair_sample']:>10.3f} {r['numpy_us_per_pair_sample']:>9.3f} "
+            f"{r['harmonic_speedup']:>15.1f} {r['kalman_speedup']:>10.1f}  "
+            f"{r['harmonic_max_abs_loglik_difference']:.1e}, "
+            f"{r['kalman_max_abs_loglik_difference']:.1e}"
         )
     return 0
 
