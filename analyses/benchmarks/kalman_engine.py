@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(
         f"{'pairs':>6} {'harmonic us':>12} {'kalman us':>10} {'numpy us':>9} "
-        f"{'x numpy (harmonic, kalman)':>27}  max |d loglik| (per pair and sample)"
+        f"{'x numpy (harmonic, kalman)':>27}  max |d loglik| vs numpy"
     )
     for r in rows:
         print(

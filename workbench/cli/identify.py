@@ -97,14 +97,14 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         parents=[out_opts, record_options()],
         help="identify stiffness, damping and biomechanical force of a record",
         description="Identify the SMD pedestrian model (K, C, natural frequency, damping ratio, "
-        "BLFs) of a record with the Rao-Blackwellised particle filter (default), the "
-        "seed-faithful particle filter or the exact marginal posterior, with posterior sd and "
+        "BLFs) of a record from the exact marginal posterior (default), the Rao-Blackwellised "
+        "particle filter or the seed-faithful particle filter, with posterior sd and "
         "an identifiability report. Flags override the --config TOML file.",
     )
     p.add_argument(
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"
     )
-    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default rbpf)")
+    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
     p.add_argument("--particles", type=int, metavar="N", help="particles (rbpf 256, pf 4000)")
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
     p.add_argument(

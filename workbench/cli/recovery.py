@@ -108,7 +108,7 @@ def add_recovery_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--scheduler", metavar="ADDRESS", help="run on a Dask distributed scheduler instead"
     )
     p.add_argument("--resume", action="store_true", help="continue a recovery in DIR")
-    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default rbpf)")
+    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
     p.add_argument("--particles", type=int, metavar="N", help="particles per record")
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
     p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")

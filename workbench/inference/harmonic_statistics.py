@@ -69,9 +69,9 @@ def harmonic_statistics(problem: IdentificationProblem) -> HarmonicStatistics | 
 def _compute(problem: IdentificationProblem) -> HarmonicStatistics | None:
     basis, y, starts = problem.basis, problem.y, problem.piece_starts
     m = basis.shape[1]
-    n_h = (m - 1) // 2
+    n_h = int(problem.harmonics)
     if m != 1 + 2 * n_h:
-        return None
+        return None  # effect columns beside the harmonics
     n_p = starts.size - 1
     omega = np.zeros(n_p)
     gram = np.empty((n_p, m, m))

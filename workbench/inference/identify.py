@@ -26,8 +26,8 @@ The steps, with the decisions they take:
 5. with effects in the model, their columns join the force basis as coefficients shared by
    the whole record (:mod:`workbench.inference.effect_terms`), and the result's
    ``extra["effects"]`` (``--json`` ``effects``) reports their posterior;
-6. run the method (:mod:`workbench.inference.methods`: ``RBPF`` by default, ``PF``
-   seed-faithful, ``Exact``);
+6. run the method (:mod:`workbench.inference.methods`: ``Exact`` by default, ``RBPF``,
+   ``PF`` seed-faithful);
 7. assess identifiability from the posterior: contraction against the prior, C-K correlation
    and the joint correlation of C and K with the force coefficients, then the force-model
    check and the prior-edge and collapse checks, each of which can only downgrade it.
@@ -252,7 +252,7 @@ def identify(
         The pedestrian model to identify: force harmonics, time basis, pieces, pacing and
         effects (``SMDModel(harmonics=6) + GaitAsymmetry()``); default ``SMDModel()``.
     method : Method or str, optional
-        ``RBPF(...)`` (default), ``PF(...)``, ``Exact(...)`` or one of their names.
+        ``Exact(...)`` (default), ``RBPF(...)``, ``PF(...)`` or one of their names.
     seed : int, optional
         Seed of every random draw (default 0).
     settings : IdentifySettings, optional

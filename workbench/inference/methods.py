@@ -370,7 +370,7 @@ _BY_NAME: dict[str, type[Method]] = {"rbpf": RBPF, "pf": PF, "exact": Exact}
 
 
 def as_method(method: Method | str | None, **options: Any) -> Method:
-    """Return a method object from an object, a name or None (the default, RBPF).
+    """Return a method object from an object, a name or None (the default, Exact).
 
     Parameters
     ----------
@@ -386,7 +386,7 @@ def as_method(method: Method | str | None, **options: Any) -> Method:
     opts = {k: v for k, v in options.items() if v is not None}
     if isinstance(method, Method):
         return method.replace(**opts) if opts else method
-    name = "rbpf" if method is None else method
+    name = "exact" if method is None else method
     try:
         cls = _BY_NAME[name]
     except (KeyError, TypeError):

@@ -18,8 +18,11 @@ Precedence: command-line flags over the TOML file (``--config FILE``) over the d
 below. The defaults are the seed study's settings (docs/science.md 3) except where the workbench
 documents a better choice:
 
-- ``method = "rbpf"``: the Rao-Blackwellised filter is exact for this model and needs far
-  fewer particles than the seed's plain particle filter (``"pf"``, kept seed-faithful).
+- ``method = "exact"``: the exact posterior of (C, K) from the marginal likelihood, which
+  the record's harmonic sufficient statistics make cheaper than any particle filter of it
+  (docs/validation/benchmarks.md) and which carries no Monte Carlo error; ``"rbpf"`` (the
+  Rao-Blackwellised filter, exact given (C, K), with per-step traces) and ``"pf"`` (the
+  seed's plain particle filter, kept seed-faithful) are the filters it cross-checks.
 - ``obs_noise = "auto"``: the observation noise is estimated from the record (maximum
   marginal likelihood); ``"seed"`` is the seed's 10 % of the RMS of u, u', u''.
 - ``prior = "modal"``: a (C, K) box from natural frequency 1-4 Hz and damping ratio
@@ -65,7 +68,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError, check_seed
-from workbench.inference.methods import METHODS, PF, RBPF, Method, as_method
+from workbench.inference.methods import METHODS, PF, RBPF, Exact, Method, as_method
 from workbench.inference.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
 from workbench.models.smd import SURFACE_MODELS, SMDModel
@@ -276,7 +279,7 @@ def _method_from_flat(flat: dict[str, Any]) -> Method:
 
 
 _FLAT_DEFAULTS: dict[str, Any] = {
-    "method": "rbpf",
+    "method": "exact",
     "particles": None,
     "harmonics": 10,
     "pacing_hz": None,
@@ -307,7 +310,7 @@ class IdentifySettings:
     model : SMDModel, optional
         The pedestrian model (its mass comes from the record when unset).
     method : Method, optional
-        ``RBPF()`` (default), ``PF()`` or ``Exact()``.
+        ``Exact()`` (default), ``RBPF()`` or ``PF()``.
     noise : NoiseSettings, optional
         Noise model and priors.
     preprocessing : Preprocessing, optional
@@ -328,7 +331,7 @@ class IdentifySettings:
     """
 
     model: SMDModel = dataclasses.field(default_factory=SMDModel)
-    method: Method = dataclasses.field(default_factory=RBPF)
+    method: Method = dataclasses.field(default_factory=Exact)
     noise: NoiseSettings = dataclasses.field(default_factory=NoiseSettings)
     preprocessing: Preprocessing = dataclasses.field(default_factory=Preprocessing)
     seed: int = 0
