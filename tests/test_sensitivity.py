@@ -251,3 +251,34 @@ def test_pooled_effects_and_manifest_records(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path.parent)
     relative = load_study_records(f"{tmp_path.name}/m.csv")
     assert [k for k, _ in relative] == ["a.csv", "b.csv"]
+
+
+@pytest.mark.parametrize("as_json", [False, True])
+def test_cli_progress_reaches_the_runner(tmp_path, capsys, monkeypatch, as_json):
+    # A study runs for minutes: typed as is, the command shows a bar on stderr as runs finish;
+    # under --json it stays silent so that stderr holds nothing but warnings and errors.
+    import workbench.sensitivity.study as study_module
+
+    seen = []
+    real = study_module.run_tasks
+
+    def spy(tasks, **kwargs):
+        seen.append(kwargs["progress"])
+        return real(tasks, **kwargs)
+
+    monkeypatch.setattr(study_module, "run_tasks", spy)
+    _key, record = demo_record()
+    path = tmp_path / "walk.csv"
+    save_record(record, path)
+    args = [
+        "sensitivity", str(path), "--factors", "obs_noise_ddu", "--levels", "obs_noise_ddu=1,3",
+        "--replicates", "1", "--method", "rbpf", "--particles", "16", "--harmonics", "2",
+        "--pieces", "whole", "--time-basis", "absolute", "--pacing", "1.8", "--highpass-hz",
+        "0", "--observe", "acc", "--no-force-check", "--out", str(tmp_path / "out"),
+    ]  # fmt: skip
+    code = main(args + (["--json"] if as_json else []))
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert seen == [not as_json]
+    # The bar counts the runs (1 factor x 2 levels x 1 replicate) as they finish.
+    assert ("sensitivity: " in captured.err and "2/2" in captured.err) is not as_json
