@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -282,3 +283,30 @@ def test_cli_progress_reaches_the_runner(tmp_path, capsys, monkeypatch, as_json)
     assert seen == [not as_json]
     # The bar counts the runs (1 factor x 2 levels x 1 replicate) as they finish.
     assert ("sensitivity: " in captured.err and "2/2" in captured.err) is not as_json
+
+
+def test_cli_takes_an_embedded_record_by_name(tmp_path, capsys, monkeypatch):
+    # Like every one-record command, sensitivity resolves an embedded record's name (a
+    # local file of that name would win); the study then runs on the embedded file.
+    import workbench.records.collection as collection
+
+    seen = []
+    real = collection.load_study_records
+
+    def spy(path, **kwargs):
+        seen.append(Path(path).name)
+        return real(path, **kwargs)
+
+    monkeypatch.setattr(collection, "load_study_records", spy)
+    monkeypatch.chdir(tmp_path)
+    args = [
+        "sensitivity", "seed_individual", "--factors", "obs_noise_ddu", "--levels",
+        "obs_noise_ddu=1,3", "--replicates", "1", "--method", "rbpf", "--particles", "16",
+        "--harmonics", "2", "--pieces", "whole", "--time-basis", "absolute", "--pacing", "1.75",
+        "--observe", "acc", "--no-force-check", "--out", str(tmp_path / "out"), "--json",
+    ]  # fmt: skip
+    code = main(args)
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert seen == ["seed_individual.csv"]
+    assert json.loads(captured.out)["runs"]

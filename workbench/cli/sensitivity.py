@@ -40,8 +40,13 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
     base = _settings(args)
     factors = parse_factors(args.factors)
     levels = parse_levels(args.levels or [], base, factors)
+    from workbench import datasets
+
+    # An embedded record by name, as every one-record command takes it (a local file of
+    # that name wins, datasets.named).
+    name = datasets.named(args.record)
     records = load_study_records(
-        args.record,
+        args.record if name is None else datasets.dataset_path(name),
         mass_kg=args.mass,
         pacing_hz=args.pacing,
         subject=args.subject,
