@@ -14,18 +14,19 @@ Every timing runs in a fresh child process of this script (``--child``), with th
 libraries' thread pools capped at one thread, so that the revision under test and the
 previous revision are measured alike.
 
-``--record``: ``workbench.identify(record)`` with its defaults (noise estimate, rbpf,
-identifiability and force-model checks; a deck record takes the deck route) on the embedded
-30 s, 200 Hz walks ``seed_individual`` (rigid floor) and ``seed_individual_deck`` (deck), the
-child pinned to one core. Printed: the first call in a fresh process (``cold``: compiled
-kernels loaded from numba's cache, first-use imports) and the best of ``--repeats`` further
-calls (``warm``), wall and CPU seconds; ``|z|``, the distance of the posterior mean of C and K
-from the exact posterior mean (``method="exact"``, the grid's moments, not its draws) in
-exact posterior sd. Named references of the same run: the seed-faithful particle filter
-(``method="pf"``; on the deck record on the joint time history, ``--pf-deck-surface``,
-because ``identify`` would otherwise route it through the deck like the default) and the
-previous implementation (``--reference-revision``, checked out into a temporary git
-worktree and run by the same child code).
+``--record``: ``workbench.identify(record)`` with its defaults (noise estimate, the exact
+posterior, identifiability and force-model checks; a deck record takes the deck route) on the
+embedded 30 s, 200 Hz walks ``seed_individual`` (rigid floor) and ``seed_individual_deck``
+(deck), the child pinned to one core. Printed: the first call in a fresh process (``cold``:
+compiled kernels loaded from numba's cache, first-use imports) and the best of ``--repeats``
+further calls (``warm``), wall and CPU seconds; ``|z|``, the distance of the posterior mean of
+C and K from the exact posterior mean (``method="exact"``, the grid's moments, not its draws)
+in exact posterior sd. Named references of the same run: the Rao-Blackwellised filter
+(``method="rbpf"``, the default before the exact posterior became cheap), the seed-faithful
+particle filter (``method="pf"``; on the deck record on the joint time history,
+``--pf-deck-surface``, because ``identify`` would otherwise route it through the deck like the
+default) and the previous implementation (``--reference-revision``, checked out into a
+temporary git worktree and run by the same child code).
 
 ``--batch``: ``--batch-records`` (default 64) realistic records (the recovery study's
 simulated walkers, half on a vibrating deck, half on a rigid floor, 20-35 s, 100-200 Hz) are
@@ -132,6 +133,8 @@ def _child_record(args: argparse.Namespace) -> dict[str, Any]:
     methods = set(args.methods.split(","))
     if "exact" in methods:
         calls["exact"] = lambda: wb.identify(record, method="exact")
+    if "rbpf" in methods:
+        calls["rbpf"] = lambda: wb.identify(record, method="rbpf")
     if "pf" in methods:
         # identify() sends a deck record through the transmissibility whatever the method:
         # the seed-faithful filter is only a reference on the time history.
@@ -286,7 +289,7 @@ def part_record(args: argparse.Namespace, revision: Revision | None) -> dict[str
         new = _spawn(
             [
                 *("record", "--name", name, "--repeats", str(args.repeats)),
-                *("--methods", "exact,pf", "--pf-deck-surface", args.pf_deck_surface),
+                *("--methods", "exact,rbpf,pf", "--pf-deck-surface", args.pf_deck_surface),
             ]
         )
         exact = new["runs"]["exact"]
@@ -333,7 +336,7 @@ def _record_table(part: dict[str, Any], revision: str | None) -> list[str]:
             cw = f"{row['wall_s'][0]:>10.2f}" if row["cold"] else f"{'-':>10}"
             cc = f"{row['cpu_s'][0]:>9.2f}" if row["cold"] else f"{'-':>9}"
             ww, wc = _best(row, "wall_s"), _best(row, "cpu_s")
-            label = {"previous": f"@{revision}", "pf": "pf ref"}.get(run, run)
+            label = {"previous": f"@{revision}", "pf": "pf ref", "rbpf": "rbpf ref"}.get(run, run)
             if run == "pf" and rec["floor"] == "deck":
                 label = "pf ref (jt)"
             lines.append(
@@ -344,6 +347,8 @@ def _record_table(part: dict[str, Any], revision: str | None) -> list[str]:
         d = runs["default"]
         wc = _best(d, "cpu_s")
         ratios = [f"x pf {wc / _best(runs['pf'], 'cpu_s'):.2f}"]
+        if "rbpf" in runs:
+            ratios.append(f"x rbpf {wc / _best(runs['rbpf'], 'cpu_s'):.2f}")
         if "previous" in runs:
             ratios.append(f"x {revision} {wc / _best(runs['previous'], 'cpu_s'):.3f}")
         met = wc < TARGET_RECORD_S and max(d["abs_z"]) < TARGET_Z
@@ -626,7 +631,7 @@ def _parser() -> argparse.ArgumentParser:
     # The child processes: this script re-run with one job each.
     p.add_argument("--child", choices=["record", "batch", "command"], help=argparse.SUPPRESS)
     p.add_argument("--name", help=argparse.SUPPRESS)
-    p.add_argument("--methods", default="exact,pf", help=argparse.SUPPRESS)
+    p.add_argument("--methods", default="exact,rbpf,pf", help=argparse.SUPPRESS)
     p.add_argument("--manifest", help=argparse.SUPPRESS)
     p.add_argument("--out", help=argparse.SUPPRESS)
     p.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
