@@ -116,7 +116,7 @@ def test_identify_takes_a_model_and_a_method(
         method="rbpf",
         seed=3,
         force_check=False,
-        settings=IdentifySettings.from_flat(particles=64),
+        settings=IdentifySettings.from_flat(method="rbpf", particles=64),
     )
     np.testing.assert_array_equal(again.draws, result.draws)
     assert result.model is not None and result.model.mass_kg == MASS_KG
@@ -225,7 +225,9 @@ def test_options_of_another_method_are_carried_through_a_switch() -> None:
     assert rbpf.replace(method="pf").method == wb.PF(force_proposal="prior")
     # The particle count is null in the JSON when the method runs its default.
     assert IdentifySettings().to_json()["particles"] is None
-    assert IdentifySettings.from_flat(particles=64).to_json()["particles"] == 64
+    assert IdentifySettings.from_flat(method="rbpf", particles=64).to_json()["particles"] == 64
+    # The default method, exact, has no particles: a count given to it is not reported.
+    assert IdentifySettings.from_flat(particles=64).to_json()["particles"] is None
     assert IdentifySettings.from_flat(rescale_to_mass=True).preprocessing.rescale_to_mass
 
 

@@ -439,7 +439,9 @@ def test_identification_result_uses_the_mcmc_posterior() -> None:
     from workbench.inference.settings import IdentifySettings
 
     problem, _ = _walk(11, harmonics=2, duration_s=3.0)
-    settings = IdentifySettings().replace(harmonics=2, particles=64, force_check=False)
+    settings = IdentifySettings().replace(
+        method="rbpf", harmonics=2, particles=64, force_check=False
+    )
     rbpf = identify_problem(problem, settings)
     before = dict(rbpf.identifiability)
     result = crosscheck(problem, rbpf, seed=1)

@@ -66,7 +66,7 @@ def test_identify_json_contract(short_record, capsys, tmp_path):
     assert code == 0, err
     r = json.loads(out)
     assert CONTRACT <= r.keys()
-    assert r["method"] == "rbpf"
+    assert r["method"] == "exact"  # the default
     assert len(r["blf"]) == 4
     assert set(r["posterior_sd"]) >= {
         "stiffness_n_per_m",

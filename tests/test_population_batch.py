@@ -18,7 +18,8 @@ from workbench.population.study import StudyDesign, study_plan, write_study
 
 pytestmark = pytest.mark.slow
 
-SETTINGS_TOML = """harmonics = 3
+SETTINGS_TOML = """method = "rbpf"
+harmonics = 3
 pieces = "whole"
 time_basis = "absolute"
 highpass_hz = 0.0

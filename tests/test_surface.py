@@ -248,7 +248,7 @@ def test_the_default_reads_c_and_k_from_the_transmissibility():
     res = wb.identify(sim.record, seed=0)
     surface = res.extra["surface"]
     assert surface["c_and_k_from"] == "transmissibility"
-    assert res.extra["surface_route"]["requested_method"] == "rbpf"
+    assert res.extra["surface_route"]["requested_method"] == "exact"  # the default
     assert res.identifiability["level"] == "well identified"
     assert "force_model_check" not in res.identifiability
     ci = res.interval()

@@ -34,6 +34,9 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from workbench.inference.identify import identify
 
     settings = identify_settings(args)
+    if args.crosscheck and args.method is None and settings.method.name == "exact":
+        # The cross-check tests a filter step by step: with no --method, the rbpf.
+        settings = settings.replace(method="rbpf")
     if args.crosscheck and (settings.method.name == "exact" or settings.model.pieces != "steps"):
         raise UsageError(
             "--crosscheck cross-checks a particle filter per footfall step; use it with "
@@ -164,7 +167,8 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--crosscheck",
         action="store_true",
         help="also sample every step's posterior with emcee (workbench crosscheck) and grade "
-        "identifiability from the MCMC posterior instead of the filter's cloud",
+        "identifiability from the MCMC posterior instead of the filter's cloud (runs the rbpf "
+        "unless --method names the pf)",
     )
     p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
     p.add_argument("--seed", type=seed_int, help="random seed (default 0)")

@@ -45,8 +45,9 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
     # An embedded record by name, as every one-record command takes it (a local file of
     # that name wins, datasets.named).
     name = datasets.named(args.record)
+    embedded = datasets.dataset_path(name) if name is not None else None
     records = load_study_records(
-        args.record if name is None else datasets.dataset_path(name),
+        args.record if embedded is None else embedded,
         mass_kg=args.mass,
         pacing_hz=args.pacing,
         subject=args.subject,

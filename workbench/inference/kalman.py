@@ -1,11 +1,13 @@
 """Exact likelihood of the linear-Gaussian SMD model given (C, K), batched over many (C, K).
 
-The module runs the batched structured piece filter: ``_filter_piece`` prepares a piece,
-runs its per-sample loop (compiled, :mod:`workbench.inference._kalman_kernel`, or the numpy
-reference with the one-step predictive, :mod:`workbench.inference.kalman_loop`), then
-integrates the piece's force coefficients out; :func:`record_loglik` runs it over the
-pieces. The discretisation (:mod:`workbench.inference.discretisation`), the result
-containers (:mod:`workbench.inference.kalman_results`) and the readable reference filter
+:func:`record_loglik` and :func:`piece_filter` run the pieces compiled by default
+(:mod:`workbench.inference.kalman_compiled`: from the record's harmonic sufficient
+statistics where the problem allows, else the compiled Kalman loop), or, with
+``engine="numpy"`` and for the one-step predictive, through ``_filter_piece`` below: the
+numpy per-sample loop (:mod:`workbench.inference.kalman_loop`), then the integration of the
+piece's force coefficients. All routes are exact and agree to rounding. The discretisation
+(:mod:`workbench.inference.discretisation`), the result containers
+(:mod:`workbench.inference.kalman_results`) and the readable reference filter
 (:mod:`workbench.inference.kalman_reference`) live in their own modules.
 
 Given damping C and stiffness K the model of :mod:`workbench.inference.problem` is
@@ -74,14 +76,10 @@ Noise
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.inference import _harmonic_kernel as _harmonic
-from workbench.inference import _kalman_kernel as _kernel
 from workbench.inference.discretisation import (
     DISCRETISATIONS,
     _check_discretisation,
@@ -90,7 +88,11 @@ from workbench.inference.discretisation import (
     _pairs,
     transition_matrices,
 )
-from workbench.inference.harmonic_statistics import harmonic_statistics
+from workbench.inference.kalman_compiled import (
+    _force_input,
+    _ForceInput,
+    _run_compiled,
+)
 from workbench.inference.kalman_loop import (
     cholesky_solve_lower,
     sample_loop,
@@ -206,139 +208,11 @@ def piece_filter(
 
 
 ENGINES = ("compiled", "numpy")
-# The compiled engine's harmonic route (module switch for tests and benchmarks).
-_HARMONIC = True
 
 
 def _check_engine(engine: str) -> None:
     if engine not in ENGINES:
         raise UsageError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
-
-
-class _ForceInput(NamedTuple):
-    """Force basis in the whitened coefficients: ``F_k = base[k] + scaled[k] @ eta``."""
-
-    base: FloatArray  # (N,) force at the prior mean [N]
-    scaled: FloatArray  # (N, m) basis row times the prior sd [N per unit eta]
-    inputs: FloatArray  # (N, m + 1) [scaled | base], the compiled filter's input rows
-
-
-# The force input of the last few problems: noise estimates, grids and Metropolis moves call
-# the filter hundreds of times on one record, and forming the (N, m + 1) input costs as much
-# as filtering a few pairs. Keyed by the identity of what it is made of, which the entry
-# keeps alive so that an identity is never reused while it is cached.
-_INPUT_CACHE: list[tuple[tuple[object, ...], _ForceInput]] = []
-_INPUT_CACHE_SIZE = 8
-
-
-def _force_input(problem: IdentificationProblem) -> _ForceInput:
-    fp = problem.force_prior
-    known = problem.surface_force_n
-    key = (problem.basis, fp.mean_n, fp.sd_n, known)
-    for cached_key, value in _INPUT_CACHE:
-        if all(a is b for a, b in zip(cached_key, key, strict=True)):
-            return value
-    base = problem.basis @ fp.mean_n
-    if known is not None:
-        # A moving surface's inertial load is a known input (problem module docstring).
-        base = base + known
-    scaled = problem.basis * fp.sd_n
-    inputs = np.ascontiguousarray(np.column_stack([scaled, base]))
-    value = _ForceInput(base, scaled, inputs)
-    _INPUT_CACHE.insert(0, (key, value))
-    del _INPUT_CACHE[_INPUT_CACHE_SIZE:]
-    return value
-
-
-def _pair_constants(dyn: _Dynamics) -> FloatArray:
-    """Return the compiled filter's per-pair constants (``_kalman_kernel.PAIR_CONSTANTS``)."""
-    phi = dyn.phi
-    return np.ascontiguousarray(
-        np.column_stack(
-            [
-                dyn.k_m,
-                dyn.c_m,
-                phi[0, 0],
-                phi[0, 1],
-                phi[1, 0],
-                phi[1, 1],
-                dyn.g0[0],
-                dyn.g0[1],
-                dyn.g1[0],
-                dyn.g1[1],
-                dyn.h_in[0],
-                dyn.h_in[1],
-                dyn.h_in[2],
-            ]
-        )
-    )
-
-
-def _run_compiled(
-    problem: IdentificationProblem,
-    dyn: _Dynamics,
-    force: _ForceInput,
-    first: int,
-    stop: int,
-    xm: FloatArray,
-    xc: FloatArray,
-    want_theta_cov: bool,
-) -> tuple[
-    FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, FloatArray
-]:
-    """Run pieces ``first .. stop - 1`` compiled; the kernel's outputs, theta in N.
-
-    Without process noise or a known surface load, and with a harmonic force basis (the
-    identification defaults), the pieces run from the record's harmonic sufficient
-    statistics (:mod:`workbench.inference._harmonic_kernel`); otherwise, and with
-    ``_HARMONIC = False``, through the Kalman loop (:mod:`workbench.inference._kalman_kernel`).
-    Both are exact and agree to rounding.
-    """
-    fp = problem.force_prior
-    xm = np.ascontiguousarray(xm, dtype=np.float64)
-    xc = np.ascontiguousarray(xc, dtype=np.float64)
-    stats = None
-    if _HARMONIC and problem.surface_force_n is None and not np.any(problem.noise.state_sd):
-        stats = harmonic_statistics(problem)
-    if stats is not None:
-        loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _harmonic.filter_record(
-            problem.y,
-            problem.piece_starts,
-            first,
-            stop,
-            _pair_constants(dyn),
-            dyn.has_end_share,
-            np.square(problem.noise.obs_sd),
-            problem.mass_kg,
-            xm,
-            xc,
-            want_theta_cov,
-            *stats,
-            np.ascontiguousarray(fp.mean_n, dtype=np.float64),
-            np.ascontiguousarray(fp.sd_n, dtype=np.float64),
-        )
-        theta_mean = fp.mean_n + eta * fp.sd_n
-        theta_cov = eta_cov * fp.sd_n[:, None] * fp.sd_n[None, :] if want_theta_cov else None
-        return loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next
-    loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _kernel.filter_record(
-        problem.y,
-        force.inputs,
-        problem.piece_starts,
-        first,
-        stop,
-        _pair_constants(dyn),
-        dyn.has_end_share,
-        np.square(problem.noise.obs_sd),
-        np.square(problem.noise.state_sd),
-        problem.mass_kg,
-        xm,
-        xc,
-        want_theta_cov,
-    )
-    fp = problem.force_prior
-    theta_mean = fp.mean_n + eta * fp.sd_n
-    theta_cov = eta_cov * fp.sd_n[:, None] * fp.sd_n[None, :] if want_theta_cov else None
-    return loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next
 
 
 def _filter_piece(
@@ -354,9 +228,10 @@ def _filter_piece(
 ) -> PieceResult:
     """Run the structured filter over one piece (see the module docstring for the algebra).
 
-    ``engine="compiled"`` runs the per-sample loop in :mod:`workbench.inference._kalman_kernel`;
+    ``engine="compiled"`` runs the piece compiled (:mod:`workbench.inference.kalman_compiled`);
     ``"numpy"`` (and every call with ``predictive``) runs the numpy loop of
-    :mod:`workbench.inference.kalman_loop`, the reference it is tested and benchmarked against.
+    :mod:`workbench.inference.kalman_loop`, the reference it is tested and benchmarked against,
+    and the integration below.
 
     Implementation. With ``V_k`` the sensitivity and ``x_k`` the mean at ``eta = 0`` of the
     predicted state at sample k, let ``Vt_k = V_k - Gamma1 b_k s`` and
