@@ -82,7 +82,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.inference.mcmc_lockstep import _EnsembleError, _Lockstep, _run_chunk
+from workbench.inference.mcmc_lockstep import (
+    _BatchedEnsemble,
+    _EnsembleError,
+    _Lockstep,
+    _run_batched,
+    _run_chunk,
+    batched_moves,
+)
 from workbench.inference.mcmc_result import McmcResult
 
 # The result type and the lockstep threads live in their own modules (each one idea);
@@ -90,6 +97,7 @@ from workbench.inference.mcmc_result import McmcResult
 __all__ = [
     "ACCEPTANCE_MAX",
     "ACCEPTANCE_MIN",
+    "ENGINES",
     "ESS_MIN",
     "RHAT_MAX",
     "Initial",
@@ -102,6 +110,8 @@ FloatArray = NDArray[np.float64]
 LogProb = Callable[[FloatArray], ArrayLike]
 Initial = Callable[[np.random.Generator], ArrayLike] | ArrayLike
 
+#: Who steps the ensembles (``run_ensembles``'s ``engine``), default first.
+ENGINES = ("batched", "emcee")
 #: Largest rank-normalised split R-hat accepted (Vehtari et al. 2021 recommend 1.01).
 RHAT_MAX = 1.01
 #: Smallest bulk and tail ESS accepted, per parameter (Vehtari et al. 2021).
@@ -162,6 +172,7 @@ def run_ensembles(
     param_names: Sequence[str] | None = None,
     moves: str | Any = "de",
     lockstep: bool = True,
+    engine: str = "batched",
 ) -> McmcResult:
     """Sample a log density with several independent emcee ensembles and check convergence.
 
@@ -225,6 +236,14 @@ def run_ensembles(
     lockstep : bool, default True
         Evaluate the requests of all ensembles in one call of ``log_prob`` per round
         (module docstring); the samples are the same either way for a row-wise target.
+    engine : {"batched", "emcee"}, default "batched"
+        Who steps the ensembles. ``"batched"``: one thread steps them all, drawing exactly
+        what emcee's sampler draws (:class:`~workbench.inference.mcmc_lockstep.
+        _BatchedEnsemble`; red-blue moves, every other move falls back to emcee).
+        ``"emcee"``: :class:`emcee.EnsembleSampler` itself, in one thread per ensemble
+        when ``lockstep``: the reference. The samples are the same bit for bit
+        (``tests/test_mcmc.py``); the batched engine saves the threads' hand-overs and
+        emcee's per-walker Python loops, most of the cost of a cheap target.
 
     Returns
     -------
@@ -252,7 +271,10 @@ def run_ensembles(
     if not np.isfinite(tau_rtol) or not 0 < tau_rtol < 1:
         raise UsageError(f"tau_rtol must lie strictly between 0 and 1, got {tau_rtol!r}")
 
+    if engine not in ENGINES:
+        raise UsageError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     move_spec = _moves(moves)
+    batched = engine == "batched" and batched_moves(move_spec())
     # Each ensemble gets two independent streams: one for its start, one for emcee's moves.
     children = np.random.SeedSequence(int(seed)).spawn(n_ensembles)
     streams = [child.spawn(2) for child in children]
@@ -265,8 +287,8 @@ def run_ensembles(
     # emcee always runs with `vectorize=True`: a point-wise target is batched here instead.
     target = _CountingLogProb(log_prob if vectorize else _row_by_row(log_prob), n_dim)
 
-    batcher = _Lockstep(target, n_ensembles) if lockstep else None
-    samplers: list[emcee.EnsembleSampler] = []
+    batcher = _Lockstep(target, n_ensembles) if lockstep and not batched else None
+    samplers: list[Any] = []  # emcee.EnsembleSampler or _BatchedEnsemble
     states: list[emcee.State] = []
     for e, start in enumerate(starts):
         lp0 = target(start)
@@ -277,9 +299,12 @@ def run_ensembles(
                 "density; start the walkers inside the support (a smaller scale or a "
                 "different centre)"
             )
+        rng_state = np.random.RandomState(np.random.MT19937(streams[e][1])).get_state()
+        if batched:
+            samplers.append(_BatchedEnsemble(move_spec(), start, lp0, rng_state))
+            continue
         fn = batcher.proxy(e) if batcher is not None else target
         sampler = emcee.EnsembleSampler(n_walkers, n_dim, fn, vectorize=True, moves=move_spec())
-        rng_state = np.random.RandomState(np.random.MT19937(streams[e][1])).get_state()
         samplers.append(sampler)
         states.append(emcee.State(start, log_prob=lp0, random_state=rng_state))
 
@@ -290,7 +315,10 @@ def run_ensembles(
     while True:
         chunk = target_steps - n_steps
         try:
-            _run_chunk(samplers, states, chunk, batcher)
+            if batched:
+                _run_batched(samplers, chunk, target, lockstep)
+            else:
+                _run_chunk(samplers, states, chunk, batcher)
         except _EnsembleError as failure:
             err = failure.__cause__
             if err is None:
