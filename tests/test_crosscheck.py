@@ -14,6 +14,7 @@ from workbench.cli import main
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
 from workbench.inference.crosscheck import (
+    GaussianFitMove,
     StepTarget,
     _multimodal,
     crosscheck,
@@ -24,6 +25,7 @@ from workbench.inference.mcmc import run_ensembles
 from workbench.inference.problem import IdentificationProblem
 from workbench.inference.rbpf import run_rbpf
 from workbench.inference.step_model import StepModel
+from workbench.inference.step_target import LogitFitMove
 
 REAL = Path(__file__).resolve().parents[1] / "workbench" / "datasets" / "real"
 
@@ -73,6 +75,37 @@ def test_step_likelihood_equals_piece_kalman_filter(observe: str, discretisation
         assert ref.theta_cov is not None
         outer = np.outer(theta_sd, theta_sd)
         np.testing.assert_allclose((cov[:, 2:, 2:] - ref.theta_cov) / outer, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("observe", ["all", "acc"])
+@pytest.mark.parametrize("discretisation", ["foh", "zoh", "euler"])
+def test_compiled_step_model_equals_the_numpy_reference(observe: str, discretisation: str) -> None:
+    """The numba kernel's likelihoods, hand-overs and posteriors equal numpy's to rounding."""
+    problem, truth = _walk(11, harmonics=4, duration_s=5.0, observe=observe)
+    rng = np.random.default_rng(3)
+    c = truth[0] * rng.uniform(0.3, 2.0, 40)
+    k = truth[1] * rng.uniform(0.5, 1.5, 40)
+    s = rng.uniform(0.5, 2.0, 40)
+    for piece in (0, 2):
+        xm, xc = _hand_in(problem, piece, truth)
+        fast, ref = (
+            StepModel(problem, piece, xm[0], xc[0], discretisation=discretisation, engine=e)
+            for e in ("compiled", "numpy")
+        )
+        # A per-row hand-in as the history grid gives it, and the model's own.
+        hand = ref.hand_over(c, k) if piece == 0 else None
+        for hand_in in (None, hand):
+            ll_f, (m_f, l_f) = fast.loglik_and_hand_over(c, k, hand_in)
+            ll_r, (m_r, l_r) = ref.loglik_and_hand_over(c, k, hand_in)
+            np.testing.assert_allclose(ll_f, ll_r, rtol=1e-12, atol=0)
+            np.testing.assert_allclose(m_f, m_r, rtol=0, atol=1e-11 * np.max(np.abs(m_r)))
+            np.testing.assert_allclose(l_f, l_r, rtol=0, atol=1e-11 * np.max(np.abs(l_r)))
+            out_f = fast.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
+            out_r = ref.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
+            for a, b in zip(out_f, out_r, strict=True):
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.max(np.abs(b)))
+    with pytest.raises(UsageError, match="engine"):
+        StepModel(problem, 0, xm[0], xc[0], engine="fortran")
 
 
 def test_joint_and_collapsed_likelihoods_are_one_gaussian_model() -> None:
@@ -175,6 +208,50 @@ def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
     )
     assert res.converged, res.reasons
     # Quadrature around the MCMC (the exact moments do not depend on where the MCMC is).
+    mean, sd = _exact_moments(target, res.mean, res.sd)
+    assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
+    assert np.all(np.abs(res.sd / sd - 1) < 0.1)
+
+
+def test_logit_fit_move_is_the_t_fit_move_without_bounds() -> None:
+    """With no finite bound the logit move draws the t-fit move's proposals, to rounding."""
+    rng = np.random.default_rng(2)
+    s = rng.normal(size=(16, 3)) * [1.0, 20.0, 0.1]
+    comp = rng.normal(size=(16, 3)) * [1.0, 20.0, 0.1] + 0.3
+    inf = np.full(3, np.inf)
+    q_ref, f_ref = GaussianFitMove().get_proposal(s, [comp], np.random.RandomState(7))
+    q_new, f_new = LogitFitMove(-inf, inf).get_proposal(s, [comp], np.random.RandomState(7))
+    np.testing.assert_allclose(q_new, q_ref, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(f_new, f_ref, rtol=0, atol=1e-12 * np.max(np.abs(f_ref)))
+    with pytest.raises(UsageError):
+        LogitFitMove(np.zeros(2), np.zeros(2))
+
+
+def test_logit_moves_match_a_posterior_piled_against_the_box() -> None:
+    """The cross-check's moves on a step posterior cut by the prior box's face, by quadrature.
+
+    The prior puts the posterior of K against the box's lower edge (about a third of its
+    mass beyond it), where a t fitted in (C, K) proposes badly and one fitted in the box's
+    logit coordinates well; the moments must match the exact ones either way.
+    """
+    problem, truth = _walk(11, harmonics=4, duration_s=5.0)
+    xm, xc = _hand_in(problem, 3, truth)
+    model = StepModel(problem, 3, xm[0], xc[0])
+    k_lo = problem.prior.stiffness_n_per_m[0]
+    prior_mean = np.array([truth[0], k_lo * 1.02])
+    prior_cov = np.diag([(0.25 * truth[0]) ** 2, (0.05 * k_lo) ** 2])
+    target = StepTarget(model, prior_mean, prior_cov, problem.prior)
+    res = run_ensembles(
+        target,
+        lambda rng: target.initial(rng, 32),
+        n_walkers=32,
+        seed=9,
+        min_steps=100,
+        moves=default_moves("collapsed", problem.prior, target.n_dim),
+        param_names=target.param_names,
+    )
+    assert res.converged, res.reasons
+    assert np.min(res.samples[:, 1]) < k_lo * 1.005  # the walkers reach the face
     mean, sd = _exact_moments(target, res.mean, res.sd)
     assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
     assert np.all(np.abs(res.sd / sd - 1) < 0.1)

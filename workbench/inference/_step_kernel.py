@@ -1,0 +1,107 @@
+"""Compiled recursion and Gram matrix of one step (:mod:`~workbench.inference.step_model`).
+
+The numpy step model runs the SMD recursion over a step's samples for a batch of (C, K)
+pairs as one batched (3 x 4) by (4 x q + 1) product per sample, stores every response in a
+buffer of shape (B, L + 1, 5, q + 1) (tens of megabytes for the 512 nodes a history grid
+hands it at a time) and then forms the Gram matrix of the observation rows with one batched
+product. Per sample the Python loop's fixed cost, and the buffer's passes over memory, cost
+more than the arithmetic.
+
+This kernel runs the same recursion pair by pair with the samples in the inner loop and
+accumulates the Gram matrix as a symmetric rank-3 update per sample (the sample's u, u' and
+u'' rows, each weighted by its channel's inverse variance), so a pair's work stays in the
+processor's first-level cache and no buffer is written. The algebra is that of
+:meth:`StepModel._run` and :meth:`StepModel._gram` in the same order per sample; the two
+agree to rounding (``tests/test_crosscheck.py``; the Gram sums are accumulated sample by
+sample here and by a matrix product there). The numpy path is kept as the reference
+(``StepModel(..., engine="numpy")``) and for the pointwise residuals of the joint mode.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["gram_and_next"]
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+
+
+@_jit
+def gram_and_next(
+    step: np.ndarray,
+    start: np.ndarray,
+    force_pairs: np.ndarray,
+    y: np.ndarray,
+    weight: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Gram matrix ``Z^T R^-1 Z`` of every pair's whitened design and its state after the step.
+
+    Parameters
+    ----------
+    step : ndarray, shape (B, 3, 4)
+        Per pair the map of ``(u_i, u'_i, F_i, F_i+1)`` to ``(u''_i, u_i+1, u'_i+1)``:
+        ``[[-K/M, -C/M, 1/M, 0], [Phi | Gamma0 Gamma1]]``.
+    start : ndarray, shape (B, 2, q + 1)
+        ``(u_0, u'_0)`` over the columns (the hand-in, with the piece's share of the
+        boundary interval added).
+    force_pairs : ndarray, shape (L, 2, q + 1)
+        ``(F_i, F_i+1)`` over the columns.
+    y : ndarray, shape (L, 3)
+        Observed u, u', u'' per sample (subtracted from the last column).
+    weight : ndarray, shape (B, 3)
+        Inverse sd of each channel per pair (0 for a channel left out).
+
+    Returns
+    -------
+    gram : ndarray, shape (B, q + 1, q + 1)
+    after : ndarray, shape (B, 2, q + 1)
+        ``(u_L, u'_L)`` over the columns: the state after the last interval, before the
+        data are subtracted (the hand-over's columns).
+    """
+    n_pairs = step.shape[0]
+    n_samples = force_pairs.shape[0]
+    q1 = start.shape[2]
+    last = q1 - 1
+    gram = np.empty((n_pairs, q1, q1))
+    after = np.empty((n_pairs, 2, q1))
+    u = np.empty(q1)
+    v = np.empty(q1)
+    # The pair's whitened observation rows, three per sample (u, u', u''); their Gram
+    # matrix is one BLAS product per pair.
+    rows = np.empty((3 * n_samples, q1))
+    for b in range(n_pairs):
+        s00, s01, s02, s03 = step[b, 0, 0], step[b, 0, 1], step[b, 0, 2], step[b, 0, 3]
+        p00, p01, g00, g10 = step[b, 1, 0], step[b, 1, 1], step[b, 1, 2], step[b, 1, 3]
+        p10, p11, g01, g11 = step[b, 2, 0], step[b, 2, 1], step[b, 2, 2], step[b, 2, 3]
+        w0, w1, w2 = weight[b, 0], weight[b, 1], weight[b, 2]
+        for j in range(q1):
+            u[j] = start[b, 0, j]
+            v[j] = start[b, 1, j]
+        for i in range(n_samples):
+            r0 = rows[3 * i]
+            r1 = rows[3 * i + 1]
+            r2 = rows[3 * i + 2]
+            for j in range(q1):
+                f0 = force_pairs[i, 0, j]
+                f1 = force_pairs[i, 1, j]
+                uj = u[j]
+                vj = v[j]
+                r0[j] = uj
+                r1[j] = vj
+                r2[j] = s00 * uj + s01 * vj + s02 * f0 + s03 * f1
+                u[j] = p00 * uj + p01 * vj + g00 * f0 + g10 * f1
+                v[j] = p10 * uj + p11 * vj + g01 * f0 + g11 * f1
+            # The data subtracted from the last column, then each row whitened.
+            r0[last] -= y[i, 0]
+            r1[last] -= y[i, 1]
+            r2[last] -= y[i, 2]
+            for j in range(q1):
+                r0[j] *= w0
+                r1[j] *= w1
+                r2[j] *= w2
+        gram[b] = np.dot(rows.T, rows)
+        for j in range(q1):
+            after[b, 0, j] = u[j]
+            after[b, 1, j] = v[j]
+    return gram, after
