@@ -233,6 +233,13 @@ def test_outputs_json_and_inference_data() -> None:
     lp = idata.sample_stats["lp"].values
     x = np.stack([idata.posterior["x0"].values, idata.posterior["x1"].values], axis=-1)
     np.testing.assert_allclose(lp, -0.5 * np.sum((x - [0.0, 1.0]) ** 2, axis=-1), atol=1e-12)
+    # The diagnostics, computed on the draws' arrays, are arviz's on the InferenceData.
+    import arviz as az
+
+    for name, i in (("x0", 0), ("x1", 1)):
+        assert result.rhat[i] == float(az.rhat(idata)[name].values)
+        assert result.ess_bulk[i] == float(az.ess(idata, method="bulk")[name].values)
+        assert result.ess_tail[i] == float(az.ess(idata, method="tail")[name].values)
 
 
 # -- failures are reported -----------------------------------------------------------------

@@ -365,17 +365,7 @@ def run_ensembles(
     acceptance = np.array([float(np.mean(s.acceptance_fraction)) for s in samplers])
     stuck = np.array([int(_stuck_walkers(s.get_chain()).sum()) for s in samplers])
 
-    # arviz is imported here, not at module level: its import takes seconds (it loads its
-    # plotting stack), which every command importing this module would otherwise pay.
-    import arviz as az
-
-    idata = az.from_dict(
-        posterior={name: draws[:, :, i] for i, name in enumerate(names)},
-        sample_stats={"lp": draw_lp},
-    )
-    rhat = _per_param(az.rhat(idata), names)
-    ess_bulk = _per_param(az.ess(idata, method="bulk"), names)
-    ess_tail = _per_param(az.ess(idata, method="tail"), names)
+    rhat, ess_bulk, ess_tail = _rhat_ess(draws)
 
     reasons = _reasons(
         names=names,
@@ -411,7 +401,8 @@ def run_ensembles(
         tau_rule_met=rule_met,
         converged=not reasons,
         reasons=reasons,
-        inference_data=idata,
+        draws=draws,
+        draw_lp=draw_lp,
         seconds=time.perf_counter() - t0,
     )
 
@@ -533,8 +524,24 @@ def _stuck_walkers(chain: FloatArray) -> NDArray[np.bool_]:
     return np.asarray(np.all(chain == chain[:1], axis=(0, 2)), dtype=np.bool_)
 
 
-def _per_param(dataset: Any, names: tuple[str, ...]) -> FloatArray:
-    return np.array([float(dataset[name].values) for name in names], dtype=np.float64)
+def _rhat_ess(draws: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Rank-normalised split R-hat, bulk and tail ESS of every parameter of (E, n, d) draws.
+
+    arviz's functions on each parameter's (chain, draw) array: the numbers its
+    InferenceData path gives (``tests/test_mcmc.py``) without building the InferenceData
+    and its xarray wrapping, which cost more than the sampling of a cheap step.
+    """
+    # arviz is imported here, not at module level: its import takes seconds (it loads its
+    # plotting stack), which every command importing this module would otherwise pay.
+    import arviz as az
+
+    out = np.empty((3, draws.shape[2]))
+    for i in range(draws.shape[2]):
+        x = np.ascontiguousarray(draws[:, :, i])
+        out[0, i] = az.rhat(x)
+        out[1, i] = az.ess(x, method="bulk")
+        out[2, i] = az.ess(x, method="tail")
+    return out[0], out[1], out[2]
 
 
 def _reasons(
