@@ -104,6 +104,11 @@ def test_compiled_step_model_equals_the_numpy_reference(observe: str, discretisa
             out_r = ref.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
             for a, b in zip(out_f, out_r, strict=True):
                 np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.max(np.abs(b)))
+            beta = out_r[1] + 0.5 * out_r[2][:, :, 0]
+            for pointwise in (False, True):
+                j_f = fast.joint_loglik(c, k, beta, s, pointwise=pointwise, hand_in=hand_in)
+                j_r = ref.joint_loglik(c, k, beta, s, pointwise=pointwise, hand_in=hand_in)
+                np.testing.assert_allclose(j_f, j_r, rtol=1e-10, atol=1e-10)
     with pytest.raises(UsageError, match="engine"):
         StepModel(problem, 0, xm[0], xc[0], engine="fortran")
 

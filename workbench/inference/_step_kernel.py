@@ -14,7 +14,11 @@ processor's first-level cache and no buffer is written. The algebra is that of
 :meth:`StepModel._run` and :meth:`StepModel._gram` in the same order per sample; the two
 agree to rounding (``tests/test_crosscheck.py``; the Gram sums are accumulated sample by
 sample here and by a matrix product there). The numpy path is kept as the reference
-(``StepModel(..., engine="numpy")``) and for the pointwise residuals of the joint mode.
+(``StepModel(..., engine="numpy")``).
+
+:func:`predictions` gives the joint density's residuals at given ``beta``: the model is
+linear in ``beta``, so one response, to the columns summed at the pair's ``beta``, replaces
+the q + 1 columns' responses the numpy path forms and then sums.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["gram_and_next"]
+__all__ = ["gram_and_next", "predictions"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 
@@ -105,3 +109,47 @@ def gram_and_next(
             after[b, 0, j] = u[j]
             after[b, 1, j] = v[j]
     return gram, after
+
+
+@_jit
+def predictions(
+    step: np.ndarray, start: np.ndarray, forces: np.ndarray, y: np.ndarray
+) -> np.ndarray:
+    """Return data minus prediction of every pair at its own ``beta`` (one column per pair).
+
+    The recursion of :func:`gram_and_next` on the single column ``[G | e]`` times
+    ``(eta, 1)``: with ``beta`` given, the step's prediction is that one response.
+
+    Parameters
+    ----------
+    step : ndarray, shape (B, 3, 4)
+        As in :func:`gram_and_next`.
+    start : ndarray, shape (B, 2)
+        ``(u_0, u'_0)`` at the pair's ``beta``.
+    forces : ndarray, shape (B, L, 2)
+        ``(F_i, F_i+1)`` at the pair's ``beta``.
+    y : ndarray, shape (L, 3)
+        Observed u, u', u''.
+
+    Returns
+    -------
+    ndarray, shape (B, L, 3)
+        ``y - prediction`` per sample and channel (u, u', u'').
+    """
+    n_pairs = step.shape[0]
+    n_samples = forces.shape[1]
+    out = np.empty((n_pairs, n_samples, 3))
+    for b in range(n_pairs):
+        s00, s01, s02, s03 = step[b, 0, 0], step[b, 0, 1], step[b, 0, 2], step[b, 0, 3]
+        p00, p01, g00, g10 = step[b, 1, 0], step[b, 1, 1], step[b, 1, 2], step[b, 1, 3]
+        p10, p11, g01, g11 = step[b, 2, 0], step[b, 2, 1], step[b, 2, 2], step[b, 2, 3]
+        u = start[b, 0]
+        v = start[b, 1]
+        for i in range(n_samples):
+            f0 = forces[b, i, 0]
+            f1 = forces[b, i, 1]
+            out[b, i, 0] = y[i, 0] - u
+            out[b, i, 1] = y[i, 1] - v
+            out[b, i, 2] = y[i, 2] - (s00 * u + s01 * v + s02 * f0 + s03 * f1)
+            u, v = p00 * u + p01 * v + g00 * f0 + g10 * f1, p10 * u + p11 * v + g01 * f0 + g11 * f1
+    return out

@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.inference._step_kernel import gram_and_next
+from workbench.inference._step_kernel import gram_and_next, predictions
 from workbench.inference.kalman import transition_matrices
 from workbench.inference.problem import OBSERVED_CHANNELS, IdentificationProblem
 
@@ -70,8 +70,8 @@ class StepModel:
     engine : {"compiled", "numpy"}, default "compiled"
         Who runs the recursion and the Gram matrix of the likelihoods: the numba kernel
         (:mod:`workbench.inference._step_kernel`) or the numpy loop, the reference it equals
-        to rounding (``tests/test_crosscheck.py``). :meth:`responses` and
-        :meth:`joint_loglik` always use the numpy loop.
+        to rounding (``tests/test_crosscheck.py``); :meth:`responses` always uses the
+        numpy loop.
     """
 
     def __init__(
@@ -443,11 +443,20 @@ class StepModel:
         beta0, prior_chol = self.prior_for(c.size, hand_in)
         dev = np.asarray(beta, dtype=np.float64) - beta0
         eta = np.linalg.solve(prior_chol, dev[:, :, None])[:, :, 0]
-        rows = self.responses(c, stiffness, hand_in)
         q = self.q
         # Data minus prediction at beta, per row, then per sample and channel (u, u', u'').
-        resid = -(rows[..., q] + np.einsum("brq,bq->br", rows[..., :q], eta))
-        resid = resid.reshape(c.size, self.length, 5)[:, :, [0, 1, 4]] / self.obs_sd
+        if self.engine == "numpy":
+            rows = self.responses(c, stiffness, hand_in)
+            resid = -(rows[..., q] + np.einsum("brq,bq->br", rows[..., :q], eta))
+            resid = resid.reshape(c.size, self.length, 5)[:, :, [0, 1, 4]]
+        else:
+            # The model is linear in beta: one response, to the columns' sum at eta.
+            step, start = self._setup(c, stiffness, hand_in)
+            start1 = np.einsum("bsq,bq->bs", start[:, :, :q], eta) + start[:, :, q]
+            pairs = self._force_pairs
+            forces = np.einsum("ipq,bq->bip", pairs[:, :, :q], eta) + pairs[None, :, :, q]
+            resid = predictions(step, start1, forces, self.y)
+        resid = resid / self.obs_sd
         obs = self.observed
         r_o = resid[:, :, obs] / s[:, None, None]
         log_sd = np.log(self.obs_sd[obs])[None, None, :] + np.log(s)[:, None, None]
