@@ -257,6 +257,11 @@ class HistoryGrid:
         ll = np.where(inside, self._splines[0].ev(u[:, 0], u[:, 1]) + self._peak, -np.inf)
         return self._hand(u, self._splines[1:]), ll
 
+    def log_likelihood(self, c: FloatArray, k: FloatArray) -> FloatArray:
+        """Interpolated log-likelihood per row: :meth:`evaluate`'s without the hand-over."""
+        u, inside = self._grid_rows(c, k)
+        return np.where(inside, self._splines[0].ev(u[:, 0], u[:, 1]) + self._peak, -np.inf)
+
     def hand_in_last(self, c: FloatArray, k: FloatArray) -> tuple[FloatArray, FloatArray] | None:
         """Interpolated hand-in of the last step held (None when that is step 0)."""
         if not self._last_splines:

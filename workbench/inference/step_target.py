@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.errors import UsageError
+from workbench.inference._fit_move_kernel import logit_t_proposal
 from workbench.inference.history_grid import HistoryGrid, box_bounds, box_expit, box_logit
 from workbench.inference.mcmc_result import McmcResult
 from workbench.inference.step_model import StepModel
@@ -154,58 +155,28 @@ class LogitFitMove(GaussianFitMove):
         self.upper = np.asarray(upper, dtype=float)
         if self.lower.shape != self.upper.shape or np.any(self.lower >= self.upper):
             raise UsageError("LogitFitMove needs lower < upper for every coordinate")
-        self.bounded = np.flatnonzero(np.isfinite(self.lower) & np.isfinite(self.upper))
+        self._bounded_mask = np.isfinite(self.lower) & np.isfinite(self.upper)
         super().__init__(inflation=inflation, df=df, **kwargs)
-
-    def _to_x(self, theta: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Logit coordinates of rows and ``log |d theta / d x|`` per row."""
-        x = theta.copy()
-        b = self.bounded
-        if not b.size:
-            return x, np.zeros(theta.shape[0])
-        lo, hi = self.lower[b], self.upper[b]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a, z = theta[:, b] - lo, hi - theta[:, b]
-            x[:, b] = np.log(a) - np.log(z)
-            log_jac = np.sum(np.log(a) + np.log(z) - np.log(hi - lo), axis=1)
-        return x, log_jac
 
     def get_proposal(
         self, s: FloatArray, c: Sequence[FloatArray], random: Any
     ) -> tuple[FloatArray, FloatArray]:
         """Draw one proposal per walker of ``s`` from the t fitted to ``c`` in logit coordinates."""
-        comp, _ = self._to_x(np.concatenate(c, axis=0))
         n, dim = s.shape
-        mean = comp.mean(axis=0)
-        dev = comp - mean
-        cov = (dev.T @ dev) * (self.inflation / (comp.shape[0] - 1))
-        cov += np.eye(dim) * 1e-12 * max(float(np.max(np.abs(np.diag(cov)))), 1e-300)
-        chol = np.linalg.cholesky(cov)
-        inv = np.linalg.inv(chol)
         # The draws of GaussianFitMove, in its order: normals, then the t's chi-square.
-        step = random.randn(n, dim) @ chol.T
-        df = self.df
-        if math.isfinite(df):
-            step *= np.sqrt(df / random.chisquare(df, size=n))[:, None]
-        xq = mean + step
-        q = xq.copy()
-        b = self.bounded
-        if b.size:
-            lo, hi = self.lower[b], self.upper[b]
-            q[:, b] = lo + (hi - lo) / (1.0 + np.exp(-np.clip(xq[:, b], -700.0, 700.0)))
-        xs, jac_s = self._to_x(s)
-        _, jac_q = self._to_x(q)
-
-        def log_q(x: FloatArray) -> FloatArray:
-            white = (x - mean) @ inv.T
-            r2 = np.sum(white * white, axis=1)
-            if not math.isfinite(df):
-                return -0.5 * r2
-            return -0.5 * (df + dim) * np.log1p(r2 / df)
-
-        factor = (log_q(xs) - jac_s) - (log_q(xq) - jac_q)
-        # A proposal rounded onto the box's face has no logit: never accept it.
-        return q, np.where(np.isfinite(jac_q), factor, -np.inf)
+        normals = random.randn(n, dim)
+        chi2 = random.chisquare(self.df, size=n) if math.isfinite(self.df) else np.ones(n)
+        return logit_t_proposal(
+            np.ascontiguousarray(np.concatenate(c, axis=0)),
+            np.ascontiguousarray(s),
+            normals,
+            chi2,
+            self.lower,
+            self.upper,
+            self._bounded_mask,
+            self.inflation,
+            self.df,
+        )
 
 
 def default_moves(mode: str = "collapsed", box: Any = None, n_dim: int = 2) -> Any:
@@ -388,7 +359,7 @@ class StepTarget:
         if not np.any(ok):
             return out
         if self.surrogate and self.grid is not None:
-            out[ok] += self.grid.evaluate(c[ok], k[ok])[1]
+            out[ok] += self.grid.log_likelihood(c[ok], k[ok])
             return out
         hand_in, history_ll = self.hand_in_and_history(c[ok], k[ok])
         out[ok] += history_ll
