@@ -26,7 +26,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["gram_and_next", "predictions"]
+__all__ = ["collapsed_and_hand_over", "gram_and_next", "predictions"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
 
@@ -153,3 +153,79 @@ def predictions(
             out[b, i, 2] = y[i, 2] - (s00 * u + s01 * v + s02 * f0 + s03 * f1)
             u, v = p00 * u + p01 * v + g00 * f0 + g10 * f1, p10 * u + p11 * v + g01 * f0 + g11 * f1
     return out
+
+
+@_jit
+def collapsed_and_hand_over(
+    gram: np.ndarray, after: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return the collapsed likelihood's terms and the hand-over from :func:`gram_and_next`.
+
+    Per pair: the Cholesky factor of the augmented ``[[A, h], [h^T, e^T e]]`` (``A = I + G^T
+    R^-1 G``, the Gram matrix with the identity added to its first q diagonal entries), and
+    from it what :meth:`StepModel.loglik_and_hand_over` forms with numpy: ``sum log
+    diag(L)``, ``d^2`` and the hand-over ``eta | y`` pushed through the state after the step.
+    ``gram`` is overwritten.
+
+    Returns
+    -------
+    log_det_half : ndarray, shape (B,)
+        ``sum log diag(L)`` (half of ``log det A``).
+    d2 : ndarray, shape (B,)
+        ``e^T e - h^T A^-1 h``.
+    mean, chol : ndarrays, shapes (B, 2) and (B, 2, 2)
+        Hand-over mean and lower Cholesky factor (noise scale 1).
+    """
+    n_pairs, q1, _ = gram.shape
+    q = q1 - 1
+    log_det_half = np.empty(n_pairs)
+    d2 = np.empty(n_pairs)
+    mean = np.empty((n_pairs, 2))
+    chol = np.zeros((n_pairs, 2, 2))
+    proj = np.empty((q, 2))
+    for b in range(n_pairs):
+        g = gram[b]
+        for j in range(q):
+            g[j, j] += 1.0
+        # In-place lower Cholesky factor of the augmented matrix (its lower triangle).
+        for j in range(q1):
+            acc = g[j, j]
+            for p in range(j):
+                acc -= g[j, p] * g[j, p]
+            g[j, j] = np.sqrt(acc)
+            for i in range(j + 1, q1):
+                acc = g[i, j]
+                for p in range(j):
+                    acc -= g[i, p] * g[j, p]
+                g[i, j] = acc / g[j, j]
+        total = 0.0
+        for j in range(q):
+            total += np.log(g[j, j])
+        log_det_half[b] = total
+        d2[b] = g[q, q] * g[q, q]
+        # proj = L^-1 V^T with V the state after the step over the q columns (2 x q).
+        for c in range(2):
+            for i in range(q):
+                acc = after[b, c, i]
+                for p in range(i):
+                    acc -= g[i, p] * proj[p, c]
+                proj[i, c] = acc / g[i, i]
+        # eta | y ~ N(-L^-T half, L^-T L^-1), half the last row of the factor.
+        c00 = 0.0
+        c01 = 0.0
+        c11 = 0.0
+        for c in range(2):
+            acc = 0.0
+            for i in range(q):
+                acc += proj[i, c] * g[q, i]
+            mean[b, c] = after[b, c, q] - acc
+        for i in range(q):
+            c00 += proj[i, 0] * proj[i, 0]
+            c01 += proj[i, 0] * proj[i, 1]
+            c11 += proj[i, 1] * proj[i, 1]
+        l00 = np.sqrt(c00)
+        l10 = c01 / l00
+        chol[b, 0, 0] = l00
+        chol[b, 1, 0] = l10
+        chol[b, 1, 1] = np.sqrt(c11 - l10 * l10)
+    return log_det_half, d2, mean, chol

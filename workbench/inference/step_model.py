@@ -40,7 +40,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.inference._step_kernel import gram_and_next, predictions
+from workbench.inference._step_kernel import (
+    collapsed_and_hand_over,
+    gram_and_next,
+    predictions,
+)
 from workbench.inference.kalman import transition_matrices
 from workbench.inference.problem import OBSERVED_CHANNELS, IdentificationProblem
 
@@ -321,6 +325,11 @@ class StepModel:
         b, q = np.atleast_1d(np.asarray(damping)).size, self.q
         # nxt (B, 2, q + 1): the state after the last interval.
         gram, nxt = self._gram_and_after(damping, stiffness, hand_in, np.ones(b))
+        constant = 0.5 * self._log_det_r(np.ones(b)) + 1.5 * _LOG_2PI * self.length
+        if self.engine == "compiled":
+            # The factor and the hand-over per pair in the kernel (the algebra below).
+            log_det_half, d2, mean, hand_chol = collapsed_and_hand_over(gram, nxt)
+            return -0.5 * d2 - log_det_half - constant, (mean, hand_chol)
         idx = np.arange(q)
         gram[:, idx, idx] += 1.0
         chol_aug = np.linalg.cholesky(gram)
@@ -369,7 +378,13 @@ class StepModel:
         c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
         s = np.ones(c.size) if noise_scale is None else np.asarray(noise_scale, dtype=np.float64)
         q = self.q
-        gram = self._gram_and_after(c, stiffness, hand_in, 1.0 / np.square(s))[0]
+        gram, after = self._gram_and_after(c, stiffness, hand_in, 1.0 / np.square(s))
+        if self.engine == "compiled" and not return_posterior:
+            # The kernel's factor (its hand-over terms are not needed here).
+            log_det_half, d2, _, _ = collapsed_and_hand_over(gram, after)
+            return (
+                -0.5 * d2 - log_det_half - 0.5 * self._log_det_r(s) - 1.5 * _LOG_2PI * self.length
+            )
         idx = np.arange(q)
         gram[:, idx, idx] += 1.0
         # One Cholesky factor of the augmented [[A, h], [h^T, e^T e]] holds everything: its
