@@ -157,6 +157,11 @@ class _BatchedEnsemble:
         else:
             self.moves, weights = [moves], np.ones(1)
         self.weights = weights / np.sum(weights)
+        # The cumulative weights RandomState.choice forms from ``p`` (it draws one uniform
+        # and searches them), formed once.
+        cdf = self.weights.cumsum()
+        cdf /= cdf[-1]
+        self._cdf = cdf
         self.random = np.random.RandomState()
         self.random.set_state(random_state)
         self.coords = np.array(coords, dtype=np.float64)
@@ -180,7 +185,8 @@ class _BatchedEnsemble:
         coords, log_prob, random = self.coords, self.log_prob, self.random
         all_inds = np.arange(self.n_walkers)
         for step in range(n_steps):
-            move = random.choice(self.moves, p=self.weights)
+            # RandomState.choice(moves, p=weights): one uniform, searched in the cdf.
+            move = self.moves[int(self._cdf.searchsorted(random.random_sample(), side="right"))]
             if self.n_walkers < 2 * self.n_dim and not move.live_dangerously:
                 raise RuntimeError(
                     "It is unadvisable to use a red-blue move with fewer walkers than twice "
@@ -191,20 +197,19 @@ class _BatchedEnsemble:
             inds = all_inds % move.nsplits
             if move.randomize_split:
                 random.shuffle(inds)
+            masks = [inds == j for j in range(move.nsplits)]
             for split in range(move.nsplits):
-                subset = inds == split
-                sets = [coords[inds == j] for j in range(move.nsplits)]
+                subset = masks[split]
+                sets = [coords[m] for m in masks]
                 q, factors = move.get_proposal(
                     sets[split], sets[:split] + sets[split + 1 :], random
                 )
                 q = np.atleast_2d(q)
-                if np.any(np.isinf(q)):
-                    raise ValueError("At least one parameter value was infinite")
-                if np.any(np.isnan(q)):
-                    raise ValueError("At least one parameter value was NaN")
+                if not np.isfinite(q).all():
+                    what = "infinite" if np.isinf(q).any() else "NaN"
+                    raise ValueError(f"At least one parameter value was {what}")
+                # ``new`` is free of NaN (the runner's wrapper checks every evaluation).
                 new = yield q
-                if np.any(np.isnan(new)):
-                    raise ValueError("Probability function returned NaN")
                 # One uniform per walker of the half, drawn in the order emcee draws them.
                 draws = random.rand(q.shape[0])
                 take = factors + new - log_prob[subset] > np.log(draws)
