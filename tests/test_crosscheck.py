@@ -479,6 +479,39 @@ def test_history_grid_matches_the_full_history_posterior() -> None:
     np.testing.assert_allclose(g_chol, hand[1], rtol=1e-3, atol=0)
 
 
+def test_compiled_grid_log_likelihood_equals_the_splines() -> None:
+    """The surrogate's compiled density equals the grid's scipy splines to rounding.
+
+    At points inside the posterior, across the whole grid, on and beyond its edges and at
+    the prior box's faces (the same -inf outside the grid or the box).
+    """
+    from workbench.inference.history_grid import HistoryGrid, box_expit, box_logit
+
+    problem, truth = _walk(12, harmonics=3, duration_s=4.5)
+    xm, xc = kf.initial_state(problem, 1)
+    models = [StepModel(problem, j, xm[0], xc[0]) for j in range(3)]
+    centre = box_logit(problem.prior, truth[None])[0][0]
+    grid = HistoryGrid(problem.prior, centre, np.diag([0.04, 0.01]), models)
+    rng = np.random.default_rng(1)
+    u = np.concatenate(
+        [
+            rng.normal(size=(200, 2)),
+            rng.uniform(-1.1 * grid.extent, 1.1 * grid.extent, (200, 2)),
+            grid.extent * np.array([[1, 1], [-1, -1], [1, -1], [0, 1], [-1, 0]]),
+        ]
+    )
+    ck = box_expit(problem.prior, grid.centre + u @ grid.root.T)
+    lo_c, lo_k = problem.prior.damping_ns_per_m[0], problem.prior.stiffness_n_per_m[0]
+    ck = np.vstack([ck, [[lo_c, ck[0, 1]], [ck[0, 0], lo_k]]])
+    ref = grid.evaluate(ck[:, 0], ck[:, 1])[1]
+    new = grid.log_likelihood(ck[:, 0], ck[:, 1])
+    np.testing.assert_array_equal(np.isfinite(new), np.isfinite(ref))
+    assert 200 < np.isfinite(ref).sum() < ck.shape[0]
+    finite = np.isfinite(ref)
+    scale = np.max(np.abs(ref[finite]))
+    np.testing.assert_allclose(new[finite], ref[finite], rtol=0, atol=1e-12 * scale)
+
+
 @pytest.mark.slow
 def test_joint_mode_agrees_with_collapsed_and_converges() -> None:
     """Non-centred joint mode: the 50-tau rule is met and the (C, K) posterior is the same."""

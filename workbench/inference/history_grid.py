@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import RectBivariateSpline
 
+from workbench.inference._grid_kernel import grid_log_likelihood
 from workbench.inference.step_model import StepModel
 
 __all__ = [
@@ -258,9 +259,26 @@ class HistoryGrid:
         return self._hand(u, self._splines[1:]), ll
 
     def log_likelihood(self, c: FloatArray, k: FloatArray) -> FloatArray:
-        """Interpolated log-likelihood per row: :meth:`evaluate`'s without the hand-over."""
-        u, inside = self._grid_rows(c, k)
-        return np.where(inside, self._splines[0].ev(u[:, 0], u[:, 1]) + self._peak, -np.inf)
+        """Interpolated log-likelihood per row: :meth:`evaluate`'s without the hand-over.
+
+        One compiled call (:mod:`workbench.inference._grid_kernel`), equal to
+        :meth:`evaluate`'s to rounding.
+        """
+        tx, ty, coef = self._splines[0].tck
+        lo, hi = box_bounds(self.box)
+        return grid_log_likelihood(
+            np.ascontiguousarray(c, dtype=np.float64),
+            np.ascontiguousarray(k, dtype=np.float64),
+            lo,
+            hi,
+            self.centre,
+            self.root,
+            self.extent,
+            tx,
+            ty,
+            coef,
+            self._peak,
+        )
 
     def hand_in_last(self, c: FloatArray, k: FloatArray) -> tuple[FloatArray, FloatArray] | None:
         """Interpolated hand-in of the last step held (None when that is step 0)."""
