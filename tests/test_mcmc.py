@@ -191,7 +191,7 @@ def test_integrated_time_is_emcees() -> None:
     # runner meets: correlated, nearly white, and one with a walker that never moved.
     import emcee
 
-    from workbench.inference.mcmc import _integrated_time
+    from workbench.inference.mcmc_diagnostics import _integrated_time
 
     rng = np.random.default_rng(8)
     for n_t, rho in ((100, 0.9), (241, 0.5), (1000, 0.0)):

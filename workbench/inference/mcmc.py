@@ -51,12 +51,17 @@ Every failed condition adds one plain sentence to :attr:`McmcResult.reasons`.
 
 One call of the target per round, for all ensembles
     A log density that costs a Kalman filter per call is dominated by per-call overhead at
-    a few dozen points, so the ensembles step in lockstep: each runs in its own thread, and
-    every time emcee asks one of them for log densities the request waits until every
-    running ensemble has asked, then all are evaluated in one call of ``log_prob`` (ensemble
-    order, so the batch, and with a row-wise target the result, is the same on every run).
-    The ensembles stay independent: each keeps its own walkers and random stream; only the
-    arithmetic is shared. ``lockstep=False`` evaluates them one after the other instead.
+    a few dozen points, so the ensembles step in lockstep: every time one of them asks for
+    log densities the request waits until every running ensemble has asked, then all are
+    evaluated in one call of ``log_prob`` (ensemble order, so the batch, and with a
+    row-wise target the result, is the same on every run). The ensembles stay independent:
+    each keeps its own walkers and random stream; only the arithmetic is shared.
+    ``lockstep=False`` evaluates them one after the other instead. By default
+    (``engine="batched"``) one thread steps all ensembles, each a generator that yields its
+    proposals and draws exactly what emcee's sampler would; ``engine="emcee"`` runs emcee's
+    own sampler, one thread per ensemble, the reference that gives the same samples bit for
+    bit. With a cheap target (the cross-check's grid surrogate) the threads' hand-overs and
+    emcee's per-walker Python loops cost more than the target itself.
 
 Determinism
     ``np.random.SeedSequence(seed).spawn(n_ensembles)`` gives every ensemble its own
@@ -82,6 +87,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
+from workbench.inference.mcmc_diagnostics import _integrated_time, _rhat_ess
 from workbench.inference.mcmc_lockstep import (
     _BatchedEnsemble,
     _EnsembleError,
@@ -92,7 +98,7 @@ from workbench.inference.mcmc_lockstep import (
 )
 from workbench.inference.mcmc_result import McmcResult
 
-# The result type and the lockstep threads live in their own modules (each one idea);
+# The result type and the lockstep drivers live in their own modules (each one idea);
 # McmcResult stays importable from here.
 __all__ = [
     "ACCEPTANCE_MAX",
@@ -518,58 +524,9 @@ def _tau(chain: FloatArray) -> FloatArray:
         return _integrated_time(chain[:, moved, :], c=5)
 
 
-def _integrated_time(x: FloatArray, c: float = 5.0) -> FloatArray:
-    """:func:`emcee.autocorr.integrated_time` of a (steps, walkers, d) chain, batched.
-
-    emcee's algorithm and arithmetic (each walker's autocorrelation function by FFT,
-    averaged over the walkers in walker order, Sokal's window), with the FFTs of all walkers
-    of a parameter in one call instead of one call per walker: the same numbers to rounding
-    (``tests/test_mcmc.py``) at a fraction of the fixed cost, which at a few hundred steps
-    is most of emcee's.
-    """
-    n_t, n_w, n_d = x.shape
-    n = 1
-    while n < n_t:
-        n <<= 1
-    tau = np.empty(n_d)
-    for d in range(n_d):
-        series = x[:, :, d]
-        f = np.fft.fft(series - np.mean(series, axis=0), n=2 * n, axis=0)
-        acf = np.fft.ifft(f * np.conjugate(f), axis=0)[:n_t].real
-        acf /= acf[0]
-        mean_acf = np.zeros(n_t)
-        for k in range(n_w):
-            mean_acf += acf[:, k]
-        mean_acf /= n_w
-        taus = 2.0 * np.cumsum(mean_acf) - 1.0
-        short = np.arange(n_t) < c * taus
-        tau[d] = taus[int(np.argmin(short)) if np.any(short) else n_t - 1]
-    return tau
-
-
 def _stuck_walkers(chain: FloatArray) -> NDArray[np.bool_]:
     """Walkers of a (steps, walkers, d) chain that never left their first position."""
     return np.asarray(np.all(chain == chain[:1], axis=(0, 2)), dtype=np.bool_)
-
-
-def _rhat_ess(draws: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Rank-normalised split R-hat, bulk and tail ESS of every parameter of (E, n, d) draws.
-
-    arviz's functions on each parameter's (chain, draw) array: the numbers its
-    InferenceData path gives (``tests/test_mcmc.py``) without building the InferenceData
-    and its xarray wrapping, which cost more than the sampling of a cheap step.
-    """
-    # arviz is imported here, not at module level: its import takes seconds (it loads its
-    # plotting stack), which every command importing this module would otherwise pay.
-    import arviz as az
-
-    out = np.empty((3, draws.shape[2]))
-    for i in range(draws.shape[2]):
-        x = np.ascontiguousarray(draws[:, :, i])
-        out[0, i] = az.rhat(x)
-        out[1, i] = az.ess(x, method="bulk")
-        out[2, i] = az.ess(x, method="tail")
-    return out[0], out[1], out[2]
 
 
 def _reasons(

@@ -1,13 +1,20 @@
-"""Several emcee ensembles in lockstep threads, one call of the target per round.
+"""Several emcee ensembles in lockstep, one call of the target per round.
 
-:class:`_Lockstep` gathers the log-density requests of all running ensembles and evaluates
-them in one batched call (ensemble order, so the batch is the same on every run);
-:func:`_run_chunk` advances every ensemble by a chunk of steps, in such threads or one after
-the other, and reports the first ensemble that failed (:mod:`workbench.inference.mcmc`, "One
-call of the target per round, for all ensembles").
+Two drivers of the same rounds (:mod:`workbench.inference.mcmc`, "One call of the target per
+round, for all ensembles"):
 
-Its own idea: thread coordination with its failure propagation, which knows nothing of
-convergence or of what the target computes.
+* threads (the reference, ``engine="emcee"``): :class:`_Lockstep` gathers the log-density
+  requests of emcee's samplers, one thread each, and evaluates them in one batched call
+  (ensemble order, so the batch is the same on every run); :func:`_run_chunk` advances
+  every ensemble by a chunk of steps, in such threads or one after the other, and reports
+  the first ensemble that failed;
+* one thread (the default, ``engine="batched"``): :class:`_BatchedEnsemble` steps an
+  ensemble as a generator that yields each proposal and receives its log densities, with
+  the draws of emcee's sampler; :func:`_run_batched` serves the ensembles' requests round
+  by round, the same batches as the threads.
+
+Its own idea: driving several ensembles through shared rounds, with failure propagation,
+knowing nothing of convergence or of what the target computes.
 """
 
 from __future__ import annotations
