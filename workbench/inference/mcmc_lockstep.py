@@ -281,8 +281,10 @@ def _run_batched(
                 lp = target(np.concatenate(batch))
             except Exception as err:
                 raise _EnsembleError(keys[-1]) from err
-            edges = np.cumsum([len(x) for x in batch])[:-1]
-            parts = np.split(lp, edges)
+            parts, start = [], 0
+            for x in batch:
+                parts.append(lp[start : start + len(x)])
+                start += len(x)
         else:
             parts = []
             for k, x in zip(keys, batch, strict=True):
