@@ -479,6 +479,28 @@ def test_history_grid_matches_the_full_history_posterior() -> None:
     np.testing.assert_allclose(g_chol, hand[1], rtol=1e-3, atol=0)
 
 
+def test_grid_from_the_piece_filter_equals_the_step_model_grid() -> None:
+    """Nodes tabulated by the piece filter equal the step model's to rounding, chained."""
+    from workbench.inference.history_grid import HistoryGrid, box_logit
+
+    problem, truth = _walk(12, harmonics=3, duration_s=4.5)
+    problem = problem.with_noise(dataclasses.replace(problem.noise, state_sd=np.zeros(2)))
+    xm, xc = kf.initial_state(problem, 1)
+    models = [StepModel(problem, j, xm[0], xc[0]) for j in range(problem.n_pieces)]
+    centre = box_logit(problem.prior, truth[None])[0][0]
+    fast, ref = (
+        HistoryGrid(problem.prior, centre, np.diag([0.04, 0.01]), models[:3], nodes=15, engine=e)
+        for e in ("filter", "step")
+    )
+    for grid in (fast, ref):
+        grid.advance(models[-1])  # the record's last step: the step model in both
+    np.testing.assert_allclose(fast.loglik, ref.loglik, rtol=1e-11, atol=0)
+    for a, b in zip(fast.hand_last, ref.hand_last, strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * np.max(np.abs(b)))
+    with pytest.raises(UsageError, match="engine"):
+        HistoryGrid(problem.prior, centre, np.eye(2), models[:1], engine="gpu")
+
+
 def test_compiled_grid_log_likelihood_equals_the_splines() -> None:
     """The surrogate's compiled density equals the grid's scipy splines to rounding.
 
