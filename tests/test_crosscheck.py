@@ -14,6 +14,7 @@ from workbench.cli import main
 from workbench.errors import UsageError
 from workbench.inference import kalman as kf
 from workbench.inference.crosscheck import (
+    GaussianFitMove,
     StepTarget,
     _multimodal,
     crosscheck,
@@ -24,6 +25,7 @@ from workbench.inference.mcmc import run_ensembles
 from workbench.inference.problem import IdentificationProblem
 from workbench.inference.rbpf import run_rbpf
 from workbench.inference.step_model import StepModel
+from workbench.inference.step_target import LogitFitMove
 
 REAL = Path(__file__).resolve().parents[1] / "workbench" / "datasets" / "real"
 
@@ -73,6 +75,42 @@ def test_step_likelihood_equals_piece_kalman_filter(observe: str, discretisation
         assert ref.theta_cov is not None
         outer = np.outer(theta_sd, theta_sd)
         np.testing.assert_allclose((cov[:, 2:, 2:] - ref.theta_cov) / outer, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("observe", ["all", "acc"])
+@pytest.mark.parametrize("discretisation", ["foh", "zoh", "euler"])
+def test_compiled_step_model_equals_the_numpy_reference(observe: str, discretisation: str) -> None:
+    """The numba kernel's likelihoods, hand-overs and posteriors equal numpy's to rounding."""
+    problem, truth = _walk(11, harmonics=4, duration_s=5.0, observe=observe)
+    rng = np.random.default_rng(3)
+    c = truth[0] * rng.uniform(0.3, 2.0, 40)
+    k = truth[1] * rng.uniform(0.5, 1.5, 40)
+    s = rng.uniform(0.5, 2.0, 40)
+    for piece in (0, 2):
+        xm, xc = _hand_in(problem, piece, truth)
+        fast, ref = (
+            StepModel(problem, piece, xm[0], xc[0], discretisation=discretisation, engine=e)
+            for e in ("compiled", "numpy")
+        )
+        # A per-row hand-in as the history grid gives it, and the model's own.
+        hand = ref.hand_over(c, k) if piece == 0 else None
+        for hand_in in (None, hand):
+            ll_f, (m_f, l_f) = fast.loglik_and_hand_over(c, k, hand_in)
+            ll_r, (m_r, l_r) = ref.loglik_and_hand_over(c, k, hand_in)
+            np.testing.assert_allclose(ll_f, ll_r, rtol=1e-12, atol=0)
+            np.testing.assert_allclose(m_f, m_r, rtol=0, atol=1e-11 * np.max(np.abs(m_r)))
+            np.testing.assert_allclose(l_f, l_r, rtol=0, atol=1e-11 * np.max(np.abs(l_r)))
+            out_f = fast.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
+            out_r = ref.collapsed_loglik(c, k, s, return_posterior=True, hand_in=hand_in)
+            for a, b in zip(out_f, out_r, strict=True):
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.max(np.abs(b)))
+            beta = out_r[1] + 0.5 * out_r[2][:, :, 0]
+            for pointwise in (False, True):
+                j_f = fast.joint_loglik(c, k, beta, s, pointwise=pointwise, hand_in=hand_in)
+                j_r = ref.joint_loglik(c, k, beta, s, pointwise=pointwise, hand_in=hand_in)
+                np.testing.assert_allclose(j_f, j_r, rtol=1e-10, atol=1e-10)
+    with pytest.raises(UsageError, match="engine"):
+        StepModel(problem, 0, xm[0], xc[0], engine="fortran")
 
 
 def test_joint_and_collapsed_likelihoods_are_one_gaussian_model() -> None:
@@ -175,6 +213,50 @@ def test_collapsed_mode_matches_the_exact_grid_posterior() -> None:
     )
     assert res.converged, res.reasons
     # Quadrature around the MCMC (the exact moments do not depend on where the MCMC is).
+    mean, sd = _exact_moments(target, res.mean, res.sd)
+    assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
+    assert np.all(np.abs(res.sd / sd - 1) < 0.1)
+
+
+def test_logit_fit_move_is_the_t_fit_move_without_bounds() -> None:
+    """With no finite bound the logit move draws the t-fit move's proposals, to rounding."""
+    rng = np.random.default_rng(2)
+    s = rng.normal(size=(16, 3)) * [1.0, 20.0, 0.1]
+    comp = rng.normal(size=(16, 3)) * [1.0, 20.0, 0.1] + 0.3
+    inf = np.full(3, np.inf)
+    q_ref, f_ref = GaussianFitMove().get_proposal(s, [comp], np.random.RandomState(7))
+    q_new, f_new = LogitFitMove(-inf, inf).get_proposal(s, [comp], np.random.RandomState(7))
+    np.testing.assert_allclose(q_new, q_ref, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(f_new, f_ref, rtol=0, atol=1e-12 * np.max(np.abs(f_ref)))
+    with pytest.raises(UsageError):
+        LogitFitMove(np.zeros(2), np.zeros(2))
+
+
+def test_logit_moves_match_a_posterior_piled_against_the_box() -> None:
+    """The cross-check's moves on a step posterior cut by the prior box's face, by quadrature.
+
+    The prior puts the posterior of K against the box's lower edge (about a third of its
+    mass beyond it), where a t fitted in (C, K) proposes badly and one fitted in the box's
+    logit coordinates well; the moments must match the exact ones either way.
+    """
+    problem, truth = _walk(11, harmonics=4, duration_s=5.0)
+    xm, xc = _hand_in(problem, 3, truth)
+    model = StepModel(problem, 3, xm[0], xc[0])
+    k_lo = problem.prior.stiffness_n_per_m[0]
+    prior_mean = np.array([truth[0], k_lo * 1.02])
+    prior_cov = np.diag([(0.25 * truth[0]) ** 2, (0.05 * k_lo) ** 2])
+    target = StepTarget(model, prior_mean, prior_cov, problem.prior)
+    res = run_ensembles(
+        target,
+        lambda rng: target.initial(rng, 32),
+        n_walkers=32,
+        seed=9,
+        min_steps=100,
+        moves=default_moves("collapsed", problem.prior, target.n_dim),
+        param_names=target.param_names,
+    )
+    assert res.converged, res.reasons
+    assert np.min(res.samples[:, 1]) < k_lo * 1.005  # the walkers reach the face
     mean, sd = _exact_moments(target, res.mean, res.sd)
     assert np.all(np.abs(res.mean - mean) < 0.1 * sd)
     assert np.all(np.abs(res.sd / sd - 1) < 0.1)
@@ -395,6 +477,61 @@ def test_history_grid_matches_the_full_history_posterior() -> None:
     white = np.linalg.solve(hand[1], (g_mean - hand[0])[:, :, None])
     assert np.max(np.abs(white)) < 0.01
     np.testing.assert_allclose(g_chol, hand[1], rtol=1e-3, atol=0)
+
+
+def test_grid_from_the_piece_filter_equals_the_step_model_grid() -> None:
+    """Nodes tabulated by the piece filter equal the step model's to rounding, chained."""
+    from workbench.inference.history_grid import HistoryGrid, box_logit
+
+    problem, truth = _walk(12, harmonics=3, duration_s=4.5)
+    problem = problem.with_noise(dataclasses.replace(problem.noise, state_sd=np.zeros(2)))
+    xm, xc = kf.initial_state(problem, 1)
+    models = [StepModel(problem, j, xm[0], xc[0]) for j in range(problem.n_pieces)]
+    centre = box_logit(problem.prior, truth[None])[0][0]
+    fast, ref = (
+        HistoryGrid(problem.prior, centre, np.diag([0.04, 0.01]), models[:3], nodes=15, engine=e)
+        for e in ("filter", "step")
+    )
+    for grid in (fast, ref):
+        grid.advance(models[-1])  # the record's last step: the step model in both
+    np.testing.assert_allclose(fast.loglik, ref.loglik, rtol=1e-11, atol=0)
+    for a, b in zip(fast.hand_last, ref.hand_last, strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-10 * np.max(np.abs(b)))
+    with pytest.raises(UsageError, match="engine"):
+        HistoryGrid(problem.prior, centre, np.eye(2), models[:1], engine="gpu")
+
+
+def test_compiled_grid_log_likelihood_equals_the_splines() -> None:
+    """The surrogate's compiled density equals the grid's scipy splines to rounding.
+
+    At points inside the posterior, across the whole grid, on and beyond its edges and at
+    the prior box's faces (the same -inf outside the grid or the box).
+    """
+    from workbench.inference.history_grid import HistoryGrid, box_expit, box_logit
+
+    problem, truth = _walk(12, harmonics=3, duration_s=4.5)
+    xm, xc = kf.initial_state(problem, 1)
+    models = [StepModel(problem, j, xm[0], xc[0]) for j in range(3)]
+    centre = box_logit(problem.prior, truth[None])[0][0]
+    grid = HistoryGrid(problem.prior, centre, np.diag([0.04, 0.01]), models)
+    rng = np.random.default_rng(1)
+    u = np.concatenate(
+        [
+            rng.normal(size=(200, 2)),
+            rng.uniform(-1.1 * grid.extent, 1.1 * grid.extent, (200, 2)),
+            grid.extent * np.array([[1, 1], [-1, -1], [1, -1], [0, 1], [-1, 0]]),
+        ]
+    )
+    ck = box_expit(problem.prior, grid.centre + u @ grid.root.T)
+    lo_c, lo_k = problem.prior.damping_ns_per_m[0], problem.prior.stiffness_n_per_m[0]
+    ck = np.vstack([ck, [[lo_c, ck[0, 1]], [ck[0, 0], lo_k]]])
+    ref = grid.evaluate(ck[:, 0], ck[:, 1])[1]
+    new = grid.log_likelihood(ck[:, 0], ck[:, 1])
+    np.testing.assert_array_equal(np.isfinite(new), np.isfinite(ref))
+    assert 200 < np.isfinite(ref).sum() < ck.shape[0]
+    finite = np.isfinite(ref)
+    scale = np.max(np.abs(ref[finite]))
+    np.testing.assert_allclose(new[finite], ref[finite], rtol=0, atol=1e-12 * scale)
 
 
 @pytest.mark.slow

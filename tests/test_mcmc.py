@@ -155,6 +155,67 @@ def test_lockstep_batches_give_the_samples_of_ensembles_run_one_by_one() -> None
     assert len(batched) < 0.3 * len(calls[4:])
 
 
+@pytest.mark.parametrize("moves", ["de", "stretch", "t-fit"])
+def test_batched_engine_gives_emcee_samples_bit_for_bit(moves: str) -> None:
+    # One thread stepping all ensembles draws what emcee's own sampler draws: the same
+    # samples, acceptance and evaluations as emcee in lockstep threads and one by one.
+    from workbench.inference.step_target import default_moves
+
+    spec = default_moves() if moves == "t-fit" else moves
+    base = gaussian_log_prob(np.zeros(3), np.diag([1.0, 4.0, 0.25]))
+    calls: list[int] = []
+
+    def log_prob(x: np.ndarray) -> np.ndarray:
+        calls.append(x.shape[0])
+        return base(x)
+
+    kwargs = {"seed": 4, "min_steps": 60, "max_steps": 150, "moves": spec}
+    start = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    ref = run_ensembles(log_prob, start, engine="emcee", **kwargs)
+    n_ref = len(calls)
+    for lockstep in (True, False):
+        calls.clear()
+        res = run_ensembles(log_prob, start, engine="batched", lockstep=lockstep, **kwargs)
+        np.testing.assert_array_equal(res.samples, ref.samples)
+        np.testing.assert_array_equal(res.acceptance_fraction, ref.acceptance_fraction)
+        np.testing.assert_array_equal(res.tau, ref.tau)
+        assert res.n_steps == ref.n_steps and res.n_evaluations == ref.n_evaluations
+        if lockstep:  # the same rounds as the threads' lockstep
+            assert len(calls) == n_ref
+    with pytest.raises(UsageError, match="engine"):
+        run_ensembles(log_prob, start, engine="threads", **kwargs)
+
+
+def test_integrated_time_is_emcees() -> None:
+    # The batched autocorrelation time against emcee's own, on chains of every kind the
+    # runner meets: correlated, nearly white, and one with a walker that never moved.
+    import emcee
+
+    from workbench.inference.mcmc_diagnostics import _integrated_time
+
+    rng = np.random.default_rng(8)
+    for n_t, rho in ((100, 0.9), (241, 0.5), (1000, 0.0)):
+        x = np.empty((n_t, 12, 3))
+        x[0] = rng.normal(size=(12, 3))
+        for t in range(1, n_t):
+            x[t] = rho * x[t - 1] + rng.normal(size=(12, 3))
+        ref = emcee.autocorr.integrated_time(x, c=5, tol=0, quiet=True)
+        np.testing.assert_allclose(_integrated_time(x), ref, rtol=1e-12, atol=0)
+
+
+def test_batched_engine_leaves_other_moves_to_emcee() -> None:
+    # A Metropolis move is not a red-blue move: emcee's sampler runs it, as before.
+    import emcee
+
+    base = gaussian_log_prob(np.zeros(2), np.eye(2))
+    moves = emcee.moves.GaussianMove(0.5)
+    kwargs = {"seed": 2, "min_steps": 50, "max_steps": 50, "moves": moves}
+    start = np.array([[0.0, 0.0], [1.0, 1.0]])
+    a = run_ensembles(base, start, engine="batched", **kwargs)
+    b = run_ensembles(base, start, engine="emcee", **kwargs)
+    np.testing.assert_array_equal(a.samples, b.samples)
+
+
 def test_a_log_prob_failing_mid_run_is_reported_not_hung() -> None:
     # One ensemble's request fails inside a batched round: every ensemble stops and the
     # original error reaches the caller.
@@ -189,6 +250,13 @@ def test_outputs_json_and_inference_data() -> None:
     lp = idata.sample_stats["lp"].values
     x = np.stack([idata.posterior["x0"].values, idata.posterior["x1"].values], axis=-1)
     np.testing.assert_allclose(lp, -0.5 * np.sum((x - [0.0, 1.0]) ** 2, axis=-1), atol=1e-12)
+    # The diagnostics, computed on the draws' arrays, are arviz's on the InferenceData.
+    import arviz as az
+
+    for name, i in (("x0", 0), ("x1", 1)):
+        assert result.rhat[i] == float(az.rhat(idata)[name].values)
+        assert result.ess_bulk[i] == float(az.ess(idata, method="bulk")[name].values)
+        assert result.ess_tail[i] == float(az.ess(idata, method="tail")[name].values)
 
 
 # -- failures are reported -----------------------------------------------------------------

@@ -280,7 +280,7 @@ def _run_step(
         min_steps=min_steps,
         max_steps=max_steps,
         param_names=target.param_names,
-        moves=default_moves(target.mode) if moves is None else moves,
+        moves=default_moves(target.mode, target.box, target.n_dim) if moves is None else moves,
     )
 
 
@@ -499,7 +499,7 @@ def crosscheck(
         "min_steps": int(min_steps),
         "max_steps": int(max_steps),
         "moves": (
-            ("t-fit 0.8 + DE 0.2" if mode == "collapsed" else "DE 0.8 + DE snooker 0.2")
+            ("logit t-fit 0.8 + DE 0.2" if mode == "collapsed" else "DE 0.8 + DE snooker 0.2")
             if moves is None
             else str(moves)
         ),

@@ -43,9 +43,9 @@ DRAWS_PER_CHAIN = 100
 # -- InferenceData ------------------------------------------------------------------------
 def _thin_per_chain(res: McmcResult, n: int) -> tuple[FloatArray, FloatArray]:
     """``n`` evenly spaced draws per ensemble: (E, n, d) parameters and (E, n) lp."""
-    post = res.inference_data.posterior
-    arr = np.stack([post[name].values for name in res.param_names], axis=-1)
-    lp = res.inference_data.sample_stats["lp"].values
+    if res.draws is None or res.draw_lp is None:
+        raise ValueError("the MCMC run kept no draws")
+    arr, lp = res.draws, res.draw_lp
     idx = np.linspace(0, arr.shape[1] - 1, n).round().astype(int)
     return arr[:, idx], lp[:, idx]
 

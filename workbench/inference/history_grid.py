@@ -46,10 +46,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import RectBivariateSpline
 
+from workbench.errors import UsageError
+from workbench.inference import kalman as kf
+from workbench.inference._grid_kernel import grid_log_likelihood
 from workbench.inference.step_model import StepModel
 
 __all__ = [
     "GRID_COVER",
+    "GRID_ENGINES",
     "GRID_EXTENT",
     "GRID_MIN_SD",
     "GRID_NODES",
@@ -76,6 +80,9 @@ GRID_COVER = 5.0
 #: node spacing is ``2 E / (N - 1)`` = 0.21 units; at build the posterior's sd is 0.5 units,
 #: so a rebuild comes when it has contracted twofold).
 GRID_MIN_SD = 0.25
+#: Who computes the nodes' exact step likelihoods and hand-overs (``HistoryGrid``'s
+#: ``engine``), default first: the piece filter, or the step model (the reference).
+GRID_ENGINES = ("filter", "step")
 #: Nodes per call of the step model (bounds the memory of its buffer).
 _CHUNK = 512
 #: Nodes within this log-density drop from the peak count as "inside the posterior" when the
@@ -125,6 +132,10 @@ class HistoryGrid:
         the previous one's hand-over at the node.
     nodes, extent : int, float
         Grid size and half-width in sd (:data:`GRID_NODES`, :data:`GRID_EXTENT`).
+    engine : {"filter", "step"}, default "filter"
+        Who computes each step at the nodes: :func:`workbench.inference.kalman.piece_filter`
+        (:meth:`_filter_step`), or :meth:`StepModel.loglik_and_hand_over`, the reference
+        it equals to rounding. The record's last step always uses the step model.
     """
 
     def __init__(
@@ -136,7 +147,11 @@ class HistoryGrid:
         *,
         nodes: int = GRID_NODES,
         extent: float = GRID_EXTENT,
+        engine: str = "filter",
     ) -> None:
+        if engine not in GRID_ENGINES:
+            raise UsageError(f"engine must be one of {', '.join(GRID_ENGINES)}, got {engine!r}")
+        self.engine = engine
         self.box = box
         self.centre = np.asarray(centre, dtype=float).reshape(2)
         cov = np.asarray(cov, dtype=float).reshape(2, 2)
@@ -164,6 +179,16 @@ class HistoryGrid:
     def advance(self, model: StepModel, *, refit: bool = True) -> None:
         """Add one step: its exact likelihood and hand-over at every node (hand-ins chained)."""
         n = self.c.size
+        if self.engine == "filter" and model.end < model.problem.n_samples:
+            ll_all, (mean_all, chol_all) = self._filter_step(model)
+            self.loglik += ll_all
+            self.hand_last = self.hand
+            self.hand = (mean_all, chol_all)
+            self.n_steps += 1
+            self.model_runs += 1
+            if refit:
+                self._fit()
+            return
         ll = np.empty(n)
         mean = np.empty((n, 2))
         chol = np.empty((n, 2, 2))
@@ -185,6 +210,34 @@ class HistoryGrid:
         self.model_runs += 1
         if refit:
             self._fit()
+
+    def _filter_step(self, model: StepModel) -> tuple[FloatArray, tuple[FloatArray, FloatArray]]:
+        """Return the step's exact likelihood and hand-over at every node (piece filter).
+
+        :func:`workbench.inference.kalman.piece_filter` runs the same regression as
+        :meth:`StepModel.loglik_and_hand_over` (equal to rounding,
+        ``tests/test_crosscheck.py``), from the record's harmonic sufficient statistics when
+        the problem allows it (no process noise, no known surface load, a harmonic force
+        basis: the cross-check's defaults), which needs no pass over the step's samples per
+        node beyond a few operations per sample.
+        """
+        n = self.c.size
+        if self.hand is None:
+            x_mean = np.repeat(model.beta0[None, :2], n, axis=0)
+            root = np.repeat(model.prior_chol[None, :2, :2], n, axis=0)
+        else:
+            x_mean, root = self.hand
+        res = kf.piece_filter(
+            model.problem,
+            model.piece,
+            self.c,
+            self.k,
+            x_mean,
+            root @ root.transpose(0, 2, 1),
+            discretisation=model.discretisation,
+        )
+        cov = 0.5 * (res.x_cov_next + res.x_cov_next.transpose(0, 2, 1))
+        return res.loglik, (res.x_mean_next, np.asarray(np.linalg.cholesky(cov), dtype=float))
 
     def copy(self) -> HistoryGrid:
         """Return an independent copy (advancing one does not change the other)."""
@@ -256,6 +309,28 @@ class HistoryGrid:
         u, inside = self._grid_rows(c, k)
         ll = np.where(inside, self._splines[0].ev(u[:, 0], u[:, 1]) + self._peak, -np.inf)
         return self._hand(u, self._splines[1:]), ll
+
+    def log_likelihood(self, c: FloatArray, k: FloatArray) -> FloatArray:
+        """Interpolated log-likelihood per row: :meth:`evaluate`'s without the hand-over.
+
+        One compiled call (:mod:`workbench.inference._grid_kernel`), equal to
+        :meth:`evaluate`'s to rounding.
+        """
+        tx, ty, coef = self._splines[0].tck
+        lo, hi = box_bounds(self.box)
+        return grid_log_likelihood(
+            np.ascontiguousarray(c, dtype=np.float64),
+            np.ascontiguousarray(k, dtype=np.float64),
+            lo,
+            hi,
+            self.centre,
+            self.root,
+            self.extent,
+            tx,
+            ty,
+            coef,
+            self._peak,
+        )
 
     def hand_in_last(self, c: FloatArray, k: FloatArray) -> tuple[FloatArray, FloatArray] | None:
         """Interpolated hand-in of the last step held (None when that is step 0)."""

@@ -51,12 +51,17 @@ Every failed condition adds one plain sentence to :attr:`McmcResult.reasons`.
 
 One call of the target per round, for all ensembles
     A log density that costs a Kalman filter per call is dominated by per-call overhead at
-    a few dozen points, so the ensembles step in lockstep: each runs in its own thread, and
-    every time emcee asks one of them for log densities the request waits until every
-    running ensemble has asked, then all are evaluated in one call of ``log_prob`` (ensemble
-    order, so the batch, and with a row-wise target the result, is the same on every run).
-    The ensembles stay independent: each keeps its own walkers and random stream; only the
-    arithmetic is shared. ``lockstep=False`` evaluates them one after the other instead.
+    a few dozen points, so the ensembles step in lockstep: every time one of them asks for
+    log densities the request waits until every running ensemble has asked, then all are
+    evaluated in one call of ``log_prob`` (ensemble order, so the batch, and with a
+    row-wise target the result, is the same on every run). The ensembles stay independent:
+    each keeps its own walkers and random stream; only the arithmetic is shared.
+    ``lockstep=False`` evaluates them one after the other instead. By default
+    (``engine="batched"``) one thread steps all ensembles, each a generator that yields its
+    proposals and draws exactly what emcee's sampler would; ``engine="emcee"`` runs emcee's
+    own sampler, one thread per ensemble, the reference that gives the same samples bit for
+    bit. With a cheap target (the cross-check's grid surrogate) the threads' hand-overs and
+    emcee's per-walker Python loops cost more than the target itself.
 
 Determinism
     ``np.random.SeedSequence(seed).spawn(n_ensembles)`` gives every ensemble its own
@@ -82,14 +87,23 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.inference.mcmc_lockstep import _EnsembleError, _Lockstep, _run_chunk
+from workbench.inference.mcmc_diagnostics import _integrated_time, _rhat_ess
+from workbench.inference.mcmc_lockstep import (
+    _BatchedEnsemble,
+    _EnsembleError,
+    _Lockstep,
+    _run_batched,
+    _run_chunk,
+    batched_moves,
+)
 from workbench.inference.mcmc_result import McmcResult
 
-# The result type and the lockstep threads live in their own modules (each one idea);
+# The result type and the lockstep drivers live in their own modules (each one idea);
 # McmcResult stays importable from here.
 __all__ = [
     "ACCEPTANCE_MAX",
     "ACCEPTANCE_MIN",
+    "ENGINES",
     "ESS_MIN",
     "RHAT_MAX",
     "Initial",
@@ -102,6 +116,8 @@ FloatArray = NDArray[np.float64]
 LogProb = Callable[[FloatArray], ArrayLike]
 Initial = Callable[[np.random.Generator], ArrayLike] | ArrayLike
 
+#: Who steps the ensembles (``run_ensembles``'s ``engine``), default first.
+ENGINES = ("batched", "emcee")
 #: Largest rank-normalised split R-hat accepted (Vehtari et al. 2021 recommend 1.01).
 RHAT_MAX = 1.01
 #: Smallest bulk and tail ESS accepted, per parameter (Vehtari et al. 2021).
@@ -162,6 +178,7 @@ def run_ensembles(
     param_names: Sequence[str] | None = None,
     moves: str | Any = "de",
     lockstep: bool = True,
+    engine: str = "batched",
 ) -> McmcResult:
     """Sample a log density with several independent emcee ensembles and check convergence.
 
@@ -225,6 +242,14 @@ def run_ensembles(
     lockstep : bool, default True
         Evaluate the requests of all ensembles in one call of ``log_prob`` per round
         (module docstring); the samples are the same either way for a row-wise target.
+    engine : {"batched", "emcee"}, default "batched"
+        Who steps the ensembles. ``"batched"``: one thread steps them all, drawing exactly
+        what emcee's sampler draws (:class:`~workbench.inference.mcmc_lockstep.
+        _BatchedEnsemble`; red-blue moves, every other move falls back to emcee).
+        ``"emcee"``: :class:`emcee.EnsembleSampler` itself, in one thread per ensemble
+        when ``lockstep``: the reference. The samples are the same bit for bit
+        (``tests/test_mcmc.py``); the batched engine saves the threads' hand-overs and
+        emcee's per-walker Python loops, most of the cost of a cheap target.
 
     Returns
     -------
@@ -252,7 +277,10 @@ def run_ensembles(
     if not np.isfinite(tau_rtol) or not 0 < tau_rtol < 1:
         raise UsageError(f"tau_rtol must lie strictly between 0 and 1, got {tau_rtol!r}")
 
+    if engine not in ENGINES:
+        raise UsageError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     move_spec = _moves(moves)
+    batched = engine == "batched" and batched_moves(move_spec())
     # Each ensemble gets two independent streams: one for its start, one for emcee's moves.
     children = np.random.SeedSequence(int(seed)).spawn(n_ensembles)
     streams = [child.spawn(2) for child in children]
@@ -265,8 +293,8 @@ def run_ensembles(
     # emcee always runs with `vectorize=True`: a point-wise target is batched here instead.
     target = _CountingLogProb(log_prob if vectorize else _row_by_row(log_prob), n_dim)
 
-    batcher = _Lockstep(target, n_ensembles) if lockstep else None
-    samplers: list[emcee.EnsembleSampler] = []
+    batcher = _Lockstep(target, n_ensembles) if lockstep and not batched else None
+    samplers: list[Any] = []  # emcee.EnsembleSampler or _BatchedEnsemble
     states: list[emcee.State] = []
     for e, start in enumerate(starts):
         lp0 = target(start)
@@ -277,9 +305,12 @@ def run_ensembles(
                 "density; start the walkers inside the support (a smaller scale or a "
                 "different centre)"
             )
+        rng_state = np.random.RandomState(np.random.MT19937(streams[e][1])).get_state()
+        if batched:
+            samplers.append(_BatchedEnsemble(move_spec(), start, lp0, rng_state))
+            continue
         fn = batcher.proxy(e) if batcher is not None else target
         sampler = emcee.EnsembleSampler(n_walkers, n_dim, fn, vectorize=True, moves=move_spec())
-        rng_state = np.random.RandomState(np.random.MT19937(streams[e][1])).get_state()
         samplers.append(sampler)
         states.append(emcee.State(start, log_prob=lp0, random_state=rng_state))
 
@@ -290,7 +321,10 @@ def run_ensembles(
     while True:
         chunk = target_steps - n_steps
         try:
-            _run_chunk(samplers, states, chunk, batcher)
+            if batched:
+                _run_batched(samplers, chunk, target, lockstep)
+            else:
+                _run_chunk(samplers, states, chunk, batcher)
         except _EnsembleError as failure:
             err = failure.__cause__
             if err is None:
@@ -337,17 +371,7 @@ def run_ensembles(
     acceptance = np.array([float(np.mean(s.acceptance_fraction)) for s in samplers])
     stuck = np.array([int(_stuck_walkers(s.get_chain()).sum()) for s in samplers])
 
-    # arviz is imported here, not at module level: its import takes seconds (it loads its
-    # plotting stack), which every command importing this module would otherwise pay.
-    import arviz as az
-
-    idata = az.from_dict(
-        posterior={name: draws[:, :, i] for i, name in enumerate(names)},
-        sample_stats={"lp": draw_lp},
-    )
-    rhat = _per_param(az.rhat(idata), names)
-    ess_bulk = _per_param(az.ess(idata, method="bulk"), names)
-    ess_tail = _per_param(az.ess(idata, method="tail"), names)
+    rhat, ess_bulk, ess_tail = _rhat_ess(draws)
 
     reasons = _reasons(
         names=names,
@@ -383,7 +407,8 @@ def run_ensembles(
         tau_rule_met=rule_met,
         converged=not reasons,
         reasons=reasons,
-        inference_data=idata,
+        draws=draws,
+        draw_lp=draw_lp,
         seconds=time.perf_counter() - t0,
     )
 
@@ -496,17 +521,12 @@ def _tau(chain: FloatArray) -> FloatArray:
     if not np.any(moved):
         return np.full(chain.shape[2], np.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
-        tau = emcee.autocorr.integrated_time(chain[:, moved, :], c=5, tol=0, quiet=True)
-    return np.asarray(tau, dtype=np.float64)
+        return _integrated_time(chain[:, moved, :], c=5)
 
 
 def _stuck_walkers(chain: FloatArray) -> NDArray[np.bool_]:
     """Walkers of a (steps, walkers, d) chain that never left their first position."""
     return np.asarray(np.all(chain == chain[:1], axis=(0, 2)), dtype=np.bool_)
-
-
-def _per_param(dataset: Any, names: tuple[str, ...]) -> FloatArray:
-    return np.array([float(dataset[name].values) for name in names], dtype=np.float64)
 
 
 def _reasons(

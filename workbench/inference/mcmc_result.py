@@ -11,6 +11,7 @@ Its own idea: the result type carries no sampling code, so the cross-check's res
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -57,10 +58,10 @@ class McmcResult:
         All checks of the mcmc module docstring passed.
     reasons : list of str
         One plain sentence per failed check; empty when converged.
-    inference_data : arviz.InferenceData
-        ``posterior`` (one variable per parameter, dims ``chain`` = ensemble and ``draw`` =
-        walker-major pooled draws) and ``sample_stats`` (``lp``, the log density of every
-        kept draw, same layout).
+    draws : ndarray, shape (n_ensembles, n_draws / n_ensembles, d), optional
+        The kept draws per ensemble, walker-major (the layout of :attr:`inference_data`).
+    draw_lp : ndarray, shape (n_ensembles, n_draws / n_ensembles), optional
+        The log density of every kept draw, same layout.
     seconds : float
         Wall-clock time of the whole run, diagnostics included.
     """
@@ -84,8 +85,27 @@ class McmcResult:
     tau_rule_met: NDArray[np.bool_]
     converged: bool
     reasons: list[str] = field(default_factory=list)
-    inference_data: Any = None
+    draws: FloatArray | None = None
+    draw_lp: FloatArray | None = None
     seconds: float = 0.0
+
+    @cached_property
+    def inference_data(self) -> Any:
+        """The run as an arviz InferenceData (built on first use, then kept).
+
+        ``posterior`` (one variable per parameter, dims ``chain`` = ensemble and ``draw`` =
+        walker-major pooled draws) and ``sample_stats`` (``lp``, the log density of every
+        kept draw, same layout); None without :attr:`draws`. Built on demand: a
+        cross-check runs hundreds of these and reads its draws directly.
+        """
+        if self.draws is None or self.draw_lp is None:
+            return None
+        import arviz as az
+
+        return az.from_dict(
+            posterior={name: self.draws[:, :, i] for i, name in enumerate(self.param_names)},
+            sample_stats={"lp": self.draw_lp},
+        )
 
     @property
     def n_draws(self) -> int:

@@ -40,10 +40,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
+from workbench.inference._step_kernel import (
+    collapsed_and_hand_over,
+    gram_and_next,
+    predictions,
+)
 from workbench.inference.kalman import transition_matrices
 from workbench.inference.problem import OBSERVED_CHANNELS, IdentificationProblem
 
-__all__ = ["StepModel"]
+__all__ = ["ENGINES", "StepModel"]
+
+#: Engines of the likelihoods (``StepModel``'s ``engine``), default first.
+ENGINES = ("compiled", "numpy")
 
 FloatArray = NDArray[np.float64]
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -63,6 +71,11 @@ class StepModel:
         :func:`~workbench.inference.kalman.initial_state` for piece 0).
     discretisation : {"foh", "zoh", "euler"}
         As in :func:`~workbench.inference.kalman.transition_matrices`.
+    engine : {"compiled", "numpy"}, default "compiled"
+        Who runs the recursion and the Gram matrix of the likelihoods: the numba kernel
+        (:mod:`workbench.inference._step_kernel`) or the numpy loop, the reference it equals
+        to rounding (``tests/test_crosscheck.py``); :meth:`responses` always uses the
+        numpy loop.
     """
 
     def __init__(
@@ -73,7 +86,11 @@ class StepModel:
         x_cov: ArrayLike,
         *,
         discretisation: str = "foh",
+        engine: str = "compiled",
     ) -> None:
+        if engine not in ENGINES:
+            raise UsageError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+        self.engine = engine
         if not 0 <= int(piece) < problem.n_pieces:
             raise UsageError(f"piece must be in 0..{problem.n_pieces - 1}, got {piece!r}")
         if np.any(np.asarray(problem.noise.state_sd) > 0):
@@ -165,36 +182,35 @@ class StepModel:
         rows[..., q] -= self._y_rows[None]
         return rows
 
-    def _run(
+    def _setup(
         self,
         damping: ArrayLike,
         stiffness: ArrayLike,
         hand_in: tuple[FloatArray, FloatArray] | None = None,
-    ) -> FloatArray:
-        """Run the recursion; return its whole buffer (B, L + 1, 5, q + 1) (see responses)."""
+    ) -> tuple[FloatArray, FloatArray]:
+        """Return the recursion's map per pair (B, 3, 4) and its start (B, 2, q + 1).
+
+        The start is ``(u_0, u'_0)`` over the columns. The (3 x 4) matrix
+        ``[[-K/M, -C/M, 1/M, 0], [Phi | Gamma0 Gamma1]]`` maps
+        ``(u_i, u'_i, F_i, F_{i+1})`` to ``(u''_i, u_{i+1}, u'_{i+1})`` (see :meth:`_run`).
+        """
         c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
         k = np.atleast_1d(np.asarray(stiffness, dtype=np.float64))
         phi, g0, g1 = transition_matrices(
             self.problem.mass_kg, c, k, self.problem.dt_s, self.discretisation
         )
-        b, q, n_s = c.size, self.q, self.length
-        q1 = q + 1
+        b, q = c.size, self.q
         mass = self.problem.mass_kg
-        # One batched product per sample does the whole recursion. Block i of the buffer
-        # holds the rows (u''_{i-1}, u_i, u'_i, F_i, F_{i+1}) over the columns; the
-        # (3 x 4) matrix [[-K/M, -C/M, 1/M, 0], [Phi | Gamma0 Gamma1]] maps rows 1-4 of block
-        # i to rows 0-2 of block i + 1, i.e. (u''_i, u_{i+1}, u'_{i+1}).
-        buf = np.zeros((b, n_s + 1, 5, q1))
-        buf[:, :n_s, 3:5] = self._force_pairs[None]
+        start = np.zeros((b, 2, q + 1))
         if hand_in is None:
-            buf[:, 0, 1:3, :q] = self.prior_chol[None, :2, :]
-            buf[:, 0, 1:3, q] = self.beta0[None, :2]
+            start[:, :, :q] = self.prior_chol[None, :2, :]
+            start[:, :, q] = self.beta0[None, :2]
         else:
-            buf[:, 0, 1:3, :2] = hand_in[1]
-            buf[:, 0, 1:3, q] = hand_in[0]
+            start[:, :, :2] = hand_in[1]
+            start[:, :, q] = hand_in[0]
         if self.piece > 0:
             # The new piece's share of the boundary interval (kalman module, time convention).
-            buf[:, 0, 1:3] += g1[:, :, None] * self._force_pairs[0, 0][None, None, :]
+            start += g1[:, :, None] * self._force_pairs[0, 0][None, None, :]
         step = np.empty((b, 3, 4))
         step[:, 0, 0] = -k / mass
         step[:, 0, 1] = -c / mass
@@ -203,9 +219,53 @@ class StepModel:
         step[:, 1:, :2] = phi
         step[:, 1:, 2] = g0
         step[:, 1:, 3] = g1
+        return step, start
+
+    def _run(
+        self,
+        damping: ArrayLike,
+        stiffness: ArrayLike,
+        hand_in: tuple[FloatArray, FloatArray] | None = None,
+    ) -> FloatArray:
+        """Run the recursion; return its whole buffer (B, L + 1, 5, q + 1) (see responses)."""
+        step, start = self._setup(damping, stiffness, hand_in)
+        b, n_s = step.shape[0], self.length
+        # One batched product per sample does the whole recursion. Block i of the buffer
+        # holds the rows (u''_{i-1}, u_i, u'_i, F_i, F_{i+1}) over the columns; the map of
+        # :meth:`_setup` takes rows 1-4 of block i to rows 0-2 of block i + 1, i.e.
+        # (u''_i, u_{i+1}, u'_{i+1}).
+        buf = np.zeros((b, n_s + 1, 5, self.q + 1))
+        buf[:, :n_s, 3:5] = self._force_pairs[None]
+        buf[:, 0, 1:3] = start
         for i in range(n_s):
             np.matmul(step, buf[:, i, 1:5], out=buf[:, i + 1, 0:3])
         return buf
+
+    def _gram_and_after(
+        self,
+        damping: ArrayLike,
+        stiffness: ArrayLike,
+        hand_in: tuple[FloatArray, FloatArray] | None,
+        inv_s2: FloatArray,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Gram matrix (B, q + 1, q + 1) of ``[G | e]`` and the state after the piece.
+
+        The state after the last interval (B, 2, q + 1) is the hand-over's columns
+        (:meth:`loglik_and_hand_over`). ``engine="compiled"`` runs the fused kernel
+        (:mod:`workbench.inference._step_kernel`), ``"numpy"`` the reference
+        (:meth:`_run` and :meth:`_gram`).
+        """
+        q = self.q
+        if self.engine == "numpy":
+            buf = self._run(damping, stiffness, hand_in)
+            b, n_s = buf.shape[0], self.length
+            after = buf[:, n_s, 1:3].copy()
+            rows = buf.reshape(b, -1, q + 1)[:, 1 : 5 * n_s + 1]
+            rows[..., q] -= self._y_rows[None]
+            return self._gram(rows, inv_s2), after
+        step, start = self._setup(damping, stiffness, hand_in)
+        weight = np.sqrt(np.where(self.observed, inv_s2[:, None], 1.0)) / self.obs_sd
+        return gram_and_next(step, start, self._force_pairs, self.y, weight)
 
     # -- likelihoods -------------------------------------------------------------------
     def _log_det_r(self, noise_scale: FloatArray) -> FloatArray:
@@ -262,12 +322,14 @@ class StepModel:
         """
         if self.end >= self.problem.n_samples:
             raise UsageError("the last piece of the record hands over to nothing")
-        buf = self._run(damping, stiffness, hand_in)
-        b, n_s, q = buf.shape[0], self.length, self.q
-        nxt = buf[:, n_s, 1:3].copy()  # (B, 2, q + 1): the state after the last interval
-        rows = buf.reshape(b, -1, q + 1)[:, 1 : 5 * n_s + 1]
-        rows[..., q] -= self._y_rows[None]
-        gram = self._gram(rows, np.ones(b))
+        b, q = np.atleast_1d(np.asarray(damping)).size, self.q
+        # nxt (B, 2, q + 1): the state after the last interval.
+        gram, nxt = self._gram_and_after(damping, stiffness, hand_in, np.ones(b))
+        constant = 0.5 * self._log_det_r(np.ones(b)) + 1.5 * _LOG_2PI * self.length
+        if self.engine == "compiled":
+            # The factor and the hand-over per pair in the kernel (the algebra below).
+            log_det_half, d2, mean, hand_chol = collapsed_and_hand_over(gram, nxt)
+            return -0.5 * d2 - log_det_half - constant, (mean, hand_chol)
         idx = np.arange(q)
         gram[:, idx, idx] += 1.0
         chol_aug = np.linalg.cholesky(gram)
@@ -315,9 +377,14 @@ class StepModel:
         """
         c = np.atleast_1d(np.asarray(damping, dtype=np.float64))
         s = np.ones(c.size) if noise_scale is None else np.asarray(noise_scale, dtype=np.float64)
-        rows = self.responses(c, stiffness, hand_in)
         q = self.q
-        gram = self._gram(rows, 1.0 / np.square(s))
+        gram, after = self._gram_and_after(c, stiffness, hand_in, 1.0 / np.square(s))
+        if self.engine == "compiled" and not return_posterior:
+            # The kernel's factor (its hand-over terms are not needed here).
+            log_det_half, d2, _, _ = collapsed_and_hand_over(gram, after)
+            return (
+                -0.5 * d2 - log_det_half - 0.5 * self._log_det_r(s) - 1.5 * _LOG_2PI * self.length
+            )
         idx = np.arange(q)
         gram[:, idx, idx] += 1.0
         # One Cholesky factor of the augmented [[A, h], [h^T, e^T e]] holds everything: its
@@ -391,11 +458,20 @@ class StepModel:
         beta0, prior_chol = self.prior_for(c.size, hand_in)
         dev = np.asarray(beta, dtype=np.float64) - beta0
         eta = np.linalg.solve(prior_chol, dev[:, :, None])[:, :, 0]
-        rows = self.responses(c, stiffness, hand_in)
         q = self.q
         # Data minus prediction at beta, per row, then per sample and channel (u, u', u'').
-        resid = -(rows[..., q] + np.einsum("brq,bq->br", rows[..., :q], eta))
-        resid = resid.reshape(c.size, self.length, 5)[:, :, [0, 1, 4]] / self.obs_sd
+        if self.engine == "numpy":
+            rows = self.responses(c, stiffness, hand_in)
+            resid = -(rows[..., q] + np.einsum("brq,bq->br", rows[..., :q], eta))
+            resid = resid.reshape(c.size, self.length, 5)[:, :, [0, 1, 4]]
+        else:
+            # The model is linear in beta: one response, to the columns' sum at eta.
+            step, start = self._setup(c, stiffness, hand_in)
+            start1 = np.einsum("bsq,bq->bs", start[:, :, :q], eta) + start[:, :, q]
+            pairs = self._force_pairs
+            forces = np.einsum("ipq,bq->bip", pairs[:, :, :q], eta) + pairs[None, :, :, q]
+            resid = predictions(step, start1, forces, self.y)
+        resid = resid / self.obs_sd
         obs = self.observed
         r_o = resid[:, :, obs] / s[:, None, None]
         log_sd = np.log(self.obs_sd[obs])[None, None, :] + np.log(s)[:, None, None]
