@@ -36,6 +36,14 @@ import math
 import numba
 import numpy as np
 
+from workbench.inference._triangular_kernel import (
+    allocate_outputs,
+    back_solve,
+    cholesky_of_identity_plus,
+    forward_solve,
+    inverse_block,
+)
+
 __all__ = ["filter_record"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
@@ -204,13 +212,9 @@ def filter_record(
     nb = m + 2  # beta = (xi_0, xi_1, eta_1 .. eta_m); column nb is the offset (beta = 0)
     b_count = prm.shape[0]
     n_run = stop - first
-    loglik = np.empty((b_count, n_run))
-    theta_eta = np.empty((b_count, n_run, m))
-    theta_cov = np.empty((b_count, n_run if want_theta_cov else 0, m, m))
-    xm_end = np.empty((b_count, n_run, 2))
-    xc_end = np.empty((b_count, n_run, 2, 2))
-    xm_next = np.empty((b_count, 2))
-    xc_next = np.empty((b_count, 2, 2))
+    loglik, theta_eta, theta_cov, xm_end, xc_end, xm_next, xc_next = allocate_outputs(
+        b_count, n_run, m, want_theta_cov
+    )
     r0 = obs_var[0]
     r1 = obs_var[1]
     r2 = obs_var[2]
@@ -505,17 +509,7 @@ def filter_record(
                 y_quad += y_sq[j, ch] * inv_r[ch]
             e_quad = y_quad - 2.0 * bvec[nb] + big[nb, nb]
             # -- the regression: J = I + M_beta, h = b_beta - M_beta,off ------------------------
-            for jc in range(nb):
-                acc = 1.0 + big[jc, jc]
-                for t in range(jc):
-                    acc -= chol[jc, t] * chol[jc, t]
-                d = math.sqrt(acc)
-                chol[jc, jc] = d
-                for i in range(jc + 1, nb):
-                    acc = big[i, jc]
-                    for t in range(jc):
-                        acc -= chol[i, t] * chol[jc, t]
-                    chol[i, jc] = acc / d
+            cholesky_of_identity_plus(big, nb, chol)
             # Design of the state at the last sample and at the hand-over, per column.
             for i in range(nb + 1):
                 qa = q[i, 0]
@@ -545,33 +539,19 @@ def filter_record(
                 rhs[i, 4] = d_next[1, i]
                 for c in range(5, n_rhs):
                     rhs[i, c] = 1.0 if c - 5 == i else 0.0
-            for c in range(n_rhs):
-                for i in range(nb):
-                    acc = rhs[i, c]
-                    for t in range(i):
-                        acc -= chol[i, t] * rhs[t, c]
-                    rhs[i, c] = acc / chol[i, i]
+            forward_solve(chol, rhs, nb)
             quad = 0.0
             logdet = 0.0
             for i in range(nb):
                 quad += rhs[i, 0] * rhs[i, 0]
                 logdet += 2.0 * math.log(chol[i, i])
             loglik[b, jj] = -0.5 * (e_quad - quad) - 0.5 * logdet - 0.5 * length * log_norm
-            for i in range(nb - 1, -1, -1):
-                acc = rhs[i, 0]
-                for t in range(i + 1, nb):
-                    acc -= chol[t, i] * beta[t]
-                beta[i] = acc / chol[i, i]
+            back_solve(chol, rhs[:, 0], beta)
             for c in range(m):
                 theta_eta[b, jj, c] = beta[2 + c]
             if want_theta_cov:
-                for i in range(m):
-                    for k2 in range(i, m):
-                        acc = 0.0
-                        for t in range(nb):
-                            acc += rhs[t, 7 + i] * rhs[t, 7 + k2]
-                        theta_cov[b, jj, i, k2] = acc
-                        theta_cov[b, jj, k2, i] = acc
+                # J^-1 = L^-T L^-1 over the force coefficients (beta's entries 2 ..).
+                inverse_block(rhs, nb, 5, 2, theta_cov[b, jj])
             # States: mean = D_off + D_beta beta, cov = (L^-1 D^T)^T (L^-1 D^T).
             _state_moments(d_end, rhs, 1, beta, xm_end[b, jj], xc_end[b, jj])
             _state_moments(d_next, rhs, 3, beta, xm_next[b], xc_next[b])

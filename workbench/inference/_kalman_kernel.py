@@ -30,6 +30,14 @@ import math
 import numba
 import numpy as np
 
+from workbench.inference._triangular_kernel import (
+    allocate_outputs,
+    back_solve,
+    cholesky_of_identity_plus,
+    forward_solve,
+    inverse_block,
+)
+
 __all__ = ["PAIR_CONSTANTS", "filter_record"]
 
 #: Per-pair constants, one row per pair: K/M, C/M, Phi (row-major), Gamma0, Gamma1,
@@ -325,13 +333,9 @@ def filter_record(
     m = n1 - 1
     b_count = prm.shape[0]
     n_run = stop - first
-    loglik = np.empty((b_count, n_run))
-    theta_eta = np.empty((b_count, n_run, m))
-    theta_cov = np.empty((b_count, n_run if want_theta_cov else 0, m, m))
-    xm_end = np.empty((b_count, n_run, 2))
-    xc_end = np.empty((b_count, n_run, 2, 2))
-    xm_next = np.empty((b_count, 2))
-    xc_next = np.empty((b_count, 2, 2))
+    loglik, theta_eta, theta_cov, xm_end, xc_end, xm_next, xc_next = allocate_outputs(
+        b_count, n_run, m, want_theta_cov
+    )
     longest = 1
     for j in range(first, stop):
         longest = max(longest, piece_starts[j + 1] - piece_starts[j])
@@ -346,7 +350,6 @@ def filter_record(
     chol = np.zeros((m, m))
     rhs = np.empty((m, 5 + (m if want_theta_cov else 0)))
     half = np.empty(m)
-    eta = np.empty(m)
     r0 = obs_var[0]
     r1 = obs_var[1]
     r2 = obs_var[2]
@@ -434,17 +437,7 @@ def filter_record(
             pf11 += gain[1, 0] ** 2 * r0 + gain[1, 1] ** 2 * r1 + gain[1, 2] ** 2 * r2
             has_next = end < n_total
             # Integrate eta out: J = I + Gram[:m, :m]; L_J^-1 [-h, V_end^T, V_next^T (, I)].
-            for jc in range(m):
-                acc = 1.0 + gram[jc, jc]
-                for t in range(jc):
-                    acc -= chol[jc, t] * chol[jc, t]
-                d = math.sqrt(acc)
-                chol[jc, jc] = d
-                for i in range(jc + 1, m):
-                    acc = gram[i, jc]
-                    for t in range(jc):
-                        acc -= chol[i, t] * chol[jc, t]
-                    chol[i, jc] = acc / d
+            cholesky_of_identity_plus(gram, m, chol)
             for i in range(m):
                 rhs[i, 0] = gram[i, m]
                 rhs[i, 1] = filt[0, i]
@@ -453,12 +446,7 @@ def filter_record(
                 rhs[i, 4] = xs[1, i] if has_next else filt[1, i]
                 for c in range(5, rhs.shape[1]):
                     rhs[i, c] = 1.0 if c - 5 == i else 0.0
-            for c in range(rhs.shape[1]):
-                for i in range(m):
-                    acc = rhs[i, c]
-                    for t in range(i):
-                        acc -= chol[i, t] * rhs[t, c]
-                    rhs[i, c] = acc / chol[i, i]
+            forward_solve(chol, rhs, m)
             logdet = 0.0
             quad = 0.0
             for i in range(m):
@@ -473,21 +461,10 @@ def filter_record(
                 - 0.5 * logdet
             )
             # eta = L_J^-T (L_J^-1 h): the coefficients' posterior mean (whitened).
-            for i in range(m - 1, -1, -1):
-                acc = half[i]
-                for t in range(i + 1, m):
-                    acc -= chol[t, i] * eta[t]
-                eta[i] = acc / chol[i, i]
-            theta_eta[b, jj] = eta
+            back_solve(chol, half, theta_eta[b, jj])
             if want_theta_cov:
                 # J^-1 = L_J^-T L_J^-1, the last m columns of rhs holding L_J^-1.
-                for i in range(m):
-                    for k2 in range(i, m):
-                        acc = 0.0
-                        for t in range(m):
-                            acc += rhs[t, 5 + i] * rhs[t, 5 + k2]
-                        theta_cov[b, jj, i, k2] = acc
-                        theta_cov[b, jj, k2, i] = acc
+                inverse_block(rhs, m, 5, 0, theta_cov[b, jj])
             _marginal(filt, pf00, pf01, pf11, rhs, 1, half, xm_end[b, jj], xc_end[b, jj])
             if has_next:
                 # The Riccati loop left p at the next sample's predicted covariance.
