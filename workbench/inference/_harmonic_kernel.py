@@ -42,6 +42,7 @@ from workbench.inference._triangular_kernel import (
     cholesky_of_identity_plus,
     forward_solve,
     inverse_block,
+    state_covariance,
 )
 
 __all__ = ["filter_record"]
@@ -160,19 +161,7 @@ def _state_moments(
         for i in range(nb):
             acc += design[r, i] * beta[i]
         mean_out[r] = acc
-    c00 = 0.0
-    c01 = 0.0
-    c11 = 0.0
-    for i in range(nb):
-        a = solved[i, col]
-        b = solved[i, col + 1]
-        c00 += a * a
-        c01 += a * b
-        c11 += b * b
-    cov_out[0, 0] = c00
-    cov_out[0, 1] = c01
-    cov_out[1, 0] = c01
-    cov_out[1, 1] = c11
+    state_covariance(solved, nb, col, np.zeros((2, 2)), cov_out)
 
 
 @_jit

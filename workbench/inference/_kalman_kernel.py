@@ -36,6 +36,7 @@ from workbench.inference._triangular_kernel import (
     cholesky_of_identity_plus,
     forward_solve,
     inverse_block,
+    state_covariance,
 )
 
 __all__ = ["PAIR_CONSTANTS", "filter_record"]
@@ -257,19 +258,11 @@ def _marginal(
         for i in range(m):
             acc += rhs[i, col + j] * half[i]
         mean_out[j] = acc
-    c00 = p00
-    c01 = p01
-    c11 = p11
-    for i in range(m):
-        a = rhs[i, col]
-        b = rhs[i, col + 1]
-        c00 += a * a
-        c01 += a * b
-        c11 += b * b
-    cov_out[0, 0] = c00
-    cov_out[0, 1] = c01
-    cov_out[1, 0] = c01
-    cov_out[1, 1] = c11
+    base = np.empty((2, 2))
+    base[0, 0] = p00
+    base[0, 1] = base[1, 0] = p01
+    base[1, 1] = p11
+    state_covariance(rhs, m, col, base, cov_out)
 
 
 @_jit

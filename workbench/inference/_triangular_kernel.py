@@ -19,6 +19,7 @@ __all__ = [
     "cholesky_of_identity_plus",
     "forward_solve",
     "inverse_block",
+    "state_covariance",
 ]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
@@ -93,3 +94,28 @@ def allocate_outputs(
         np.empty((b_count, 2)),
         np.empty((b_count, 2, 2)),
     )
+
+
+@_jit
+def state_covariance(
+    solved: np.ndarray, n: int, col: int, base: np.ndarray, cov_out: np.ndarray
+) -> None:
+    """Write ``base + S^T S`` into ``cov_out`` (2 x 2), ``S = solved[:n, col:col + 2]``.
+
+    ``S = L^-1 D^T`` for a state linear in the whitened unknowns with design ``D``: the
+    state's covariance given the piece is ``D J^-1 D^T = S^T S`` on top of ``base`` (the
+    covariance it keeps whatever the unknowns).
+    """
+    c00 = base[0, 0]
+    c01 = base[0, 1]
+    c11 = base[1, 1]
+    for i in range(n):
+        a = solved[i, col]
+        b = solved[i, col + 1]
+        c00 += a * a
+        c01 += a * b
+        c11 += b * b
+    cov_out[0, 0] = c00
+    cov_out[0, 1] = c01
+    cov_out[1, 0] = c01
+    cov_out[1, 1] = c11
