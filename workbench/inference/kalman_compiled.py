@@ -117,7 +117,7 @@ def _run_compiled(
     if _HARMONIC and problem.surface_force_n is None and not np.any(problem.noise.state_sd):
         stats = harmonic_statistics(problem)
     if stats is not None:
-        loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _harmonic.filter_record(
+        out = _harmonic.filter_record(
             problem.y,
             problem.piece_starts,
             first,
@@ -133,25 +133,24 @@ def _run_compiled(
             np.ascontiguousarray(fp.mean_n, dtype=np.float64),
             np.ascontiguousarray(fp.sd_n, dtype=np.float64),
         )
-        theta_mean = fp.mean_n + eta * fp.sd_n
-        theta_cov = eta_cov * fp.sd_n[:, None] * fp.sd_n[None, :] if want_theta_cov else None
-        return loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next
-    loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = _kernel.filter_record(
-        problem.y,
-        force.inputs,
-        problem.piece_starts,
-        first,
-        stop,
-        _pair_constants(dyn),
-        dyn.has_end_share,
-        np.square(problem.noise.obs_sd),
-        np.square(problem.noise.state_sd),
-        problem.mass_kg,
-        xm,
-        xc,
-        want_theta_cov,
-    )
-    fp = problem.force_prior
+    else:
+        out = _kernel.filter_record(
+            problem.y,
+            force.inputs,
+            problem.piece_starts,
+            first,
+            stop,
+            _pair_constants(dyn),
+            dyn.has_end_share,
+            np.square(problem.noise.obs_sd),
+            np.square(problem.noise.state_sd),
+            problem.mass_kg,
+            xm,
+            xc,
+            want_theta_cov,
+        )
+    loglik, eta, eta_cov, xm_end, xc_end, xm_next, xc_next = out
+    # Both kernels work in the whitened coefficients eta (theta = mu + s eta).
     theta_mean = fp.mean_n + eta * fp.sd_n
     theta_cov = eta_cov * fp.sd_n[:, None] * fp.sd_n[None, :] if want_theta_cov else None
     return loglik, theta_mean, theta_cov, xm_end, xc_end, xm_next, xc_next

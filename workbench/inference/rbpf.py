@@ -63,8 +63,9 @@ Moves after resampling
     Chopin 2002). This is exact but costs a pass over the pieces so far per step, so each
     proposal is first screened by a quadratic fitted to the cloud's exact log-targets and
     only those that pass are filtered (delayed acceptance, Christen and Fox 2005: the chain
-    still targets the exact posterior; on walking records about a third of the proposals
-    reach the exact stage, ``settings["metropolis_exact_evaluations"]``);
+    still targets the exact posterior; ``settings["metropolis_exact_evaluations"]`` counts
+    the proposals that reach the exact stage, about a third on realistic walks,
+    docs/validation/benchmarks.md);
     ``exact_moves=0`` falls back to Liu-West moves throughout.
 
 Known limitation: a posterior that drifts. The Liu-West kernel only knows the cloud's
@@ -98,6 +99,7 @@ Noise model, discretisation and the piece-boundary convention are those of
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -232,6 +234,7 @@ def run_rbpf(
     rejuvenate: str = "auto",
     exact_budget: float = 0.3,
     predictive: bool = False,
+    delayed_acceptance: bool = True,
 ) -> ParticleFilterOutput:
     """Run the Rao-Blackwellised particle filter over (C, K).
 
@@ -273,6 +276,10 @@ def run_rbpf(
         piece filters). The first resamplings, where the cloud collapses from the prior
         onto the posterior and exact moves are cheap, then use them; 0 leaves them to the
         Liu-West kernel.
+    delayed_acceptance : bool, default True
+        Screen the exact moves' proposals by a quadratic fitted to the cloud's exact
+        log-targets (module docstring); False runs plain Metropolis moves (the same target,
+        every proposal filtered exactly).
     predictive : bool, default False
         Also return the one-step-ahead predictive mean of ``y`` at every sample: the mixture
         of the particles' exact predictions, weighted by their weights given the data before
@@ -390,7 +397,7 @@ def run_rbpf(
                     counts["exact_move_events"] += 1
                     if cloud.history is None:
                         _exact_history(pieces, j, cloud)
-                    _metropolis(pieces, j, cloud, done, n_mh, box, rng, counts)
+                    _metropolis(pieces, j, cloud, done, n_mh, box, rng, counts, delayed_acceptance)
                 elif a < 1.0:
                     cloud.set_values(
                         *liu_west_move(
@@ -412,7 +419,7 @@ def run_rbpf(
                     counts["exact_move_events"] += 1
                     if cloud.history is None:
                         _exact_history(pieces, j, cloud)
-                    _metropolis(pieces, j, cloud, 1.0, n_mh, box, rng, counts)
+                    _metropolis(pieces, j, cloud, 1.0, n_mh, box, rng, counts, delayed_acceptance)
                 elif a < 1.0:
                     cloud.set_values(
                         *liu_west_move(
@@ -458,6 +465,7 @@ def run_rbpf(
         "metropolis_acceptance": (
             counts["accepted"] / counts["proposals"] if counts["proposals"] else None
         ),
+        "delayed_acceptance": delayed_acceptance,
         "metropolis_proposals": counts["proposals"],
         "metropolis_exact_evaluations": counts["exact_evaluations"],
         "tempering_steps": steps_tr.tolist(),
@@ -537,6 +545,7 @@ def _metropolis(
     box: StiffnessDampingPrior,
     rng: np.random.Generator,
     counts: dict[str, int],
+    delayed_acceptance: bool = True,
 ) -> None:
     """Random-walk Metropolis steps on ``p(C, K | y_before) p(y_piece | ...)^temperature``.
 
@@ -552,7 +561,7 @@ def _metropolis(
     cov = np.cov(z, rowvar=False, bias=True)
     root = _sym_sqrt(_RW_SCALE * cov)
     target = cloud.history + temperature * cloud.loglik
-    screen = _quadratic_screen(z, target)
+    screen = _quadratic_screen(z, target) if delayed_acceptance else None
     moved = False
     for _ in range(n_steps):
         proposal = z + rng.standard_normal(z.shape) @ root.T
@@ -585,7 +594,9 @@ def _metropolis(
         cloud.set_values(np.ascontiguousarray(z[:, 0]), np.ascontiguousarray(z[:, 1]))
 
 
-def _quadratic_screen(z: FloatArray, target: FloatArray) -> Any:
+def _quadratic_screen(
+    z: FloatArray, target: FloatArray
+) -> Callable[[FloatArray], FloatArray] | None:
     """Return a quadratic in (C, K) fitted to exact log-targets, or None without a fit.
 
     Least squares over the cloud's distinct values, in coordinates standardised by the
