@@ -22,7 +22,8 @@ test (70 kg at 1.8 Hz, 8 s at 100 Hz, 3 N force noise, from rest, seed 4; n = 4)
 particles, seeds 0-9, with the exact moves screened (``delayed_acceptance=True``, the
 default) and plain (``False``): the same statistics, and the mean ``z`` of the ten runs,
 against the test's own reference (its zooming grids, ``tests/test_rbpf.py``
-``_grid_posterior``, imported from the test so that the figures are the test's).
+``_grid_posterior``, imported from the test so that the figures are the test's;
+``--exact-reference`` compares with ``exact_posterior`` instead).
 """
 
 from __future__ import annotations
@@ -122,6 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--particles", type=int, default=256)
     ap.add_argument("--cores", type=int, default=1, help="CPUs to pin to (read before numpy)")
     ap.add_argument("--surprising-step", action="store_true", help="the rbpf tests' record")
+    ap.add_argument(
+        "--exact-reference", action="store_true", help="with --surprising-step: exact_posterior"
+    )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     settings = IdentifySettings()
@@ -138,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
         else:
             prepared = _Prepared.of(_record(name), settings)
             problem, _ = _set_noise(compile_problem(prepared, settings), settings)
-        exact = _test_grid_reference(problem) if args.surprising_step else exact_posterior(problem)
+        test_grid = args.surprising_step and not args.exact_reference
+        exact = _test_grid_reference(problem) if test_grid else exact_posterior(problem)
         rows = {
             label: _runs(problem, exact, args.seeds, args.particles, **options)
             for label, options in cases
