@@ -107,6 +107,30 @@ FLAT_KEYS = (
     "rescale_to_mass",
     "surface",
 )
+#: What a ``--config`` file may hold under each key, as TOML writes it, with an example
+#: line: a value of another kind is refused naming the file and the key before the settings
+#: are built (``int("ten")`` would otherwise fail deep inside with Python's own words).
+_TOML_KINDS: dict[str, tuple[tuple[type, ...], str, str]] = {
+    "method": ((str,), "a quoted name", 'method = "exact"'),
+    "particles": ((int,), "a whole number", "particles = 256"),
+    "harmonics": ((int,), "a whole number", "harmonics = 10"),
+    "pacing_hz": ((int, float), "a number", "pacing_hz = 1.8"),
+    "highpass_hz": ((int, float), "a number", "highpass_hz = 0.15"),
+    "obs_noise": ((str, int, float), "a number or a quoted word", 'obs_noise = "auto"'),
+    "state_noise_fraction": ((int, float), "a number", "state_noise_fraction = 0.005"),
+    "time_basis": ((str,), "a quoted name", 'time_basis = "step_phase"'),
+    "pieces": ((str,), "a quoted name", 'pieces = "steps"'),
+    "prior": ((str,), "a quoted name", 'prior = "modal"'),
+    "resampling": ((str,), "a quoted name", 'resampling = "systematic"'),
+    "ess_threshold": ((int, float), "a number", "ess_threshold = 0.5"),
+    "seed": ((int,), "a whole number", "seed = 0"),
+    "force_check": ((bool,), "true or false", "force_check = true"),
+    "observe": ((str,), "a quoted name", 'observe = "all"'),
+    "force_proposal": ((str,), "a quoted name", 'force_proposal = "regression"'),
+    "effects": ((str, list), "a quoted list of names", 'effects = "gait_asymmetry"'),
+    "rescale_to_mass": ((bool,), "true or false", "rescale_to_mass = false"),
+    "surface": ((str,), "a quoted name", 'surface = "coupled"'),
+}
 #: The flat keys of each part (the rest, ``seed`` and ``force_check``, are the settings').
 MODEL_KEYS = ("harmonics", "pacing_hz", "time_basis", "pieces", "effects", "surface")
 METHOD_KEYS = ("method", "particles", "resampling", "ess_threshold", "force_proposal")
@@ -530,5 +554,21 @@ class IdentifySettings:
                 "is not an identification setting",
                 f"use only {', '.join(sorted(FLAT_KEYS))}",
             )
+        for key, value in data.items():
+            kinds, kind, example = _TOML_KINDS[key]
+            # bool is an int to Python, but "harmonics = true" is no count.
+            if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+                raise InputError(
+                    path,
+                    f"key {key!r}",
+                    f"the value {value!r} is not {kind}",
+                    f"write for example {example}",
+                )
         merged = {**data, **{k: v for k, v in overrides.items() if v is not None}}
-        return cls.from_flat(**merged)
+        try:
+            return cls.from_flat(**merged)
+        except UsageError as err:
+            if err.parameter not in data or overrides.get(err.parameter) is not None:
+                raise
+            # The value came from the file: name the file and its key, not a flag.
+            raise InputError(path, f"key {err.parameter!r}", str(err), "correct it") from None
