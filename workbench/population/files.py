@@ -62,8 +62,42 @@ def read_results(path: str | os.PathLike[str]) -> Any:
         raise InputError(
             file, "whole file", f"the table cannot be read ({err})", "rerun 'workbench batch'"
         ) from None
+    if table.empty:
+        raise InputError(
+            file,
+            "whole file",
+            "the table holds no records (only its header)",
+            "rerun 'workbench batch' on a manifest whose records identify",
+        )
+    _check_repeats(table, file)
     _check_numbers(table, file)
     return table
+
+
+def _check_repeats(table: Any, file: Path) -> None:
+    """Refuse a record that appears on more than one row, naming it and its rows.
+
+    Each row counts as one pedestrian in the fit: a repeated row narrows every interval as
+    if it were a new walker (doubling the rows of 12 records manufactures a damping slope
+    that the 12 do not support). A batch writes each record once, so repeats come from
+    editing or concatenating tables, and only the user knows which copy to keep.
+    """
+    key = ["path"] if "path" in table.columns else list(table.columns)
+    repeated = table.duplicated(subset=key, keep=False).to_numpy()
+    if not repeated.any():
+        return
+    first = int(repeated.argmax())
+    same = table[key].eq(table[key].iloc[first]).all(axis=1).to_numpy()
+    rows = [str(i + 1) for i in range(len(table)) if same[i]]
+    name = f"record {table['path'].iloc[first]}" if "path" in table.columns else "one record"
+    n_repeated = int(repeated.sum())
+    raise InputError(
+        file,
+        f"rows {', '.join(rows)} of the table",
+        f"{name} appears on {len(rows)} rows ({n_repeated} rows of the table are repeats), "
+        "and each row would count as another pedestrian in the laws",
+        "keep one row per record (rerun 'workbench batch', which writes each record once)",
+    )
 
 
 def _check_numbers(table: Any, file: Path) -> None:
