@@ -49,6 +49,30 @@ def _sampler(args: argparse.Namespace) -> tuple[Any, str]:
     return partial(sample_pedestrians, laws=laws), f"population sampler ({laws.source})"
 
 
+#: The beam's flags and their defaults; None in the parser, so that flags given with
+#: --structure (which replaces the beam) can be told from defaults and refused.
+BEAM_DEFAULTS = {
+    "span": 50.0,
+    "mass_per_m": 500.0,
+    "frequency": 2.0,
+    "damping": 0.005,
+    "modes": 1,
+    "width": 2.0,
+}
+
+
+def _check_beam_flags(args: argparse.Namespace) -> None:
+    given = [name for name in BEAM_DEFAULTS if getattr(args, name) is not None]
+    if args.structure is not None and given:
+        flags = ", ".join("--" + name.replace("_", "-") for name in given)
+        one = len(given) == 1
+        raise UsageError(
+            f"{flags} describe{'s' if one else ''} the simply supported beam, which "
+            f"--structure {args.structure} replaces, so {'it' if one else 'they'} would be "
+            "ignored; put the values in the structure file or drop --structure"
+        )
+
+
 def _structure(args: argparse.Namespace) -> Any:
     import json
 
@@ -56,6 +80,9 @@ def _structure(args: argparse.Namespace) -> Any:
     from workbench.hsi.structure import simply_supported_beam, structure_from_json
 
     if args.structure is None:
+        for name, value in BEAM_DEFAULTS.items():
+            if getattr(args, name) is None:
+                setattr(args, name, value)
         return simply_supported_beam(
             args.span,
             args.mass_per_m,
@@ -84,6 +111,54 @@ def _structure(args: argparse.Namespace) -> Any:
             args.structure, "whole file", f"is not JSON ({err})", "give a JSON object"
         ) from None
     return structure_from_json(obj, str(args.structure))
+
+
+def _check_comfort_limits(limits: tuple[float, ...]) -> None:
+    if (
+        len(limits) != 3
+        or not all(np.isfinite(limits))
+        or limits[0] <= 0
+        or not limits[0] < limits[1] < limits[2]
+    ):
+        given = ",".join(f"{x:g}" for x in limits)
+        raise UsageError(
+            f"--comfort-limits {given}: give three finite, increasing, positive accelerations "
+            "in m/s^2, e.g. 0.5,1.0,2.5"
+        )
+
+
+#: Fewest time steps per period of the structure's first mode: Newmark's average
+#: acceleration rule stays stable with fewer but lengthens the period (by about 3 % at 10
+#: steps, 100 % at 2), so a coarser step would report another structure's response.
+MIN_STEPS_PER_PERIOD = 10
+
+
+def _check_resolution(args: argparse.Namespace, structure: Any) -> None:
+    """Refuse a first mode that the time step cannot follow.
+
+    Refused, not adapted: the step is the user's and the cost grows with it, so they choose.
+    """
+    first_hz = float(np.min(structure.frequencies_hz))
+    if first_hz * args.dt * MIN_STEPS_PER_PERIOD > 1:
+        where = f"--structure {args.structure}" if args.structure else f"--frequency {first_hz:g}"
+        raise UsageError(
+            f"{where}: a first mode at {first_hz:g} Hz needs a time step of at most "
+            f"{1 / (MIN_STEPS_PER_PERIOD * first_hz):.3g} s ({MIN_STEPS_PER_PERIOD} steps per "
+            f"period), but --dt is {args.dt:g} s; lower --dt or check the frequency "
+            "(footbridges have their first mode at about 1-10 Hz)"
+        )
+
+
+def _check_at(at_m: float, structure: Any) -> None:
+    if not 0 <= at_m <= structure.span_m:
+        raise UsageError(f"--at {at_m:g} m is off the {structure.span_m:g} m span")
+    shapes = np.abs(structure.shapes(np.array([at_m])))
+    if not np.any(shapes > 1e-9):
+        # There the deck does not move, so no peak to compare or classify.
+        raise UsageError(
+            f"--at {at_m:g} m is a support or a node of every mode kept, where the deck does "
+            f"not move; give a point that moves, e.g. the midspan --at {structure.span_m / 2:g}"
+        )
 
 
 def _check_records_args(args: argparse.Namespace) -> None:
@@ -145,16 +220,19 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
 
     if not args.scheduler:
         warn_many_workers(args.workers)
+    _check_beam_flags(args)
     _positive(args, "span", "mass_per_m", "frequency", "width", "dt", "duration", "density", "flow")
     if args.crossings < 1:
         raise UsageError(f"--crossings {args.crossings}: give at least one crossing")
     if args.dt > 0.02:
         raise UsageError(f"--dt {args.dt:g} s is too coarse for 2 Hz walking; use 0.01 or less")
-    structure = _structure(args)
-    sampler, source = _sampler(args)
     limits = tuple(args.comfort_limits) if args.comfort_limits else SETRA_LIMITS_M_S2
-    if args.at is not None and not 0 <= args.at <= structure.span_m:
-        raise UsageError(f"--at {args.at:g} m is off the {structure.span_m:g} m span")
+    _check_comfort_limits(limits)
+    structure = _structure(args)
+    _check_resolution(args, structure)
+    sampler, source = _sampler(args)
+    if args.at is not None:
+        _check_at(args.at, structure)
     if args.crowd == "single" and (args.density is not None or args.flow is not None):
         raise UsageError("--density and --flow describe a crowd; add --crowd stream")
     if args.density is not None and args.flow is not None:
@@ -305,18 +383,12 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "class, apparent frequency and damping of the occupied structure.",
     )
     g = p.add_argument_group("structure (simply supported beam)")
-    g.add_argument("--span", type=float, default=50.0, metavar="M", help="span (50 m)")
-    g.add_argument(
-        "--mass-per-m", type=float, default=500.0, metavar="KG", help="mass per length (500 kg/m)"
-    )
-    g.add_argument(
-        "--frequency", type=float, default=2.0, metavar="HZ", help="first bending frequency (2 Hz)"
-    )
-    g.add_argument(
-        "--damping", type=float, default=0.005, metavar="ZETA", help="modal damping ratio (0.005)"
-    )
-    g.add_argument("--modes", type=int, default=1, metavar="N", help="modes kept (1)")
-    g.add_argument("--width", type=float, default=2.0, metavar="M", help="deck width (2 m)")
+    g.add_argument("--span", type=float, metavar="M", help="span (50 m)")
+    g.add_argument("--mass-per-m", type=float, metavar="KG", help="mass per length (500 kg/m)")
+    g.add_argument("--frequency", type=float, metavar="HZ", help="first bending frequency (2 Hz)")
+    g.add_argument("--damping", type=float, metavar="ZETA", help="modal damping ratio (0.005)")
+    g.add_argument("--modes", type=int, metavar="N", help="modes kept (1)")
+    g.add_argument("--width", type=float, metavar="M", help="deck width (2 m)")
     g.add_argument(
         "--structure",
         metavar="FILE.json",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -34,7 +35,13 @@ def running_rms(acc: ArrayLike, dt_s: float, window_s: float = 1.0) -> NDArray[n
 def comfort_class(peak_m_s2: float, limits_m_s2: Sequence[float] = SETRA_LIMITS_M_S2) -> str:
     """Setra comfort class of a peak vertical acceleration, for the given three limits."""
     lim = [float(x) for x in limits_m_s2]
-    if len(lim) != 3 or any(b <= a for a, b in itertools.pairwise(lim)) or lim[0] <= 0:
+    # nan compares false both ways, so the order test alone would let it through.
+    if (
+        len(lim) != 3
+        or not all(math.isfinite(x) for x in lim)
+        or any(b <= a for a, b in itertools.pairwise(lim))
+        or lim[0] <= 0
+    ):
         raise UsageError(
             f"comfort limits {lim} must be three increasing positive accelerations in m/s^2, "
             "e.g. 0.5,1.0,2.5"
