@@ -1,0 +1,127 @@
+"""Hostile inputs refused in one sentence naming the file or flag and the fix (exit 2).
+
+Each case once ended in an internal error, a silently wrong number or a flag ignored without
+a word; every refusal here comes before the long computation, so the tests stay cheap.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import pytest
+
+from workbench.cli import main
+
+
+def run_cli(argv, capsys):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def refused(argv, capsys) -> str:
+    """Run a command that must be refused: exit 2, one sentence, no traceback."""
+    code, _, err = run_cli(argv, capsys)
+    assert code == 2, err
+    assert "Traceback" not in err and "internal error" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    return err
+
+
+def never(*_, **__):
+    raise AssertionError("the computation started")
+
+
+# -- a settings file: a value of the wrong kind names the file and the key --------------------
+@pytest.mark.parametrize(
+    ("line", "key"),
+    [
+        ('harmonics = "ten"', "'harmonics'"),
+        ("particles = 2.5", "'particles'"),
+        ("force_check = 1", "'force_check'"),
+        ("seed = true", "'seed'"),
+    ],
+)
+def test_a_config_value_of_the_wrong_kind_names_the_file_and_key(line, key, tmp_path, capsys):
+    config = tmp_path / "settings.toml"
+    config.write_text(line + "\n", encoding="utf-8")
+    err = refused(["identify", "seed_individual", "--config", config], capsys)
+    assert str(config) in err and f"key {key}" in err and "write for example" in err
+    assert "invalid literal" not in err
+
+
+def test_a_config_value_out_of_range_names_the_key_not_a_flag(tmp_path, capsys):
+    config = tmp_path / "settings.toml"
+    config.write_text("harmonics = 99\n", encoding="utf-8")
+    err = refused(["identify", "seed_individual", "--config", config], capsys)
+    assert f"{config}, key 'harmonics'" in err and "between 1 and 40" in err
+    assert "--harmonics" not in err  # the user gave no such flag
+
+
+# -- results tables: nothing to fit, or records counted twice ----------------------------------
+def _results(n: int = 12, seed: int = 3) -> pd.DataFrame:
+    from workbench.population.sampler import sample_pedestrians
+
+    table = sample_pedestrians(n, seed=seed).assign(path=[f"r{i:02d}.csv" for i in range(n)])
+    table["identified_damping"] = True
+    table["identified_stiffness"] = True
+    table["identifiability"] = "well identified"
+    return table
+
+
+@pytest.mark.parametrize("command", ["population", "report"])
+def test_a_header_only_results_table_is_refused(command, tmp_path, capsys):
+    folder = tmp_path / "batch"
+    folder.mkdir()
+    _results().iloc[:0].to_csv(folder / "results.csv", index=False)
+    err = refused([command, folder, "--out", tmp_path / "out"], capsys)
+    assert "results.csv" in err and "holds no records" in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command", ["population", "report"])
+def test_repeated_rows_are_refused_not_counted_as_new_walkers(command, tmp_path, capsys):
+    folder = tmp_path / "batch"
+    folder.mkdir()
+    table = _results()
+    pd.concat([table, table.iloc[[4]]]).to_csv(folder / "results.csv", index=False)
+    err = refused([command, folder, "--out", tmp_path / "out"], capsys)
+    assert "rows 5, 13 of the table" in err and "record r04.csv appears on 2 rows" in err
+    assert not (tmp_path / "out").exists()
+
+
+# -- hsi: flags that would give an internal error, a wrong number or be ignored ---------------
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--at", "0"], "--at 0 m is a support or a node of every mode kept"),
+        (["--at", "50"], "--at 50 m is a support or a node of every mode kept"),
+        (["--comfort-limits", "nan,1,2"], "--comfort-limits nan,1,2: give three finite"),
+        (["--comfort-limits", "0.5,inf,2"], "--comfort-limits 0.5,inf,2: give three finite"),
+        (["--frequency", "1e6"], "--frequency 1e+06: a first mode at 1e+06 Hz needs a time step"),
+        (["--frequency", "30", "--dt", "0.005"], "at most 0.00333 s"),
+        (["--structure", "s.json", "--span", "3"], "--span describes the simply supported beam"),
+        (["--structure", "s.json", "--modes", "2", "--width", "3"], "--modes, --width describe"),
+    ],
+)
+def test_hsi_refuses_flags_it_cannot_honour(argv, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("workbench.hsi.montecarlo.run_monte_carlo", never)
+    structure = {
+        "span_m": 40,
+        "frequencies_hz": [2.0],
+        "damping_ratios": [0.005],
+        "modal_masses_kg": [10000],
+    }
+    (tmp_path / "s.json").write_text(json.dumps(structure), encoding="utf-8")
+    err = refused(["hsi", "--crossings", "1", *argv], capsys)
+    assert message in err
+
+
+def test_hsi_at_a_moving_point_and_resolved_frequency_still_run(capsys):
+    # The checks above must not refuse ordinary input: a quarter point, 30 Hz at 0.003 s.
+    argv = ["hsi", "--crossings", "1", "--duration", "5", "--json"]
+    code, out, err = run_cli([*argv, "--at", "12.5", "--frequency", "30", "--dt", "0.003"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["structure"]["frequencies_hz"] == [30.0]
