@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_path", "atomic_write_json", "atomic_write_text"]
+__all__ = ["atomic_path", "atomic_write_json", "atomic_write_text", "strict_json"]
 
 
 def _default_mode(target: Path) -> int:
@@ -68,5 +68,46 @@ def atomic_write_text(target: str | os.PathLike[str], text: str) -> Path:
 
 
 def atomic_write_json(target: str | os.PathLike[str], obj: Any) -> Path:
-    """Write ``obj`` as indented, strictly valid JSON (no NaN) to ``target`` atomically."""
-    return atomic_write_text(target, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+    """Write ``obj`` as indented, strictly valid JSON to ``target`` atomically.
+
+    Non-finite numbers are written as ``null`` (:func:`strict_json`).
+    """
+    text = json.dumps(strict_json(obj), indent=2, allow_nan=False)
+    return atomic_write_text(target, text + "\n")
+
+
+def strict_json(obj: Any) -> Any:
+    """Return ``obj`` as strict JSON holds it: NaN and infinities ``None``, numpy as Python.
+
+    Python's :func:`json.dumps` writes a bare ``NaN`` or ``Infinity``, which is not JSON
+    (``jq`` and browsers refuse the whole document); a number that does not exist is
+    ``null`` in every JSON the workbench writes or prints.
+
+    Parameters
+    ----------
+    obj : object
+        Dicts, lists, tuples, numbers, numpy scalars and arrays, paths, strings.
+
+    Returns
+    -------
+    object
+        The same structure with every non-finite float replaced by ``None``, numpy scalars
+        and arrays turned into Python numbers and lists, and paths into strings.
+    """
+    import math
+
+    import numpy as np
+
+    if isinstance(obj, np.ndarray):
+        obj = obj.tolist()
+    elif isinstance(obj, np.generic):
+        obj = obj.item()
+    elif isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k if isinstance(k, str) else str(k): strict_json(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [strict_json(v) for v in obj]
+    return obj

@@ -16,6 +16,8 @@ import tempfile
 from pathlib import Path
 from typing import Any, NoReturn
 
+from workbench.fileutil import strict_json
+
 __all__ = [
     "CURRENT_ARGV",
     "EXIT_RECORDS_FAILED",
@@ -32,7 +34,6 @@ __all__ = [
     "emit",
     "floats",
     "identify_settings",
-    "json_default",
     "load",
     "output_options",
     "positive_int",
@@ -360,48 +361,20 @@ def warn_accepted_negative_force(record: Any) -> None:
 
 
 def emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
-    """Print the command's result: ``obj`` as JSON under ``--json``, else ``text``.
+    """Print the command's result: ``obj`` as strict JSON under ``--json``, else ``text``.
 
     Parameters
     ----------
     args : argparse.Namespace
     obj : dict
-        The JSON result.
+        The JSON result; a non-finite number is printed as null (a bare NaN is not JSON).
     text : str
         The human summary.
     """
     if getattr(args, "json", False):
-        print(json.dumps(obj, indent=2, default=json_default))
+        print(json.dumps(strict_json(obj), indent=2, allow_nan=False))
     else:
         print(text)
-
-
-def json_default(obj: Any) -> Any:
-    """Turn numpy scalars and arrays and paths into JSON values (``json.dumps`` hook).
-
-    Parameters
-    ----------
-    obj : object
-
-    Returns
-    -------
-    object
-        A JSON-serialisable value.
-
-    Raises
-    ------
-    TypeError
-        For any other type.
-    """
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def safe_key(name: str) -> str:

@@ -13,6 +13,7 @@ import numpy as np
 
 from workbench.cli.common import floats, seed_int
 from workbench.errors import InputError, UsageError
+from workbench.fileutil import strict_json
 
 __all__ = ["add_simulate_parser", "parse_effect"]
 
@@ -121,7 +122,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
             "--natural-frequency-hz and --damping-ratio to choose them yourself."
         ]
     if args.json:
-        print(json.dumps(result, indent=2))
+        print(json.dumps(strict_json(result), indent=2, allow_nan=False))
     else:
         print(
             f"simulated {record.duration_s:.1f} s of walking at {args.pacing:g} Hz "

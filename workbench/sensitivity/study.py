@@ -28,7 +28,7 @@ from typing import Any
 import pandas as pd
 
 from workbench.errors import UsageError
-from workbench.fileutil import atomic_path, atomic_write_text
+from workbench.fileutil import atomic_path, atomic_write_text, strict_json
 from workbench.inference.settings import IdentifySettings
 from workbench.records.record import Record
 from workbench.sensitivity.analysis import (
@@ -223,7 +223,8 @@ class SensitivityStudy:
         )
         self.files = {k: str(v) for k, v in files.items()}
         atomic_write_text(
-            files["json"], json.dumps(self.to_json(), indent=2, default=_json_default) + "\n"
+            files["json"],
+            json.dumps(strict_json(self.to_json()), indent=2, default=_json_default) + "\n",
         )
         return self.files
 
