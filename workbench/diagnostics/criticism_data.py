@@ -22,6 +22,7 @@ from scipy import signal
 
 from workbench.models.effect_context import CRITICISM_HARMONICS, phase_harmonics
 from workbench.models.force import step_phase_rad
+from workbench.records.inspection import check_walking
 from workbench.records.preprocess import (
     DEFAULT_HIGHPASS_HZ,
     COMResponse,
@@ -29,7 +30,7 @@ from workbench.records.preprocess import (
     preprocess,
 )
 from workbench.records.record import G_M_S2, Record
-from workbench.records.steps import Steps, segment_steps
+from workbench.records.steps import Steps, estimate_pacing, segment_steps
 
 __all__ = [
     "DEFAULT_HARMONICS",
@@ -183,6 +184,8 @@ def prepare(
             min_steps=6,
             surface_acc_m_s2=record.ground_acc_m_s2,
         )
+    # As identify and inspect: a standing person or a machine's sine is no walk to criticise.
+    check_walking(record, steps, estimate_pacing(com, steps))
     lo, hi, phase, footfalls = _fundamental_phase(com, steps)
     t = np.asarray(record.time_s[lo:hi], dtype=np.float64)
     n_steps = footfalls.size - 1

@@ -41,12 +41,13 @@ def is_manifest(path: str | os.PathLike[str]) -> bool:
 
 
 def _rescaled(record: Record, rescale_to_mass: bool) -> Record:
-    if not rescale_to_mass:
-        return record
     from workbench.records.inspection import inspect_record
 
-    # The study identifies the rescaled record, as 'identify --rescale-to-mass' would.
-    return inspect_record(record, rescale=True).record
+    # Inspected before the study, as identify inspects before it identifies: a record
+    # without walking (a constant force, a machine's sine) is refused here, once, instead
+    # of failing every run of the study. The study identifies the rescaled record, as
+    # 'identify --rescale-to-mass' would.
+    return inspect_record(record, rescale=rescale_to_mass).record
 
 
 def load_study_records(

@@ -25,7 +25,7 @@ from workbench.records.steps import (
     static_balance_warning,
 )
 
-__all__ = ["Inspection", "inspect_record"]
+__all__ = ["Inspection", "check_walking", "inspect_record"]
 
 #: Relative disagreement between a stated and an estimated pacing frequency that earns a warning.
 PACING_MISMATCH_TOLERANCE = 0.05
@@ -111,8 +111,27 @@ def _round_or_none(value: float | None, digits: int = 4) -> float | None:
     return round(float(value), digits)
 
 
-def _check_walking(record: Record, steps: Steps, pacing: PacingEstimate) -> None:
-    """Refuse records in which the step detector found periodicity but nobody walks."""
+def check_walking(record: Record, steps: Steps, pacing: PacingEstimate) -> None:
+    """Refuse a record in which the step detector found periodicity but nobody walks.
+
+    The one check of every command that identifies or compares: a person standing still or
+    a machine's sine has "steps" to the detector, and a model fitted to them is a number
+    about nothing.
+
+    Parameters
+    ----------
+    record : Record
+        The record, with its body mass.
+    steps : Steps
+        Its steps as found by :func:`~workbench.records.steps.segment_steps`.
+    pacing : PacingEstimate
+        Their pacing (:func:`~workbench.records.steps.estimate_pacing`).
+
+    Raises
+    ------
+    InputError
+        Naming the record: the force varies too little, or repeats outside walking's pacing.
+    """
     lo, hi = int(steps.boundaries[0]), int(steps.boundaries[-1])
     variation = float(np.std(record.grf_n[lo:hi]) / record.weight_n)
     if variation < MIN_WALKING_VARIATION:
@@ -189,7 +208,7 @@ def inspect_record(
     elif message is not None:
         warnings.append(message)
     pacing = estimate_pacing(com, steps)
-    _check_walking(record, steps, pacing)
+    check_walking(record, steps, pacing)
     if not highpass_hz and abs(balance - 1.0) > DRIFT_BALANCE_TOLERANCE:
         warnings.append(
             f"{record.name}: with the high-pass off, the static offset of "
