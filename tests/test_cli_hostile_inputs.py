@@ -7,7 +7,9 @@ a word; every refusal here comes before the long computation, so the tests stay 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -125,3 +127,62 @@ def test_hsi_at_a_moving_point_and_resolved_frequency_still_run(capsys):
     code, out, err = run_cli([*argv, "--at", "12.5", "--frequency", "30", "--dt", "0.003"], capsys)
     assert code == 0, err
     assert json.loads(out)["structure"]["frequencies_hz"] == [30.0]
+
+
+# -- records that are no walk: every command that identifies or compares refuses them --------
+def _not_a_walk(folder: Path, kind: str) -> Path:
+    t = np.arange(0.0, 12.0, 0.005)
+    weight = 70.0 * 9.81
+    if kind == "standing":  # a person standing on the plate: weight and sensor noise
+        grf = weight + 2.0 * np.random.default_rng(0).standard_normal(t.size)
+    elif kind == "sine":  # a shaker at 10 Hz, far above walking's pacing
+        grf = weight + 300.0 * np.sin(2 * np.pi * 10.0 * t)
+    else:  # a constant force: a plate that sees nothing move
+        grf = np.full(t.size, weight)
+    path = folder / f"{kind}.csv"
+    pd.DataFrame({"time": t, "grf": grf}).to_csv(path, index=False)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("kind", "message"),
+    [
+        ("standing", "far less than walking does"),
+        ("sine", "outside the 0.8-3.5 Hz of walking"),
+    ],
+)
+@pytest.mark.parametrize("command", ["compare", "diagnose"])
+def test_criticism_refuses_a_record_that_is_no_walk(command, kind, message, tmp_path, capsys):
+    path = _not_a_walk(tmp_path, kind)
+    extra = ["--effects", "gait_asymmetry"] if command == "compare" else ["--no-one-step"]
+    err = refused([command, path, "--mass", "70", *extra], capsys)
+    assert str(path) in err and message in err
+
+
+@pytest.mark.parametrize("kind", ["constant", "standing", "sine"])
+def test_sensitivity_refuses_a_record_that_is_no_walk_before_the_study(
+    kind, tmp_path, capsys, monkeypatch
+):
+    monkeypatch.setattr("workbench.sensitivity.study.run_sensitivity", never)
+    path = _not_a_walk(tmp_path, kind)
+    argv = ["sensitivity", path, "--mass", "70", "--out", tmp_path / "study"]
+    err = refused([*argv, "--factors", "harmonics", "--replicates", "1"], capsys)
+    assert str(path) in err
+    assert not (tmp_path / "study").exists()
+
+
+# -- JSON on stdout and in files: a number that does not exist is null ------------------------
+def test_json_output_writes_null_for_non_finite_numbers(tmp_path, capsys):
+    import argparse
+
+    from workbench.cli.common import emit
+    from workbench.fileutil import atomic_write_json
+
+    def strict(text):  # the standard's JSON: no NaN or Infinity tokens
+        return json.loads(text, parse_constant=lambda c: pytest.fail(f"bare {c} in JSON"))
+
+    obj = {"peak": float("nan"), "limits": np.array([0.5, np.inf]), "n": np.int64(3)}
+    emit(argparse.Namespace(json=True), obj, "text")
+    assert strict(capsys.readouterr().out) == {"peak": None, "limits": [0.5, None], "n": 3}
+    path = atomic_write_json(tmp_path / "x.json", {"slope": -np.inf, "sd": 0.25})
+    assert strict(path.read_text(encoding="utf-8")) == {"slope": None, "sd": 0.25}
