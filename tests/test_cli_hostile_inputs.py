@@ -186,3 +186,24 @@ def test_json_output_writes_null_for_non_finite_numbers(tmp_path, capsys):
     assert strict(capsys.readouterr().out) == {"peak": None, "limits": [0.5, None], "n": 3}
     path = atomic_write_json(tmp_path / "x.json", {"slope": -np.inf, "sd": 0.25})
     assert strict(path.read_text(encoding="utf-8")) == {"slope": None, "sd": 0.25}
+
+
+# -- an empty output path would write into the current folder ---------------------------------
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["demo", "--out", ""],
+        ["identify", "seed_individual", "--out", ""],
+        ["simulate", "--out", " "],
+        ["sample", "--n", "3", "--out", ""],
+        ["hsi", "--crossings", "1", "--out", ""],
+        ["hsi", "--crossings", "1", "--records", ""],
+    ],
+)
+def test_an_empty_output_path_is_refused(argv, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("workbench.hsi.montecarlo.run_monte_carlo", never)
+    err = refused(argv, capsys)
+    flag = "--records" if "--records" in argv else "--out"
+    assert f"{flag} is empty, which would write into the current folder" in err
+    assert list(tmp_path.iterdir()) == []

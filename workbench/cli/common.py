@@ -196,7 +196,7 @@ def _duration(minutes: float) -> str:
     return f"{minutes:.0f} min" if minutes < 120 else f"{minutes / 60:.3g} h"
 
 
-def check_out(path: str | os.PathLike[str], *, is_file: bool = False) -> None:
+def check_out(path: str | os.PathLike[str], *, is_file: bool = False, flag: str = "--out") -> None:
     """Refuse an ``--out`` that cannot be written, before any computation.
 
     Otherwise a write failure shows only after the work is done. The check has no side
@@ -209,6 +209,8 @@ def check_out(path: str | os.PathLike[str], *, is_file: bool = False) -> None:
         The ``--out`` value.
     is_file : bool, default False
         The output is one file (``simulate``, ``sample``), not a folder.
+    flag : str, default "--out"
+        The option that gave the path (``hsi --records`` is an output folder too).
 
     Raises
     ------
@@ -217,6 +219,12 @@ def check_out(path: str | os.PathLike[str], *, is_file: bool = False) -> None:
     """
     from workbench.errors import UsageError
 
+    if not str(path).strip():
+        # Path("") is the current folder: the outputs would land among the user's files.
+        example = "a file name, e.g. walk.csv" if is_file else "a folder, e.g. results"
+        raise UsageError(
+            f"{flag} is empty, which would write into the current folder; give {example}"
+        )
     target = Path(path)
     fix = "choose a folder you can write to"
     try:

@@ -14,6 +14,7 @@ import numpy as np
 from workbench.cli.common import (
     add_no_limits,
     check_budget,
+    check_out,
     emit,
     floats,
     seed_int,
@@ -257,6 +258,8 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
     _check_cost(args, spec)
     if args.records is not None:
         from workbench.hsi.record_files import check_records_folder
+
+        check_out(args.records, flag="--records")
 
         # A folder that cannot take the records must fail before the Monte Carlo runs.
         with _flag("folder", "--records"):
