@@ -54,7 +54,7 @@ def test_runaway_inputs_are_refused_before_any_work(argv, estimate, tmp_path, ca
 
 
 def test_identify_on_a_ten_million_sample_record_is_estimated_over_the_budget():
-    from workbench.cli.identify import IDENTIFY_BASE_BYTES, IDENTIFY_BYTES_PER_SAMPLE
+    from workbench.cli.common import IDENTIFY_BASE_BYTES, IDENTIFY_BYTES_PER_SAMPLE
 
     # The estimate grows with the record: a 10 M-row record is far over 2 GB, a minute of
     # 1 kHz walking far under.
@@ -97,7 +97,7 @@ def test_hsi_time_guard_grows_with_the_modes_and_no_limits_lifts_it(capsys, monk
 
 
 def test_identify_guard_uses_the_record_length(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("workbench.cli.identify.IDENTIFY_BASE_BYTES", 0.0)
+    monkeypatch.setattr(cli_common, "IDENTIFY_BASE_BYTES", 0.0)
     monkeypatch.setattr(cli_common, "MEMORY_BUDGET_GB", 0.001)  # 1 MB: under 200 samples
     rec = tmp_path / "walk.csv"
     t = np.arange(400) / 200.0

@@ -3,6 +3,10 @@
 Command modules import this module and nothing else from :mod:`workbench.cli`, so the
 command line has no import cycle: :mod:`workbench.cli.main` imports the command modules,
 they import this one, and this one imports only the library.
+
+Why this module is long: it is the one place of what every command shares, so that a flag,
+a check or a budget means the same in each; splitting it would break that rule of the
+command modules (they import this module and nothing else from the command line).
 """
 
 from __future__ import annotations
@@ -21,6 +25,9 @@ from workbench.fileutil import strict_json
 __all__ = [
     "CURRENT_ARGV",
     "EXIT_RECORDS_FAILED",
+    "IDENTIFY_BASE_BYTES",
+    "IDENTIFY_BYTES_PER_SAMPLE",
+    "IDENTIFY_SECONDS_PER_SAMPLE",
     "MEMORY_BUDGET_GB",
     "TIME_BUDGET_MIN",
     "Parser",
@@ -31,6 +38,8 @@ __all__ = [
     "check_budget",
     "check_highpass",
     "check_out",
+    "check_particles",
+    "check_record_size",
     "emit",
     "floats",
     "identify_settings",
@@ -56,6 +65,23 @@ EXIT_RECORDS_FAILED = 4
 #: coefficients measured on small runs (see the command's estimate); ``--no-limits`` lifts both.
 MEMORY_BUDGET_GB = 2.0
 TIME_BUDGET_MIN = 30.0
+
+#: Peak memory of identifying a record [bytes]: the interpreter, its libraries and the
+#: compiled filter, then the problem, the filter's per-step clouds and the result per record
+#: sample; measured as the peak resident size of the default identification (RBPF, 256
+#: particles) of simulated 200 Hz walks of 12 000 (0.210 GB) and 48 000 samples (0.395 GB),
+#: a straight line through both (10 M samples: 51 GB; the run that found it had reached 4.4
+#: GB in 150 s). Every command that identifies, inspects or criticises one record checks it.
+IDENTIFY_BASE_BYTES = 150e6
+IDENTIFY_BYTES_PER_SAMPLE = 5100.0
+#: Computing time of one identification per record sample [s]: the exact default took
+#: about 4.5 s of one core (beyond the interpreter's start) on seed_individual's 6000
+#: samples; the filters take longer, so for them it is a lower bound.
+IDENTIFY_SECONDS_PER_SAMPLE = 7.5e-4
+#: Least memory of one particle of a filter [bytes]: its force coefficients (2 n + 1), C, K
+#: and the state's mean and covariance (six numbers), in three copies (the cloud, its
+#: resampled copy and the proposal); the filters hold more, so this is a lower bound.
+PARTICLE_NUMBERS = 7
 
 #: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
 CURRENT_ARGV: list[str] = []
@@ -186,10 +212,45 @@ def check_budget(
     elif minutes > TIME_BUDGET_MIN:
         over = f"about {_duration(minutes)} of computing, over the {TIME_BUDGET_MIN:g} min budget"
     if over is not None and not getattr(args, "no_limits", False):
-        raise UsageError(f"{what} needs {over}; {fix}, or add --no-limits to run it anyway")
+        # A command without --no-limits (batch's shared settings) must not offer it.
+        lift = ", or add --no-limits to run it anyway" if hasattr(args, "no_limits") else ""
+        raise UsageError(f"{what} needs {over}; {fix}{lift}")
     if minutes >= 1 and not getattr(args, "json", False):
         # A progress bar may first move only after a long first chunk: say what to expect.
         print(f"workbench: {what}: about {_duration(minutes)} estimated", file=sys.stderr)
+
+
+def check_record_size(args: argparse.Namespace, record: Any, command: str) -> None:
+    """Refuse a record too long to identify, inspect or criticise, before any work.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    record : Record
+        The loaded record (its sample count).
+    command : str
+        The command's name, for the sentence.
+    """
+    check_budget(
+        args,
+        f"{command} on {record.name} ({record.n_samples} samples)",
+        f"{command} shorter parts of it (split the file) or resample it to a lower rate",
+        memory_gb=(IDENTIFY_BASE_BYTES + IDENTIFY_BYTES_PER_SAMPLE * record.n_samples) / 1e9,
+    )
+
+
+def check_particles(args: argparse.Namespace, settings: Any) -> None:
+    """Refuse a particle count whose cloud alone is over the memory budget, before any work."""
+    n = getattr(settings.method, "n_particles", None)
+    if not n:
+        return
+    numbers = 3 * (2 * settings.model.harmonics + 1 + PARTICLE_NUMBERS)
+    check_budget(
+        args,
+        f"--particles {n}",
+        "give fewer particles (the rbpf needs a few hundred, the pf a few thousand)",
+        memory_gb=8.0 * numbers * n / 1e9,
+    )
 
 
 def _duration(minutes: float) -> str:
@@ -441,10 +502,13 @@ def identify_settings(args: argparse.Namespace) -> Any:
         "surface": surface_choice(args),
     }
     if flag("config"):
-        return IdentifySettings.from_toml(args.config, **overrides)
-    if (name := datasets.named(flag("record"))) is not None:  # its own force model, flags win
-        return datasets.settings(name, **{k: v for k, v in overrides.items() if v is not None})
-    return IdentifySettings().replace(**overrides)
+        settings = IdentifySettings.from_toml(args.config, **overrides)
+    elif (name := datasets.named(flag("record"))) is not None:  # its own force model, flags win
+        settings = datasets.settings(name, **{k: v for k, v in overrides.items() if v is not None})
+    else:
+        settings = IdentifySettings().replace(**overrides)
+    check_particles(args, settings)
+    return settings
 
 
 def add_rigid_floor_flag(parser: Any) -> None:

@@ -6,7 +6,9 @@ import argparse
 from typing import Any
 
 from workbench.cli.common import (
+    add_no_limits,
     add_rigid_floor_flag,
+    check_record_size,
     emit,
     load,
     record_options,
@@ -57,6 +59,7 @@ def _prepared(args: argparse.Namespace) -> Any:
     from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
     record = load(args)
+    check_record_size(args, record, args.command)
     highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz
     return prepare(record, highpass_hz=highpass_hz, pacing_hz=args.pacing)
 
@@ -191,6 +194,7 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "so its result does not depend on it",
     )
     add_rigid_floor_flag(level)
+    add_no_limits(level)
     p = sub.add_parser(
         "diagnose",
         parents=[out_opts, rec_opts, level],

@@ -7,7 +7,11 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    add_no_limits,
     add_rigid_floor_flag,
+    check_budget,
+    check_particles,
+    check_record_size,
     emit,
     load,
     positive_int,
@@ -53,6 +57,22 @@ def _walkers(text: str) -> int:
     return value
 
 
+#: Least length of an MCMC chain of crosscheck (its first chunk, ``min_steps``) and least
+#: parameters per walker (C and K): each ensemble holds at least this many numbers per walker.
+MIN_CHAIN_NUMBERS = 100 * 2
+
+
+def _check_walkers(args: argparse.Namespace) -> None:
+    """Refuse MCMC ensembles whose chains alone are over the memory budget, before loading."""
+    walkers = args.walkers or 32
+    check_budget(
+        args,
+        f"crosscheck with {args.ensembles} ensembles of {walkers} walkers",
+        "give fewer --walkers or --ensembles (the defaults, 4 of 32, suffice for C and K)",
+        memory_gb=8.0 * MIN_CHAIN_NUMBERS * args.ensembles * walkers / 1e9,
+    )
+
+
 def _surface_for_the_filter(record: Any, chosen: str | None) -> str | None:
     """Return the surface model the cross-checked filter runs.
 
@@ -83,9 +103,12 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "force_check": False,
     }
+    _check_walkers(args)
     record = load(args)
+    check_record_size(args, record, "crosscheck")
     overrides["surface"] = _surface_for_the_filter(record, surface_choice(args))
     settings = IdentifySettings().replace(**overrides)
+    check_particles(args, settings)
     if settings.model.pieces != "steps":
         raise UsageError("crosscheck works per footfall step; identify with --pieces steps")
     insp = inspect_record(
@@ -218,4 +241,5 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--walkers", type=_walkers, metavar="N", help="per ensemble, even (32)")
     p.add_argument("--seed", type=seed_int, help="random seed (default 0)")
     p.add_argument("--out", metavar="DIR", help="write the InferenceData (netCDF) and figures")
+    add_no_limits(p)
     p.set_defaults(handler=_cmd_crosscheck)

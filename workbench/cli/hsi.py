@@ -84,6 +84,14 @@ def _structure(args: argparse.Namespace) -> Any:
         for name, value in BEAM_DEFAULTS.items():
             if getattr(args, name) is None:
                 setattr(args, name, value)
+        # Before the beam's arrays exist: the eigen-analysis of the occupied structure holds
+        # at least one dense matrix of twice the modes squared (estimate_cost counts it too).
+        check_budget(
+            args,
+            f"hsi with {args.modes} modes",
+            "keep fewer modes (--modes; walking excites the first few)",
+            memory_gb=8.0 * (2.0 * args.modes) ** 2 / 1e9,
+        )
         return simply_supported_beam(
             args.span,
             args.mass_per_m,

@@ -9,7 +9,7 @@ from typing import Any
 from workbench.cli.common import (
     add_no_limits,
     add_rigid_floor_flag,
-    check_budget,
+    check_record_size,
     emit,
     identify_settings,
     load,
@@ -20,14 +20,6 @@ from workbench.cli.common import (
 from workbench.errors import UsageError
 
 __all__ = ["add_identify_parser"]
-
-#: Peak memory of ``identify`` [bytes]: the interpreter, its libraries and the compiled
-#: filter, then the problem, the filter's per-step clouds and the result per record sample;
-#: measured as the peak resident size of the default identification (RBPF, 256 particles) of
-#: simulated 200 Hz walks of 12 000 (0.210 GB) and 48 000 samples (0.395 GB), a straight line
-#: through both (10 M samples: 51 GB; the run that found it had reached 4.4 GB in 150 s).
-IDENTIFY_BASE_BYTES = 150e6
-IDENTIFY_BYTES_PER_SAMPLE = 5100.0
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
@@ -45,12 +37,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     if args.crosscheck and settings.model.effects:
         raise UsageError("--crosscheck works on the baseline model; drop --effects to use it")
     record = load(args)
-    check_budget(
-        args,
-        f"identify on {record.name} ({record.n_samples} samples)",
-        "identify shorter parts of it (split the file)",
-        memory_gb=(IDENTIFY_BASE_BYTES + IDENTIFY_BYTES_PER_SAMPLE * record.n_samples) / 1e9,
-    )
+    check_record_size(args, record, "identify")
     result = identify(record, settings=settings, progress=not args.json)
     check = None
     if args.crosscheck and "surface_route" in result.extra:

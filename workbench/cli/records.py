@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from workbench.cli.common import emit, load, record_options, safe_key
+from workbench.cli.common import (
+    add_no_limits,
+    check_record_size,
+    emit,
+    load,
+    record_options,
+    safe_key,
+)
 
 __all__ = ["add_records_parser"]
 
@@ -15,6 +22,7 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
     record = load(args)
+    check_record_size(args, record, "inspect")
     highpass_hz = DEFAULT_HIGHPASS_HZ if args.highpass_hz is None else args.highpass_hz
     insp = inspect_record(record, highpass_hz=highpass_hz, rescale=args.rescale_to_mass)
     result = insp.to_json()
@@ -78,4 +86,5 @@ def add_records_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "record by name, e.g. seed_individual",
     )
     p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report with figures")
+    add_no_limits(p)
     p.set_defaults(handler=_cmd_inspect)

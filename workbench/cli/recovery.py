@@ -6,7 +6,10 @@ import argparse
 from typing import Any
 
 from workbench.cli.common import (
+    IDENTIFY_SECONDS_PER_SAMPLE,
+    add_no_limits,
     add_rigid_floor_flag,
+    check_budget,
     emit,
     identify_settings,
     seed_int,
@@ -15,6 +18,16 @@ from workbench.cli.common import (
 from workbench.errors import UsageError
 
 __all__ = ["add_recovery_parser"]
+
+
+def _design_points(settings: Any, factors: list[str], levels: dict[str, Any]) -> int:
+    """Return how many times each record is identified: the baseline and each point."""
+    from workbench.sensitivity.design import build_design, default_levels
+
+    if not factors:
+        return 1
+    chosen = {name: levels.get(name) or default_levels(name, settings) for name in factors}
+    return len(build_design("oat", chosen)[1])
 
 
 def _cmd_recovery(args: argparse.Namespace) -> int:
@@ -41,6 +54,19 @@ def _cmd_recovery(args: argparse.Namespace) -> int:
             raise UsageError(
                 f"--duration-s {args.duration_s!r}: give a range of 5-600 s, low before high"
             )
+    if args.records < 1:
+        raise UsageError(f"--records {args.records}: give at least one record")
+    # Before any record is simulated: each is identified once per design point.
+    low, high = ranges.get("duration_s", (20.0, 30.0))
+    samples = args.records * (low + high) / 2 * args.sample_rate_hz
+    points = _design_points(settings, factors, levels)
+    parallel = 1 if args.scheduler else args.workers
+    check_budget(
+        args,
+        f"recovery of {args.records} records at {points} setting(s)",
+        "give fewer --records, shorter --duration-s or more --workers",
+        minutes=IDENTIFY_SECONDS_PER_SAMPLE * samples * points / parallel / 60,
+    )
     design = RecoveryDesign(
         truth_laws(args.truth),
         floor=args.floor,
@@ -131,4 +157,5 @@ def add_recovery_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         help="levels of a factor (repeatable; default: the factor's default levels)",
     )
     add_rigid_floor_flag(p)
+    add_no_limits(p)
     p.set_defaults(handler=_cmd_recovery)

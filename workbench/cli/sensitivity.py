@@ -7,9 +7,12 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    IDENTIFY_SECONDS_PER_SAMPLE,
     add_allow_negative_force,
     add_allow_outside_paths,
+    add_no_limits,
     add_rigid_floor_flag,
+    check_budget,
     emit,
     identify_settings,
     seed_int,
@@ -24,6 +27,33 @@ __all__ = ["add_sensitivity_parser"]
 def _settings(args: argparse.Namespace) -> Any:
     # The study's own seeds replace the baseline's: the baseline carries no --seed.
     return identify_settings(argparse.Namespace(**{**vars(args), "seed": None}))
+
+
+def _check_runs(
+    args: argparse.Namespace, records: list[Any], base: Any, factors: list[str], levels: Any
+) -> None:
+    """Refuse a study whose identifications are over the time budget, before any run."""
+    from workbench.sensitivity.design import FACTORS, build_design, default_levels
+
+    # The study's own design (run_sensitivity): the default levels of factors not given.
+    names = factors or list(FACTORS)
+    chosen = {n: levels.get(n) or default_levels(n, base) for n in names}
+    _, points = build_design(args.design, chosen)
+    samples = sum(record.n_samples for _, record in records)
+    runs = len(records) * len(points) * args.replicates
+    parallel = 1 if args.scheduler else args.workers
+    check_budget(
+        args,
+        f"sensitivity of {runs} identifications ({len(points)} settings x {args.replicates} "
+        f"replicates x {len(records)} records)",
+        "give fewer --replicates, factors or levels, or more --workers",
+        minutes=IDENTIFY_SECONDS_PER_SAMPLE
+        * samples
+        * len(points)
+        * args.replicates
+        / parallel
+        / 60,
+    )
 
 
 def _cmd_sensitivity(args: argparse.Namespace) -> int:
@@ -57,6 +87,7 @@ def _cmd_sensitivity(args: argparse.Namespace) -> int:
     )
     for _, record in records:
         warn_accepted_negative_force(record)
+    _check_runs(args, records, base, factors, levels)
     study = run_sensitivity(
         records,
         base=base,
@@ -114,6 +145,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=1, help="local processes (default 1)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address")
     p.add_argument("--out", metavar="DIR", required=True, help="folder for tables and report")
+    add_no_limits(p)
     g = p.add_argument_group("baseline settings (as for identify)")
     g.add_argument("--method", choices=["rbpf", "pf", "exact"])
     g.add_argument("--particles", type=int)
