@@ -207,3 +207,84 @@ def test_an_empty_output_path_is_refused(argv, tmp_path, capsys, monkeypatch):
     flag = "--records" if "--records" in argv else "--out"
     assert f"{flag} is empty, which would write into the current folder" in err
     assert list(tmp_path.iterdir()) == []
+
+
+# -- counts checked against the budgets before anything is allocated ---------------------------
+@pytest.mark.parametrize(
+    ("argv", "computation", "estimate"),
+    [
+        (
+            ["identify", "seed_individual", "--method", "rbpf", "--particles", "2000000000"],
+            "workbench.inference.identify.identify",
+            "--particles 2000000000 needs about 1.34e+03 GB of memory",
+        ),
+        (
+            ["crosscheck", "seed_individual", "--walkers", "100000000"],
+            "workbench.cli.common.load",
+            "4 ensembles of 100000000 walkers needs about 640 GB of memory",
+        ),
+        (
+            ["hsi", "--modes", "1000000000"],
+            "workbench.hsi.structure.simply_supported_beam",
+            "hsi with 1000000000 modes needs about 3.2e+10 GB of memory",
+        ),
+        (
+            ["recovery", "--records", "1000000000", "--out", "rec"],
+            "workbench.population.recovery.run_recovery",
+            "recovery of 1000000000 records at 1 setting(s) needs about",
+        ),
+        (
+            ["sensitivity", "seed_individual", "--replicates", "1000000000", "--out", "s"],
+            "workbench.sensitivity.study.run_sensitivity",
+            "(25 settings x 1000000000 replicates x 1 records) needs about",
+        ),
+    ],
+)
+def test_runaway_counts_are_refused_before_any_allocation(
+    argv, computation, estimate, tmp_path, capsys, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(computation, never)
+    err = refused(argv, capsys)
+    assert estimate in err and "add --no-limits to run it anyway" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_ordinary_counts_pass_the_count_checks():
+    import argparse
+
+    from workbench.cli.common import check_budget, check_particles
+    from workbench.inference.settings import IdentifySettings
+
+    # A pf of 100 000 particles (25 times the seed's) is well inside the memory budget.
+    args = argparse.Namespace(no_limits=False, json=True)
+    check_particles(args, IdentifySettings.from_flat(method="pf", particles=100_000))
+    check_budget(args, "x", "y", memory_gb=8.0 * (2.0 * 1000) ** 2 / 1e9)  # 1000 modes: 32 MB
+
+
+@pytest.mark.parametrize(
+    ("command", "extra", "computation"),
+    [
+        ("inspect", [], "workbench.records.inspection.inspect_record"),
+        ("diagnose", ["--no-one-step"], "workbench.diagnostics.criticism.prepare"),
+        ("compare", ["--effects", "gait_asymmetry"], "workbench.diagnostics.criticism.prepare"),
+        ("crosscheck", [], "workbench.records.inspection.inspect_record"),
+    ],
+)
+def test_every_one_record_command_checks_the_record_size(
+    command, extra, computation, tmp_path, capsys, monkeypatch
+):
+    from workbench.cli import common as cli_common
+
+    # As identify's guard (test_work_guards): the budget lowered so that 400 samples are over.
+    monkeypatch.setattr(cli_common, "IDENTIFY_BASE_BYTES", 0.0)
+    monkeypatch.setattr(cli_common, "MEMORY_BUDGET_GB", 0.001)
+    monkeypatch.setattr(computation, never)
+    rec = tmp_path / "walk.csv"
+    t = np.arange(400) / 200.0
+    pd.DataFrame({"time": t, "grf": 700 + 100 * np.sin(11 * t)}).to_csv(rec, index=False)
+    err = refused([command, rec, "--mass", "70", *extra], capsys)
+    assert f"{command} on walk (400 samples) needs about 0.00204 GB of memory" in err
+    # --no-limits lifts it: the run reaches the computation (here a stand-in that stops it).
+    _, _, err = run_cli([command, rec, "--mass", "70", *extra, "--no-limits"], capsys)
+    assert "needs about" not in err and "the computation started" in err
