@@ -288,3 +288,30 @@ def test_every_one_record_command_checks_the_record_size(
     # --no-limits lifts it: the run reaches the computation (here a stand-in that stops it).
     _, _, err = run_cli([command, rec, "--mass", "70", *extra, "--no-limits"], capsys)
     assert "needs about" not in err and "the computation started" in err
+
+
+# -- a filter's flag given to a method that ignores it: a warning, the run goes on -------------
+@pytest.mark.parametrize(
+    ("flags", "warnings"),
+    [
+        ({"particles": 500}, ["the exact method ignores --particles"]),
+        ({"method": "rbpf", "force_proposal": "prior"}, ["the rbpf method ignores --force"]),
+        (
+            {"particles": 500, "force_proposal": "prior"},
+            ["ignores --particles", "ignores --force-proposal"],
+        ),
+        ({"method": "pf", "particles": 500, "force_proposal": "prior"}, []),
+        ({"method": "rbpf", "particles": 500}, []),
+    ],
+)
+def test_flags_the_method_ignores_are_warned_about(flags, warnings, capsys):
+    import argparse
+
+    from workbench.cli.common import identify_settings
+
+    settings = identify_settings(argparse.Namespace(record="walk.csv", **flags))
+    err = capsys.readouterr().err
+    assert settings.method.name == flags.get("method", "exact")
+    assert len(err.strip().splitlines()) == len(warnings), err
+    for warning in warnings:
+        assert f"workbench: warning: {warning}" in err or warning in err

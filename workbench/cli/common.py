@@ -51,6 +51,7 @@ __all__ = [
     "seed_int",
     "surface_choice",
     "warn_accepted_negative_force",
+    "warn_ignored_method_flags",
     "warn_many_workers",
 ]
 
@@ -508,7 +509,31 @@ def identify_settings(args: argparse.Namespace) -> Any:
     else:
         settings = IdentifySettings().replace(**overrides)
     check_particles(args, settings)
+    warn_ignored_method_flags(args, settings.method.name)
     return settings
+
+
+def warn_ignored_method_flags(args: argparse.Namespace, method: str) -> None:
+    """Say on stderr that a filter's flag is ignored by the method that runs.
+
+    A warning, not a refusal: scripts that pass --particles to every run keep working, and
+    the result is what the method gives without the flag, but nobody believes the flag acted.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+    method : str
+        The method that runs (``exact``, ``rbpf``, ``pf``).
+    """
+    if "method" in (getattr(args, "factors", None) or ""):
+        return  # a study that varies the method runs the filters too
+    ignored = []
+    if getattr(args, "particles", None) is not None and method == "exact":
+        ignored.append("--particles (the exact posterior has no particles; add --method rbpf)")
+    if getattr(args, "force_proposal", None) is not None and method != "pf":
+        ignored.append(f"--force-proposal (it is the pf's; {method} draws no force proposals)")
+    for flag in ignored:
+        print(f"workbench: warning: the {method} method ignores {flag}", file=sys.stderr)
 
 
 def add_rigid_floor_flag(parser: Any) -> None:
