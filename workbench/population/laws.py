@@ -276,10 +276,18 @@ class PopulationLaws:
             laws = obj["laws"]
             for key in ("natural_frequency_hz", "damping_ratio", "blf1"):
                 law = laws[key]
+                residual_sd = _nonneg(law["residual_sd"], f"laws.{key}.residual_sd")
+                if residual_sd > MAX_RESIDUAL_SD[key]:
+                    raise UsageError(
+                        f"the population laws give laws.{key}.residual_sd = {residual_sd:g}, "
+                        f"a scatter no walking population has (at most "
+                        f"{MAX_RESIDUAL_SD[key]:g}; the draws would spread over the sampler's "
+                        "whole physical range); fit the laws again or correct it"
+                    )
                 kwargs[key] = LinearLaw(
                     slope=_finite(law["slope"], f"laws.{key}.slope"),
                     intercept=_finite(law["intercept"], f"laws.{key}.intercept"),
-                    residual_sd=_nonneg(law["residual_sd"], f"laws.{key}.residual_sd"),
+                    residual_sd=residual_sd,
                 )
             logn = obj["lognormal"]
             for key in ("blf2", "blf3"):
@@ -322,6 +330,12 @@ class PopulationLaws:
         """Return a copy with some fields changed."""
         return replace(self, **changes)
 
+
+#: Largest residual sd of each mean law: ten times the seed's (f_n 0.15 Hz, damping
+#: ratio 0.05, BLF1 0.04) and wider than the scatter of every published walking population
+#: (f_n of walkers 1.1-3.3 Hz in all, docs/science.md 7); a larger one draws mostly the
+#: sampler's truncation bounds (f_n anywhere in 0.5-20 Hz), which no data support.
+MAX_RESIDUAL_SD = {"natural_frequency_hz": 1.5, "damping_ratio": 0.5, "blf1": 0.4}
 
 #: Largest log-sd of a lognormal load-factor law (a factor e^2 per sd already spans most of
 #: the published BLF2 and BLF3 values at once).
