@@ -34,7 +34,9 @@ def read_recovery(path: str | Path) -> dict[str, Any]:
     p = Path(path)
     file = p / "recovery.json" if p.is_dir() else p
     try:
-        obj = json.loads(file.read_text(encoding="utf-8"))
+        # A recovery writes null for a number that does not exist; a bare NaN or Infinity
+        # (Python's json would read it) comes from an edit and makes every verdict moot.
+        obj = json.loads(file.read_text(encoding="utf-8"), parse_constant=_refuse_constant)
     except FileNotFoundError:
         raise InputError(
             file,
@@ -53,7 +55,31 @@ def read_recovery(path: str | Path) -> dict[str, Any]:
             "is not the result of 'workbench recovery' (no truth, recovered and verdict)",
             "give the recovery.json a recovery wrote",
         )
+    _check_truth(obj, file)
     return obj
+
+
+def _refuse_constant(token: str) -> Any:
+    raise ValueError(f"{token} is not a number JSON allows")
+
+
+def _check_truth(obj: dict[str, Any], file: Path) -> None:
+    """Refuse a truth law without a finite slope or intercept: its verdicts judge nothing."""
+    import math
+
+    laws = obj["truth"].get("laws") if isinstance(obj["truth"], dict) else None
+    for law in NAMES:
+        for par in ("slope", "intercept"):
+            value = laws.get(law, {}).get(par) if isinstance(laws, dict) else None
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (number and math.isfinite(float(value or 0))):
+                raise InputError(
+                    file,
+                    f"key truth.laws.{law}.{par}",
+                    f"the true value {value!r} is not a finite number, so no fit can be "
+                    "judged against it",
+                    "run the recovery again (it writes the truth it simulated)",
+                )
 
 
 def _settings_text(obj: dict[str, Any]) -> str:
