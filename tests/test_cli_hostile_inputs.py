@@ -315,3 +315,52 @@ def test_flags_the_method_ignores_are_warned_about(flags, warnings, capsys):
     assert len(err.strip().splitlines()) == len(warnings), err
     for warning in warnings:
         assert f"workbench: warning: {warning}" in err or warning in err
+
+
+# -- laws and recovery results that would put numbers on nothing -------------------------------
+def test_laws_with_an_implausible_scatter_are_refused_naming_the_key(tmp_path, capsys):
+    from workbench.population.laws import PopulationLaws
+
+    laws = PopulationLaws().to_json()
+    laws["laws"]["natural_frequency_hz"]["residual_sd"] = 1e6
+    path = tmp_path / "laws.json"
+    path.write_text(json.dumps(laws), encoding="utf-8")
+    err = refused(["sample", "--laws", path, "--n", "3", "--out", tmp_path / "p.csv"], capsys)
+    assert str(path) in err and "laws.natural_frequency_hz.residual_sd = 1e+06" in err
+    assert not (tmp_path / "p.csv").exists()
+    # The seed's own laws, and a scatter ten times theirs, still read.
+    laws["laws"]["natural_frequency_hz"]["residual_sd"] = 1.5
+    assert PopulationLaws.from_json(laws).natural_frequency_hz.residual_sd == 1.5
+
+
+def _recovery(slope: str) -> str:
+    law = '{"slope": %s, "intercept": 1.4, "residual_sd": 0.15}'
+    return (
+        '{"truth": {"laws": {"natural_frequency_hz": '
+        + law % slope
+        + ', "damping_ratio": '
+        + law % "-0.2"
+        + '}}, "recovered": {}, "verdict": {"pipeline": {"natural_frequency_hz": '
+        '{"slope": "recovered"}}}}'
+    )
+
+
+@pytest.mark.parametrize(
+    ("slope", "message"),
+    [
+        ("NaN", "NaN is not a number JSON allows"),
+        ("null", "key truth.laws.natural_frequency_hz.slope: the true value None"),
+        ('"0.3"', "key truth.laws.natural_frequency_hz.slope: the true value '0.3'"),
+    ],
+)
+def test_a_recovery_with_no_true_slope_is_refused_not_reported_recovered(slope, message, tmp_path):
+    from workbench.errors import InputError
+    from workbench.reporting.recovery import read_recovery
+
+    path = tmp_path / "recovery.json"
+    path.write_text(_recovery(slope), encoding="utf-8")
+    with pytest.raises(InputError, match=r"recovery\.json") as err:
+        read_recovery(tmp_path)
+    assert message in str(err.value)
+    path.write_text(_recovery("0.3"), encoding="utf-8")
+    assert read_recovery(tmp_path)["truth"]["laws"]["natural_frequency_hz"]["slope"] == 0.3
