@@ -143,6 +143,7 @@ def load_manifest(
 
     entries: list[ManifestEntry] = []
     seen: dict[str, int] = {}
+    files: dict[object, tuple[str, int]] = {}  # the file each row names, however spelt
     folder = p.parent
     for i in range(header_index + 1, len(lines)):
         line = lines[i]
@@ -169,6 +170,19 @@ def load_manifest(
                 "list every record once",
             )
         seen[file_text] = number
+        identity = _file_identity(
+            Path(file_text) if Path(file_text).is_absolute() else folder / file_text
+        )
+        if identity in files:
+            first, first_line = files[identity]
+            raise InputError(
+                source,
+                f"line {number}, column 'path'",
+                f"the record {_show(file_text)} is the file {_show(first)} of line {first_line} "
+                "under another spelling, so it would be identified twice and count twice",
+                "list every record once",
+            )
+        files[identity] = (file_text, number)
         mass = _manifest_number(cells.get("mass_kg", ""), source, number, "mass_kg")
         if mass is not None:
             problem = mass_problem(mass)
@@ -205,6 +219,18 @@ def load_manifest(
             "add one row per record file",
         )
     return entries
+
+
+def _file_identity(record_path: Path) -> object:
+    """Return what is the same for every spelling of one file, and differs between files.
+
+    ``r1.csv``, ``./r1.csv`` and a path through a link to the same folder are one record.
+    """
+    try:
+        info = os.stat(record_path)  # follows links; a hard link is the same file too
+    except (OSError, ValueError):  # missing (a failure of its row later) or unreadable name
+        return os.path.realpath(record_path)
+    return (info.st_dev, info.st_ino)
 
 
 def _inside(record_path: Path, folder: Path) -> bool:
