@@ -364,3 +364,23 @@ def test_a_recovery_with_no_true_slope_is_refused_not_reported_recovered(slope, 
     assert message in str(err.value)
     path.write_text(_recovery("0.3"), encoding="utf-8")
     assert read_recovery(tmp_path)["truth"]["laws"]["natural_frequency_hz"]["slope"] == 0.3
+
+
+# -- one record under several spellings in a manifest is identified once ----------------------
+@pytest.mark.parametrize("spelling", ["./r1.csv", "sub/up/r1.csv", "sub/../r1.csv"])
+def test_a_manifest_naming_one_record_twice_is_refused(spelling, tmp_path, capsys, monkeypatch):
+    from workbench.records.manifest import load_manifest
+
+    (tmp_path / "r1.csv").write_text("time,grf\n0,700\n", encoding="utf-8")
+    (tmp_path / "r2.csv").write_text("time,grf\n0,700\n", encoding="utf-8")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "up").symlink_to("..")  # a link back to the manifest's folder
+    manifest = tmp_path / "manifest.csv"
+    manifest.write_text(f"path\nr1.csv\nr2.csv\n{spelling}\n", encoding="utf-8")
+    monkeypatch.setattr("workbench.inference.identify.identify", never)
+    err = refused(["batch", manifest, "--out", tmp_path / "out"], capsys)
+    assert f"{manifest}, line 4, column 'path'" in err
+    assert f"the record '{spelling}' is the file 'r1.csv' of line 2" in err
+    # Distinct files, one of them missing (a failure of its row later), still load.
+    manifest.write_text("path\nr1.csv\nr2.csv\nmissing.csv\n", encoding="utf-8")
+    assert [e.path.name for e in load_manifest(manifest)] == ["r1.csv", "r2.csv", "missing.csv"]
