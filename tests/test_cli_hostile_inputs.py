@@ -384,3 +384,22 @@ def test_a_manifest_naming_one_record_twice_is_refused(spelling, tmp_path, capsy
     # Distinct files, one of them missing (a failure of its row later), still load.
     manifest.write_text("path\nr1.csv\nr2.csv\nmissing.csv\n", encoding="utf-8")
     assert [e.path.name for e in load_manifest(manifest)] == ["r1.csv", "r2.csv", "missing.csv"]
+
+
+# -- an input path that cannot be read is named as an input, not blamed on --out --------------
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["identify", "seed_individual", "--config", "{folder}"],
+        ["hsi", "--crossings", "1", "--pedestrians", "{folder}"],
+        ["hsi", "--crossings", "1", "--structure", "{folder}"],
+        ["hsi", "--crossings", "1", "--laws", "{folder}"],
+    ],
+)
+def test_a_folder_given_as_an_input_file_is_named_as_such(argv, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("workbench.hsi.montecarlo.run_monte_carlo", never)
+    folder = tmp_path / "inputs"
+    folder.mkdir()
+    err = refused([a.format(folder=folder) for a in argv], capsys)
+    assert f"{folder}, whole file: this is a folder" in err
+    assert "choose a folder you can write to" not in err

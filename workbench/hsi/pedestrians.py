@@ -157,6 +157,17 @@ def read_pedestrians(path: str | Path) -> pd.DataFrame:
         raise InputError(
             path, "whole file", f"is not a readable CSV table ({err})", "give a CSV file"
         ) from None
+    except IsADirectoryError:
+        raise InputError(
+            path, "whole file", "this is a folder", "give the table 'workbench sample' writes"
+        ) from None
+    except OSError as err:  # an input: a sentence about writable --out folders would mislead
+        raise InputError(
+            path,
+            "whole file",
+            f"the file cannot be read ({err.strerror or err})",
+            "check the path and its permissions",
+        ) from None
     return validate_pedestrians(frame, str(path))
 
 

@@ -546,6 +546,17 @@ class IdentifySettings:
                 f"is not valid TOML ({err})",
                 "fix the syntax (key = value lines)",
             ) from None
+        except IsADirectoryError:
+            raise InputError(
+                path, "whole file", "this is a folder", "give the settings file (a .toml file)"
+            ) from None
+        except OSError as err:  # an input: a sentence about writable --out folders would mislead
+            raise InputError(
+                path,
+                "whole file",
+                f"the settings file cannot be read ({err.strerror or err})",
+                "check the path and its permissions",
+            ) from None
         unknown = sorted(set(data) - set(FLAT_KEYS))
         if unknown:
             raise InputError(
