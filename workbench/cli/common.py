@@ -259,7 +259,7 @@ def _duration(minutes: float) -> str:
 
 
 def check_out(path: str | os.PathLike[str], *, is_file: bool = False, flag: str = "--out") -> None:
-    """Refuse an ``--out`` that cannot be written, before any computation.
+    """Refuse an ``--out`` (or other output path) that cannot be written, before any work.
 
     Otherwise a write failure shows only after the work is done. The check has no side
     effect: it finds the nearest existing folder of the output and creates and removes an
@@ -277,7 +277,7 @@ def check_out(path: str | os.PathLike[str], *, is_file: bool = False, flag: str 
     Raises
     ------
     UsageError
-        In one sentence naming ``--out`` and the folder in the way.
+        In one sentence naming the flag and the folder in the way.
     """
     from workbench.errors import UsageError
 
@@ -291,24 +291,24 @@ def check_out(path: str | os.PathLike[str], *, is_file: bool = False, flag: str 
     fix = "choose a folder you can write to"
     try:
         if is_file and target.is_dir():
-            raise UsageError(f"--out {path}: this is a folder; give a file name in it")
+            raise UsageError(f"{flag} {path}: this is a folder; give a file name in it")
         if not is_file and target.exists() and not target.is_dir():
-            raise UsageError(f"--out {path}: this is a file, not a folder; {fix}")
+            raise UsageError(f"{flag} {path}: this is a file, not a folder; {fix}")
         existing = (target.parent if is_file else target).absolute()
         while not existing.exists():
             existing = existing.parent
     except OSError as err:
-        raise UsageError(f"--out {path}: {err.strerror or err}; {fix}") from None
+        raise UsageError(f"{flag} {path}: {err.strerror or err}; {fix}") from None
     if not existing.is_dir():
         raise UsageError(
-            f"--out {path}: {existing} is a file, so no folder can be made in it; {fix}"
+            f"{flag} {path}: {existing} is a file, so no folder can be made in it; {fix}"
         )
     try:  # the system's answer, which permission bits alone do not give (read-only mounts)
         with tempfile.NamedTemporaryFile(dir=existing, prefix=".workbench-check-"):
             pass
     except OSError as err:
         raise UsageError(
-            f"--out {path}: cannot write in {existing} ({err.strerror or err}); {fix}"
+            f"{flag} {path}: cannot write in {existing} ({err.strerror or err}); {fix}"
         ) from None
 
 
