@@ -214,27 +214,27 @@ def test_an_empty_output_path_is_refused(argv, tmp_path, capsys, monkeypatch):
     ("argv", "computation", "estimate"),
     [
         (
-            ["identify", "seed_individual", "--method", "rbpf", "--particles", "2000000000"],
+            ["identify", "seed_individual", "--method", "rbpf", "--particles", "2e9"],
             "workbench.inference.identify.identify",
             "--particles 2000000000 needs about 1.34e+03 GB of memory",
         ),
         (
-            ["crosscheck", "seed_individual", "--walkers", "100000000"],
+            ["crosscheck", "seed_individual", "--walkers", "1e8"],
             "workbench.cli.common.load",
             "4 ensembles of 100000000 walkers needs about 640 GB of memory",
         ),
         (
-            ["hsi", "--modes", "1000000000"],
+            ["hsi", "--modes", "1e9"],
             "workbench.hsi.structure.simply_supported_beam",
             "hsi with 1000000000 modes needs about 3.2e+10 GB of memory",
         ),
         (
-            ["recovery", "--records", "1000000000", "--out", "rec"],
+            ["recovery", "--records", "1e9", "--out", "rec"],
             "workbench.population.recovery.run_recovery",
             "recovery of 1000000000 records at 1 setting(s) needs about",
         ),
         (
-            ["sensitivity", "seed_individual", "--replicates", "1000000000", "--out", "s"],
+            ["sensitivity", "seed_individual", "--replicates", "1e9", "--out", "s"],
             "workbench.sensitivity.study.run_sensitivity",
             "(25 settings x 1000000000 replicates x 1 records) needs about",
         ),
@@ -248,6 +248,25 @@ def test_runaway_counts_are_refused_before_any_allocation(
     err = refused(argv, capsys)
     assert estimate in err and "add --no-limits to run it anyway" in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("text", "value"), [("256", 256), ("1e6", 1_000_000), ("2E9", 2_000_000_000), ("4.0", 4)]
+)
+def test_counts_may_be_written_in_exponent_form(text, value):
+    from workbench.cli.common import positive_int
+
+    assert positive_int(text) == value
+
+
+@pytest.mark.parametrize("text", ["1.5", "nan", "inf", "ten", "0", "-1e3"])
+def test_counts_that_are_not_whole_and_positive_are_refused(text):
+    import argparse
+
+    from workbench.cli.common import positive_int
+
+    with pytest.raises(argparse.ArgumentTypeError, match=r"whole number|at least 1"):
+        positive_int(text)
 
 
 def test_ordinary_counts_pass_the_count_checks():

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import sys
@@ -53,6 +54,7 @@ __all__ = [
     "warn_accepted_negative_force",
     "warn_ignored_method_flags",
     "warn_many_workers",
+    "whole_number",
 ]
 
 
@@ -650,8 +652,8 @@ def seed_int(text: str) -> int:
     return value
 
 
-def positive_int(text: str) -> int:
-    """Argparse type: a whole number of at least 1.
+def whole_number(text: str) -> int:
+    """Argparse type: a whole number, also written with an exponent (``1e6``).
 
     Parameters
     ----------
@@ -662,9 +664,31 @@ def positive_int(text: str) -> int:
     int
     """
     try:
-        value = int(text)
+        return int(text)
     except ValueError:
+        pass
+    # Counts are often written as 1e6; a whole number so written is one.
+    try:
+        number = float(text)
+    except ValueError:
+        number = math.nan
+    if not (math.isfinite(number) and number.is_integer()):
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    return int(number)
+
+
+def positive_int(text: str) -> int:
+    """Argparse type: a whole number of at least 1 (:func:`whole_number`).
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    int
+    """
+    value = whole_number(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r} must be at least 1")
     return value

@@ -198,7 +198,9 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"
     )
     p.add_argument("--method", choices=["rbpf", "pf"], default="rbpf", help="filter (rbpf)")
-    p.add_argument("--particles", type=int, metavar="N", help="particles (rbpf 256, pf 4000)")
+    p.add_argument(
+        "--particles", type=positive_int, metavar="N", help="particles (rbpf 256, pf 4000)"
+    )
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
     p.add_argument(
         "--obs-noise",

@@ -17,6 +17,7 @@ from workbench.cli.common import (
     check_out,
     emit,
     floats,
+    positive_int,
     seed_int,
     warn_many_workers,
 )
@@ -399,7 +400,7 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     g.add_argument("--mass-per-m", type=float, metavar="KG", help="mass per length (500 kg/m)")
     g.add_argument("--frequency", type=float, metavar="HZ", help="first bending frequency (2 Hz)")
     g.add_argument("--damping", type=float, metavar="ZETA", help="modal damping ratio (0.005)")
-    g.add_argument("--modes", type=int, metavar="N", help="modes kept (1)")
+    g.add_argument("--modes", type=positive_int, metavar="N", help="modes kept (1)")
     g.add_argument("--width", type=float, metavar="M", help="deck width (2 m)")
     g.add_argument(
         "--structure",

@@ -13,6 +13,7 @@ from workbench.cli.common import (
     emit,
     identify_settings,
     load,
+    positive_int,
     record_options,
     safe_key,
     seed_int,
@@ -95,7 +96,9 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"
     )
     p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
-    p.add_argument("--particles", type=int, metavar="N", help="particles (rbpf 256, pf 4000)")
+    p.add_argument(
+        "--particles", type=positive_int, metavar="N", help="particles (rbpf 256, pf 4000)"
+    )
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
     p.add_argument(
         "--obs-noise",

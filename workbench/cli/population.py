@@ -15,6 +15,7 @@ from workbench.cli.common import (
     check_budget,
     emit,
     identify_settings,
+    positive_int,
     seed_int,
     warn_many_workers,
 )
@@ -208,7 +209,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--resume", action="store_true", help="continue a batch in DIR")
     p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
-    p.add_argument("--particles", type=int, metavar="N", help="particles per record")
+    p.add_argument("--particles", type=positive_int, metavar="N", help="particles per record")
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
     p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")
     p.add_argument(

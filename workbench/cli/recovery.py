@@ -12,6 +12,7 @@ from workbench.cli.common import (
     check_budget,
     emit,
     identify_settings,
+    positive_int,
     seed_int,
     warn_many_workers,
 )
@@ -54,8 +55,6 @@ def _cmd_recovery(args: argparse.Namespace) -> int:
             raise UsageError(
                 f"--duration-s {args.duration_s!r}: give a range of 5-600 s, low before high"
             )
-    if args.records < 1:
-        raise UsageError(f"--records {args.records}: give at least one record")
     # Before any record is simulated: each is identified once per design point.
     low, high = ranges.get("duration_s", (20.0, 30.0))
     samples = args.records * (low + high) / 2 * args.sample_rate_hz
@@ -119,7 +118,7 @@ def add_recovery_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "zhang (f_n = 1.1043 f_p, zeta 0.30) or a laws JSON file",
     )
     p.add_argument("--floor", choices=("deck", "rigid"), default="deck", help="(default deck)")
-    p.add_argument("--records", type=int, default=60, metavar="N", help="records (60)")
+    p.add_argument("--records", type=positive_int, default=60, metavar="N", help="records (60)")
     p.add_argument("--duration-s", metavar="LOW-HIGH", help="record lengths [s] (20-30)")
     p.add_argument(
         "--sample-rate-hz", type=float, default=100.0, metavar="HZ", help="(default 100)"
@@ -135,7 +134,7 @@ def add_recovery_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--resume", action="store_true", help="continue a recovery in DIR")
     p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
-    p.add_argument("--particles", type=int, metavar="N", help="particles per record")
+    p.add_argument("--particles", type=positive_int, metavar="N", help="particles per record")
     p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
     p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")
     p.add_argument("--state-noise", type=float, metavar="FRACTION", help="as for identify")

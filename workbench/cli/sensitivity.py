@@ -15,9 +15,11 @@ from workbench.cli.common import (
     check_budget,
     emit,
     identify_settings,
+    positive_int,
     seed_int,
     warn_accepted_negative_force,
     warn_many_workers,
+    whole_number,
 )
 from workbench.errors import UsageError
 
@@ -140,7 +142,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         metavar="NAME=V1,V2",
         help="levels of one factor (multipliers for the noise and prior_box factors); repeatable",
     )
-    p.add_argument("--replicates", type=int, default=3, help="seeds per level (default 3)")
+    p.add_argument("--replicates", type=whole_number, default=3, help="seeds per level (default 3)")
     p.add_argument("--seed", type=seed_int, default=0, help="study seed (default 0)")
     p.add_argument("--workers", type=int, default=1, help="local processes (default 1)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address")
@@ -148,7 +150,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     add_no_limits(p)
     g = p.add_argument_group("baseline settings (as for identify)")
     g.add_argument("--method", choices=["rbpf", "pf", "exact"])
-    g.add_argument("--particles", type=int)
+    g.add_argument("--particles", type=positive_int)
     g.add_argument("--harmonics", type=int)
     g.add_argument("--highpass-hz", type=float, metavar="F")
     g.add_argument("--obs-noise", metavar="FRACTION")
