@@ -422,3 +422,16 @@ def test_a_folder_given_as_an_input_file_is_named_as_such(argv, tmp_path, capsys
     err = refused([a.format(folder=folder) for a in argv], capsys)
     assert f"{folder}, whole file: this is a folder" in err
     assert "choose a folder you can write to" not in err
+
+
+def test_crosscheck_time_is_estimated_from_the_steps_and_walkers(capsys, monkeypatch):
+    from workbench.cli import common as cli_common
+
+    monkeypatch.setattr(cli_common, "TIME_BUDGET_MIN", 0.1)  # 6 s
+    monkeypatch.setattr("workbench.inference.identify.identify", never)
+    # Two steps (about 235 samples) with 4 x 32 walkers: about 4.5 s, under; 2 x 1000: 70 s.
+    argv = ["crosscheck", "seed_individual", "--max-steps", "2"]
+    _, _, err = run_cli(argv, capsys)
+    assert "the computation started" in err
+    err = refused([*argv, "--ensembles", "2", "--walkers", "1000"], capsys)
+    assert "crosscheck of 2 steps of seed_individual with 2000 walkers in all" in err

@@ -57,6 +57,11 @@ def _walkers(text: str) -> int:
     return value
 
 
+#: Computing time of the MCMC per walker and per record sample checked [s]: crosscheck of
+#: seed_individual's first 4 steps (about 470 samples) with 4 ensembles of 32 walkers took
+#: about 9 s of one core beyond the identification and the interpreter's start.
+MCMC_SECONDS_PER_WALKER_SAMPLE = 1.5e-4
+
 #: Least length of an MCMC chain of crosscheck (its first chunk, ``min_steps``) and least
 #: parameters per walker (C and K): each ensemble holds at least this many numbers per walker.
 MIN_CHAIN_NUMBERS = 100 * 2
@@ -120,6 +125,15 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
             f"--max-steps {args.max_steps}: {record.name} has only {n_steps} whole steps; "
             f"give at most {n_steps}"
         )
+    checked = args.max_steps or n_steps
+    samples = record.n_samples * checked / n_steps
+    walkers = args.ensembles * (args.walkers or 32)
+    check_budget(
+        args,
+        f"crosscheck of {checked} steps of {record.name} with {walkers} walkers in all",
+        "check fewer steps (--max-steps) or give fewer --walkers or --ensembles",
+        minutes=MCMC_SECONDS_PER_WALKER_SAMPLE * walkers * samples / 60,
+    )
     ident = identify(insp, settings=settings, progress=False)
     problem = ident.problem
     result = crosscheck(
