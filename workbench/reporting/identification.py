@@ -54,8 +54,13 @@ def convergence_figure(result: IdentificationResult, truth: dict | None = None) 
             ax.plot(
                 piece_end_t, result.piece_mean[:, j], ".", ms=3, color="C1", label="after each step"
             )
-        ax.axhline(est[key], color="k", lw=0.8, label=f"estimate {est[key]:.4g}")
-        ax.axhspan(*ci[key], color="k", alpha=0.08, label="95 % interval")
+        if result.grade(key) == "not identified":
+            # Drawn to diagnose the run, not read off: the legend names no number.
+            ax.axhline(est[key], color="k", lw=0.8, label="posterior mean (not identified)")
+            ax.axhspan(*ci[key], color="k", alpha=0.08, label="95 % given the prior box")
+        else:
+            ax.axhline(est[key], color="k", lw=0.8, label=f"estimate {est[key]:.4g}")
+            ax.axhspan(*ci[key], color="k", alpha=0.08, label="95 % interval")
         if truth and key in truth:
             ax.axhline(truth[key], color="C3", lw=1.0, ls="--", label=f"truth {truth[key]:.4g}")
         lo, hi = (
@@ -160,12 +165,27 @@ def identification_section(
         ("natural_frequency_hz", "natural frequency [Hz]"),
         ("damping_ratio", "damping ratio"),
     ):
-        row = [label, f"{est[k]:.4g}", f"{sd[k]:.3g}", f"{ci[k][0]:.4g} - {ci[k][1]:.4g}"]
+        grade = result.grade(k)
+        if grade == "not identified":
+            lo, hi = result.prior_range(k)
+            row = [label, "not identified", "", f"prior range {lo:.4g} - {hi:.4g}"]
+        else:
+            weak = " (weakly identified)" if grade == "weakly identified" else ""
+            row = [
+                label,
+                f"{est[k]:.4g}{weak}",
+                f"{sd[k]:.3g}",
+                f"{ci[k][0]:.4g} - {ci[k][1]:.4g}",
+            ]
         if truth is not None:
             row.append(f"{truth[k]:.4g}" if k in truth else "")
         rows.append(row)
     for i, (b, s) in enumerate(zip(result.blf[:3], result.blf_sd[:3], strict=True), start=1):
-        row = [f"BLF{i}", f"{b:.3f}", f"{s:.3f}", ""]
+        # The BLFs are the force given C and K: conditional on them when they are not identified.
+        if result.force_identified:
+            row = [f"BLF{i}", f"{b:.3f}", f"{s:.3f}", ""]
+        else:
+            row = [f"BLF{i}", "not identified", "", "conditional on C and K"]
         if truth is not None:
             row.append("")
         rows.append(row)

@@ -66,17 +66,18 @@ def _seed_values() -> dict[str, float]:
 
 
 def _estimates(result: Any) -> dict[str, tuple[float, float, float]]:
-    """(estimate, low, high) of K, C, f_n, zeta and BLF1-3 (the BLF band over steps)."""
-    est, ci = result.estimates, result.interval()
-    out = {key: (float(est[key]), *map(float, ci[key])) for key, _, _ in _ROWS}
-    blf_ci = result.conf_int()
-    for i in (1, 2, 3):
-        key = f"blf{i}"
-        out[key] = (float(result.blf[i - 1]), *map(float, blf_ci.loc[key]))
-    return out  # type: ignore[return-value]
+    """(estimate, low, high) of K, C, f_n, zeta and BLF1-3 (the BLF band over steps).
+
+    NaN for what the result grades not identified: its number is no estimate.
+    """
+    params, ci = result.params, result.conf_int()
+    keys = [key for key, _, _ in _ROWS] + ["blf1", "blf2", "blf3"]
+    return {key: (float(params[key]), *map(float, ci.loc[key])) for key in keys}  # type: ignore[misc]
 
 
 def _cell(value: tuple[float, float, float], fmt: str) -> str:
+    if not np.isfinite(value[0]):
+        return "not identified"
     return f"{fmt.format(value[0])} [{fmt.format(value[1])}, {fmt.format(value[2])}]"
 
 
@@ -215,7 +216,8 @@ def individual_demo_section(
     missed = [
         f"BLF{i} {est[f'blf{i}'][0]:.3f} against {truth[f'blf{i}']:.3f}"
         for i in (1, 2, 3)
-        if not est[f"blf{i}"][1] <= truth[f"blf{i}"] <= est[f"blf{i}"][2]
+        if np.isfinite(est[f"blf{i}"][0])
+        and not est[f"blf{i}"][1] <= truth[f"blf{i}"] <= est[f"blf{i}"][2]
     ]
     if missed:
         sec.paragraph(
