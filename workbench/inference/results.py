@@ -7,7 +7,15 @@ frequency, damping ratio, BLFs -- with posterior standard deviations and 95 % in
 it carries its own diagnostics: residuals, a Ljung-Box test of their serial correlation,
 particle degeneracy and frozen-parameter flags, and the identifiability report.
 
+A quantity the identifiability report grades not identified (C, K, and what rests on them)
+is withheld from every view -- ``params``, ``conf_int()``, ``summary()``, the JSON -- and its
+numbers are kept, named as the posterior given the prior box, for diagnosis.
+
 Plotting lives in :mod:`workbench.reporting`; this module only computes.
+
+Why this module is long: it is the one object every method returns, and all its views
+(statsmodels-like accessors, summary, JSON, netCDF, arviz) read the same grades here; split
+across modules, one view could print what another withholds.
 """
 
 from __future__ import annotations
