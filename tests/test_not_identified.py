@@ -188,3 +188,18 @@ def test_embedded_records_graded_not_identified_print_no_estimate(
         assert f"[{lo:.0f}, {hi:.0f}]" not in text and f"[{lo:.3f}, {hi:.3f}]" not in text
     assert out["blf"] is None and len(out[CONDITIONAL_KEY]["blf"]["estimate"]) == 10
     assert not re.search(r"^BLF\d", text, re.M)
+
+
+def test_the_deck_route_repeats_no_withheld_number_in_its_surface_report() -> None:
+    """On a deck record C and K come from the transmissibility, whose block repeats them."""
+    deck = wb.identify(wb.datasets.load("seed_individual_deck"), wb.SMDModel(harmonics=6), seed=1)
+    assert deck.not_identified == []
+    frf = deck.to_json()["surface"]["transmissibility"]
+    assert frf["interval_95"]["stiffness_n_per_m"] is not None
+    graded = _graded(deck, identified_stiffness=False, level="not identified")
+    out = graded.to_json()
+    frf = out["surface"]["transmissibility"]
+    for key in ("stiffness_n_per_m", "natural_frequency_hz", "damping_ratio"):
+        assert frf["estimates"][key] is None and frf["interval_95"][key] is None, key
+        assert out[CONDITIONAL_KEY][key]["estimate"] == pytest.approx(deck.estimates[key])
+    assert frf["estimates"]["damping_ns_per_m"] == pytest.approx(deck.estimates["damping_ns_per_m"])

@@ -606,13 +606,31 @@ class IdentificationResult:
         out["warnings"] = self.warnings
         out["settings"] = self.settings
         if "surface" in self.extra:
-            out["surface"] = self.extra["surface"]
+            out["surface"] = self._surface_json(hidden)
         if "effects" in self.extra:
             out["effects"] = None if force_hidden else self.extra["effects"]
             if force_hidden:
                 conditional["effects"] = self.extra["effects"]
         out[CONDITIONAL_KEY] = conditional
         return out
+
+    def _surface_json(self, hidden: set[str]) -> dict[str, Any]:
+        """Return the surface report without its copy of numbers that are not identified.
+
+        When C and K came from the deck's transmissibility, its ``transmissibility`` block
+        is that same posterior; graded not identified, its numbers go the way of the
+        result's (null, kept under ``conditional_on_prior_box``).
+        """
+        surface = dict(self.extra["surface"])
+        frf = surface.get("transmissibility")
+        if not hidden or surface.get("c_and_k_from") != "transmissibility" or not frf:
+            return surface
+        frf = dict(frf)
+        for block in ("estimates", "posterior_sd", "interval_95"):
+            if isinstance(frf.get(block), dict):
+                frf[block] = {k: None if k in hidden else v for k, v in frf[block].items()}
+        surface["transmissibility"] = frf
+        return surface
 
     def summary(self) -> str:
         """Return a text table of the estimates with posterior sd and 95 % intervals.
