@@ -170,9 +170,14 @@ def test_real_insole_record_identifies(capsys):
     assert code == 0, err
     r = json.loads(out)
     assert CONTRACT <= r.keys()
-    assert len(r["blf"]) == 10 and all(np.isfinite(r["blf"]))
+    # The insole is graded not identified (tests/test_not_identified.py): its numbers are
+    # under conditional_on_prior_box, null where estimates go.
+    kept = r["conditional_on_prior_box"]
+    blf = r["blf"] if r["blf"] is not None else kept["blf"]["estimate"]
+    assert len(blf) == 10 and all(np.isfinite(blf))
     assert r["identifiability"]["sentence"]
-    assert all(np.isfinite(list(r["interval_95"]["natural_frequency_hz"])))
+    f_n = r["interval_95"]["natural_frequency_hz"] or kept["natural_frequency_hz"]["interval_95"]
+    assert all(np.isfinite(f_n))
 
 
 @pytest.mark.slow
