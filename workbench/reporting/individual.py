@@ -75,6 +75,11 @@ def _estimates(result: Any) -> dict[str, tuple[float, float, float]]:
     return {key: (float(params[key]), *map(float, ci.loc[key])) for key in keys}  # type: ignore[misc]
 
 
+def _json_cell(value: tuple[float, float, float]) -> list[float] | None:
+    # Not identified (NaN) is null, as in identify's JSON: strict JSON has no NaN.
+    return list(value) if np.isfinite(value[0]) else None
+
+
 def _cell(value: tuple[float, float, float], fmt: str) -> str:
     if not np.isfinite(value[0]):
         return "not identified"
@@ -267,8 +272,8 @@ def individual_demo_section(
     sec.paragraph(
         f"The real treadmill record's first steady stretch ({treadmill.duration_s:.0f} s, a "
         "rigid floor), identified with the default settings and with the seed-faithful ones. "
-        "The default reports what the record can support; the seed's settings print numbers "
-        "for the same data, and their verdict beside them says how far to trust them."
+        "The default reports what the record can support; a parameter either setting grades "
+        "not identified shows no number, and the verdict below each column says why."
     )
     sec.table(settings_comparison_table(compared))
     sec.bullets(
@@ -277,7 +282,7 @@ def individual_demo_section(
     summary = {
         "deck": {
             "record": DECK_RECORD,
-            "estimates": {k: list(v) for k, v in est.items()},
+            "estimates": {k: _json_cell(v) for k, v in est.items()},
             "truth": truth,
             "identified": bool(result.identifiability.get("identified_damping"))
             and bool(result.identifiability.get("identified_stiffness")),
@@ -285,7 +290,7 @@ def individual_demo_section(
         },
         "treadmill": {
             label: {
-                "estimates": {k: list(v) for k, v in _estimates(res).items()},
+                "estimates": {k: _json_cell(v) for k, v in _estimates(res).items()},
                 "level": res.identifiability.get("level"),
             }
             for label, res in compared.items()
