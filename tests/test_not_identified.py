@@ -203,3 +203,26 @@ def test_the_deck_route_repeats_no_withheld_number_in_its_surface_report() -> No
         assert frf["estimates"][key] is None and frf["interval_95"][key] is None, key
         assert out[CONDITIONAL_KEY][key]["estimate"] == pytest.approx(deck.estimates[key])
     assert frf["estimates"]["damping_ns_per_m"] == pytest.approx(deck.estimates["damping_ns_per_m"])
+
+
+def test_the_identification_report_shows_no_number_for_what_is_not_identified(
+    result: wb.IdentificationResult, tmp_path: Any
+) -> None:
+    from workbench.reporting.document import Report
+    from workbench.reporting.identification import identification_section
+
+    graded = _graded(result, identified_stiffness=False, level="not identified")
+    report = Report("identification")
+    report.add(identification_section(graded, tmp_path, "walk"))
+    report.write(tmp_path)
+    rows = {
+        line.split("|")[1].strip(): line
+        for line in (tmp_path / "report.md").read_text(encoding="utf-8").splitlines()
+        if line.startswith("| ")
+    }
+    for label in ("K [N/m]", "natural frequency [Hz]", "damping ratio", "BLF1"):
+        assert "not identified" in rows[label], rows[label]
+    assert f"{result.estimates['stiffness_n_per_m']:.4g}" not in rows["K [N/m]"]
+    assert "prior range" in rows["K [N/m]"]
+    c = result.estimates["damping_ns_per_m"]
+    assert rows["C [N s/m]"].split("|")[2].strip() == f"{c:.4g}"

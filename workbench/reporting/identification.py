@@ -168,7 +168,9 @@ def identification_section(
         grade = result.grade(k)
         if grade == "not identified":
             lo, hi = result.prior_range(k)
-            row = [label, "not identified", "", f"prior range {lo:.4g} - {hi:.4g}"]
+            # Four significant digits, written out: 44220, not 4.422e+04.
+            lo, hi = (float(f"{x:.4g}") for x in (lo, hi))
+            row = [label, "not identified", "", f"prior range {lo:g} - {hi:g}"]
         else:
             weak = " (weakly identified)" if grade == "weakly identified" else ""
             row = [
