@@ -27,6 +27,7 @@ from workbench.inference.problem import IdentificationProblem
 from workbench.inference.weighted import _moments, weighted_quantile
 from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2
+from workbench.wording import count, join_words, p_value, parameter_words, verb
 
 if TYPE_CHECKING:
     import arviz
@@ -402,7 +403,8 @@ class IdentificationResult:
         out = []
         if self.frozen_parameters:
             out.append(
-                f"{' and '.join(self.frozen_parameters)} froze: the particles hold at most "
+                f"{join_words([parameter_words(k) for k in self.frozen_parameters])} froze: the "
+                f"particles hold at most "
                 f"{FROZEN_UNIQUE_VALUES} distinct values at the end, so the reported sd is not "
                 "a posterior sd; use more particles, jitter, or method rbpf/exact."
             )
@@ -428,9 +430,10 @@ class IdentificationResult:
         bound = self.parameters_at_prior_bound
         if bound:
             out.append(
-                f"{' and '.join(bound)} reach the edge of the prior box: the data push the "
-                "value outside the range the prior allows, so it is not an estimate and its "
-                "sd is not an uncertainty (check the model fit and the noise setting)."
+                f"{join_words([parameter_words(k) for k in bound])} "
+                f"{verb(len(bound), 'reaches', 'reach')} the edge of the prior box: the data "
+                "push the value outside the range the prior allows, so it is not an estimate "
+                "and its sd is not an uncertainty (check the model fit and the noise setting)."
             )
         sentence = self.identifiability.get("sentence")
         level = self.identifiability.get("level")
@@ -481,8 +484,9 @@ class IdentificationResult:
         p = self.problem
         lines = [
             f"SMD identification ({self.method}) of {p.source}",
-            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, {p.n_pieces} pieces "
-            f"({p.time_basis} basis, n = {p.harmonics}), noise {self.noise.get('label', '')}",
+            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, "
+            f"{count(p.n_pieces, 'piece')} ({p.time_basis} basis, n = {p.harmonics}), "
+            f"noise {self.noise.get('label', '')}",
             "",
             f"{'parameter':<24}{'estimate':>12}{'sd':>12}{'95 % interval':>26}",
         ]
@@ -507,9 +511,12 @@ class IdentificationResult:
             f"identifiability: {self.identifiability.get('sentence', 'not assessed')}",
             *([f"surface: {self.extra['surface']['sentence']}"] if "surface" in self.extra else []),
             f"log-likelihood {self.loglik:.2f}; Ljung-Box p of GRF residuals "
-            f"{float(lb['lb_pvalue'].iloc[0]):.3g} at lag {int(lb.index[0])}",
+            f"{p_value(float(lb['lb_pvalue'].iloc[0]))} at lag {int(lb.index[0])}",
         ]
-        lines += [f"warning: {w}" for w in self.warnings]
+        # The warnings carry the identifiability sentence (the report's and the JSON's
+        # readers look there); the summary has printed it once already.
+        shown = self.identifiability.get("sentence")
+        lines += [f"warning: {w}" for w in self.warnings if w != shown]
         return "\n".join(lines)
 
     def to_inference_data(self, n_draws: int | None = None) -> arviz.InferenceData:
