@@ -76,7 +76,7 @@ def tornado_figure(study: SensitivityStudy, output: str, record: str | None = No
         if np.isfinite(hw):
             cur["hw"] = max(cur["hw"], hw)
     order = sorted(rows, key=lambda n: rows[n]["hi"] - rows[n]["lo"])
-    fig = Figure(figsize=(7.5, 0.45 * max(len(order), 2) + 1.4))
+    fig = Figure(figsize=(7.5, 0.45 * max(len(order), 2) + 1.8), layout="constrained")
     ax = fig.add_subplot()
     y = np.arange(len(order))
     for i, n in enumerate(order):
@@ -90,8 +90,8 @@ def tornado_figure(study: SensitivityStudy, output: str, record: str | None = No
     ax.set_xlabel(f"change of {_LABELS.get(output, output)} from the baseline")
     ax.set_title(f"{record}: {_LABELS.get(output, output)}")
     if order:
-        ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
+        # Below the axes: inside, the legend covered the longest bars.
+        fig.legend(loc="outside lower center", ncols=2, fontsize=8)
     return fig
 
 
