@@ -63,6 +63,7 @@ def grf_footfalls_figure(insp: Inspection) -> Figure:
     for tb in rec.time_s[idx][in_zoom]:
         ax_zoom.axvline(tb, color="C3", lw=0.6, alpha=0.6)
     ax_zoom.set_xlim(lo, hi)
+    ax_all.set_xlabel("time [s]")
     ax_zoom.set_xlabel("time [s]")
     ax_all.set_title(
         f"{rec.name}: {count(insp.steps.n_steps, 'step')}, static balance {insp.static_balance:.3f}"

@@ -101,7 +101,7 @@ def draw_force_window(
     ax.set_xlabel("time [s]")
     ax.set_ylabel("force [N]")
     ax.set_title("Reconstructed biomechanical force (step boundaries in red)")
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="best")
 
 
 def force_figure(result: IdentificationResult, *, window_s: float = 6.0) -> Figure:

@@ -272,10 +272,10 @@ def residuals_figure(fit: PopulationFit) -> Figure:
             stats.norm.pdf(x, res["normal_mean"], res["normal_sd"]),
             "C3",
             lw=2,
-            label="normal of the same sd",
+            label="fitted normal",
         )
         ax.set_title(
-            f"{LABELS[key].split(' [')[0]}: residual sd {res['normal_sd']:.3g}"
+            f"{AXIS_NAMES[key][0]}: residual sd {res['normal_sd']:.3g}"
             f"{' ' + unit if unit else ''}\n"
             f"normality: Shapiro-Wilk p {p_value(res['shapiro_p'], 2)}, "
             f"Anderson-Darling p {p_value(res['anderson_darling_p'], 2)}",
