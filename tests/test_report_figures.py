@@ -131,7 +131,8 @@ def test_population_residual_panels_say_what_they_show():
     fit = fit_population(table)
     fig = population.residuals_figure(fit)
     pure = {
-        "density",
+        r"density of damping ratio $\zeta$",
+        "density of BLF1",
         "standard normal quantile",
         r"residual of damping ratio $\zeta$",
         r"ordered residual of damping ratio $\zeta$",

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-__all__ = ["count", "join_words", "p_value", "parameter_words", "verb"]
+__all__ = ["count", "join_words", "p_value", "parameter_words", "parameters_in_words", "verb"]
 
 #: The field's words for each parameter key of the results.
 PARAMETER_WORDS = {
@@ -35,6 +35,11 @@ def join_words(items: Sequence[str]) -> str:
     if len(items) <= 1:
         return "".join(items)
     return ", ".join(items[:-1]) + " and " + items[-1]
+
+
+def parameters_in_words(keys: Sequence[str]) -> str:
+    """Name result keys in the field's words, joined: ``damping C and stiffness K``."""
+    return join_words([parameter_words(k) for k in keys])
 
 
 def verb(n: int, singular: str, plural: str) -> str:

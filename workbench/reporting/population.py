@@ -30,7 +30,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 from scipy import stats
 
 from workbench.fileutil import atomic_path, atomic_write_text
@@ -67,23 +66,17 @@ LABELS = {
     "blf2": "BLF2",
     "blf3": "BLF3",
 }
-#: Axis labels (mathtext) of the same quantities, with the unit apart for derived labels.
+#: Figure words (mathtext) and unit of the quantities whose label is not their key in capitals.
 AXIS_NAMES = {
     "natural_frequency_hz": ("natural frequency $f_n$", "Hz"),
     "damping_ratio": (r"damping ratio $\zeta$", ""),
-    "blf1": ("BLF1", ""),
-    "blf2": ("BLF2", ""),
-    "blf3": ("BLF3", ""),
 }
 
 
 def _axis_label(key: str, prefix: str = "", *, inverse: bool = False) -> str:
-    """``prefix name [unit]``; ``[1/unit]`` for a density; no brackets for a pure number."""
-    name, unit = AXIS_NAMES[key]
-    text = f"{prefix}{name}"
-    if unit:
-        text += f" [1/{unit}]" if inverse else f" [{unit}]"
-    return text
+    """Write ``prefix name [unit]`` (``[1/unit]`` for a density; a pure number has none)."""
+    name, unit = AXIS_NAMES.get(key, (key.upper(), ""))
+    return f"{prefix}{name}" + (f" [{'1/' * inverse}{unit}]" if unit else "")
 
 
 def _law_text(law: dict[str, Any], digits: int = 4) -> str:
@@ -263,36 +256,28 @@ def residuals_figure(fit: PopulationFit) -> Figure:
     for j, key in enumerate(LAW_COLUMNS):
         r = fit.used[f"{key}_residual"].to_numpy(float)
         res = fit.population_json["laws"][key]["residuals"]
-        unit = AXIS_NAMES[key][1]
-        ax = axes[0, j]
+        ax, qq = axes[:, j]
+        name, unit = AXIS_NAMES.get(key, (key.upper(), ""))
         ax.hist(r, bins="auto", density=True, color="C0", alpha=0.6, label="residuals")
         x = np.linspace(r.min(), r.max(), 200)
-        ax.plot(
-            x,
-            stats.norm.pdf(x, res["normal_mean"], res["normal_sd"]),
-            "C3",
-            lw=2,
-            label="fitted normal",
-        )
+        pdf = stats.norm.pdf(x, res["normal_mean"], res["normal_sd"])
+        ax.plot(x, pdf, "C3", lw=2, label="fitted normal")
         ax.set_title(
-            f"{AXIS_NAMES[key][0]}: residual sd {res['normal_sd']:.3g}"
-            f"{' ' + unit if unit else ''}\n"
+            f"{name}: residual sd {res['normal_sd']:.3g} {unit}\n"
             f"normality: Shapiro-Wilk p {p_value(res['shapiro_p'], 2)}, "
             f"Anderson-Darling p {p_value(res['anderson_darling_p'], 2)}",
             fontsize=9,
         )
         ax.set_xlabel(_axis_label(key, "residual of "))
-        ax.set_ylabel(_axis_label(key, "density of ", inverse=True) if unit else "density")
-        ax.xaxis.set_major_locator(MaxNLocator(nbins=5))
-        if j == 0:
-            ax.legend(fontsize=8)
-        qq = axes[1, j]
+        ax.set_ylabel(_axis_label(key, "density of ", inverse=True))
+        ax.locator_params(axis="x", nbins=5)  # the default crowded the ticks of narrow panels
         (osm, osr), (slope, inter, _) = stats.probplot(r, dist="norm")
         qq.plot(osm, osr, ".", ms=3)
         qq.plot(osm, slope * np.asarray(osm) + inter, "C3")
         qq.set_xlabel("standard normal quantile")
         qq.set_ylabel(_axis_label(key, "ordered residual of "))
         qq.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
     return fig
 
 
