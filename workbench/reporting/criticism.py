@@ -133,7 +133,8 @@ def error_vs_state_figure(diag: Diagnosis, bins: int = 15) -> Figure:
         r = float(np.corrcoef(x, diag.residual_n)[0, 1]) if np.std(x) > 0 else 0.0
         ax.set_title(f"correlation {r:.2f}", fontsize=10)
         ax.set_xlabel(_STATE_LABELS.get(label, label))
-        ax.set_ylabel("mean held-out error [N]")
+        if i % ncols == 0:  # the error axis is shared along each row
+            ax.set_ylabel("mean held-out error [N]")
         ax.ticklabel_format(axis="x", style="sci", scilimits=(-2, 3))
     for ax in axes[n:]:
         ax.set_axis_off()
@@ -228,7 +229,7 @@ def criticism_section(diag: Diagnosis, out_dir: str | Path, key: str) -> Section
                 [
                     c.effect,
                     f"{c.score:+.3f}",
-                    "yes" if c.significant else "no",
+                    ("yes" if c.significant else "no") if c.testable else "untestable",
                     f"{100 * c.expected_error_drop:.1f} %",
                     c.evidence,
                 ]
