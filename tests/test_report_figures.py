@@ -122,14 +122,31 @@ def test_tornado_legend_stays_off_the_bars():
     assert legend_box.y1 <= ax.get_window_extent().y0
 
 
-def test_population_residual_panels_say_what_they_show():
+@pytest.fixture(scope="module")
+def population_fit():
+    """Laws fitted to 60 sampled pedestrians (seed 7), all identified."""
     peds = sample_pedestrians(60, seed=7)
     table = peds.assign(path=[f"r{i:03d}.csv" for i in range(len(peds))])
     table["identified_damping"] = True
     table["identified_stiffness"] = True
     table["identifiability"] = "well identified"
-    fit = fit_population(table)
-    fig = population.residuals_figure(fit)
+    return fit_population(table)
+
+
+def test_population_laws_figure_keeps_its_legend_off_the_points(population_fit):
+    fig = population.laws_figure(population_fit)
+    assert figure_problems(fig, dimensionless={r"damping ratio $\zeta$", "BLF1"}) == []
+    assert all(ax.get_legend() is None for ax in visible_axes(fig))
+    fig.canvas.draw()
+    legend_top = fig.legends[0].get_window_extent().y1
+    assert all(legend_top <= ax.get_window_extent().y0 for ax in visible_axes(fig))
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    # Each panel's reference law is named, BLF1's (Young's) too.
+    assert "seed's law" in texts and "Young (assumed)" in texts
+
+
+def test_population_residual_panels_say_what_they_show(population_fit):
+    fig = population.residuals_figure(population_fit)
     pure = {
         r"density of damping ratio $\zeta$",
         "density of BLF1",

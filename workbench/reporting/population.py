@@ -192,7 +192,7 @@ def _write_table_csv(table: Table, path: Path) -> Path:
 def laws_figure(fit: PopulationFit, reference: PopulationLaws | None = None) -> Figure:
     """Parameters against pacing with the fitted laws and bands (seed figs. 11-12)."""
     ref = reference or PopulationLaws()
-    fig = Figure(figsize=(13, 4))
+    fig = Figure(figsize=(13, 4.6), layout="constrained")
     axes = fig.subplots(1, 3)
     used = fit.used
     subjects = used["subject"].astype(str) if "subject" in used else pd.Series([""] * len(used))
@@ -209,9 +209,9 @@ def laws_figure(fit: PopulationFit, reference: PopulationLaws | None = None) -> 
         ax.set_xlabel("pacing frequency $f_p$ [Hz]")
         ax.set_ylabel(_axis_label(key))
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, loc="upper left")
+    legend = {t: h for a in axes for h, t in zip(*a.get_legend_handles_labels(), strict=True)}
+    fig.legend(legend.values(), legend.keys(), loc="outside lower center", ncols=5, fontsize=8)
     fig.suptitle("Identified parameters against pacing (colour: participant)")
-    fig.tight_layout()
     return fig
 
 
