@@ -283,8 +283,8 @@ def _text(o: dict[str, Any]) -> str:
         r = o["records"]
         where = r["manifest"] or f"{r['folder']} (no manifest: nothing to list)"
         lines.append(
-            f"  wrote {r['records']} walker record(s) of the first {r['crossings']} "
-            f"crossing(s): {where}"
+            f"  wrote {count(r['records'], 'walker record')} of the first "
+            f"{count(r['crossings'], 'crossing')}: {where}"
         )
         lines.extend(f"  skipped {k['record']}: {k['reason']}" for k in r["skipped"])
     lines.extend(f"  wrote {f}" for f in o.get("files", []))

@@ -419,7 +419,7 @@ class IdentificationResult:
             and self.static_parameters
         ):
             out.append(
-                f"all particles descend from {anc} initial particle(s): the filter lost its "
+                f"all particles descend from {count(anc, 'initial particle')}: the filter lost its "
                 "diversity, so the reported spread understates the uncertainty."
             )
         if self.degenerate:

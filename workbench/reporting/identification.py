@@ -191,7 +191,9 @@ def identification_section(
         f"Identifiability: {result.identifiability.get('sentence', 'not assessed')} "
         f"Noise: {result.noise.get('label', '')}."
     )
-    sec.bullets([f"Warning: {w}" for w in result.warnings])
+    # The identifiability sentence is among the warnings too; the paragraph above said it.
+    shown = result.identifiability.get("sentence")
+    sec.bullets([f"Warning: {w}" for w in result.warnings if w != shown])
     for suffix, fig, caption in (
         ("convergence", convergence_figure(result, truth), "Convergence of C and K"),
         ("force", force_figure(result), "Biomechanical force and its Fourier amplitudes"),
