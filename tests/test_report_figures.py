@@ -86,6 +86,7 @@ def test_criticism_figures_are_readable(diagnosis):
         state,
         criticism.residual_spectrum_figure(diagnosis),
         criticism.error_by_phase_figure(diagnosis),
+        criticism.overlay_figure(diagnosis),
     ):
         assert figure_problems(fig) == []
     spectrum = criticism.residual_spectrum_figure(diagnosis)
@@ -143,6 +144,11 @@ def test_population_laws_figure_keeps_its_legend_off_the_points(population_fit):
     texts = [t.get_text() for t in fig.legends[0].get_texts()]
     # Each panel's reference law is named, BLF1's (Young's) too.
     assert "seed's law" in texts and "Young (assumed)" in texts
+
+
+def test_population_blf_figure_is_readable(population_fit):
+    fig = population.blf_figure(population_fit)
+    assert figure_problems(fig, dimensionless={"BLF2", "BLF3", "density"}) == []
 
 
 def test_population_residual_panels_say_what_they_show(population_fit):
