@@ -77,17 +77,10 @@ def residual_spectrum_figure(diag: Diagnosis) -> Figure:
     ax = fig.add_subplot()
     keep = (f > 0) & (f <= fmax)
     ax.semilogy(f[keep], p[keep], lw=1.0, label="held-out error")
+    first = {1: r"odd multiples of $f_p/2$", 2: r"harmonics $i\,f_p$"}  # one legend entry each
     for k in range(1, int(fmax / (0.5 * d.pacing_hz)) + 1):
-        even = k % 2 == 0
-        ax.axvline(
-            0.5 * k * d.pacing_hz,
-            color="0.6",
-            ls="-" if even else "--",
-            lw=0.6,
-            label=(r"harmonics $i\,f_p$" if k == 2 else r"odd multiples of $f_p/2$")
-            if k <= 2
-            else None,
-        )
+        ls = "-" if k % 2 == 0 else "--"
+        ax.axvline(0.5 * k * d.pacing_hz, color="0.6", ls=ls, lw=0.6, label=first.get(k))
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("error PSD [N²/Hz]")
     ax.legend(fontsize=8, loc="upper right")
@@ -138,7 +131,7 @@ def error_vs_state_figure(diag: Diagnosis, bins: int = 15) -> Figure:
         ax.ticklabel_format(axis="x", style="sci", scilimits=(-2, 3))
     for ax in axes[n:]:
         ax.set_axis_off()
-    fig.suptitle("Held-out error against the state (means in 15 bins of equal count)")
+    fig.suptitle(f"Held-out error against the state (means in {bins} bins of equal count)")
     return fig
 
 
