@@ -61,6 +61,7 @@ from workbench.errors import InputError, UsageError, WorkbenchError
 from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json
 from workbench.inference.settings import IdentifySettings
+from workbench.records.text_table import FILE_MISSING, file_problem
 
 __all__ = [
     "FAILURE_COLUMNS",
@@ -123,6 +124,11 @@ class BatchTask:
         What a sensitivity design point changes beyond the settings
         (:class:`~workbench.sensitivity.design.Overrides`): applied through the problem
         hooks of :func:`~workbench.inference.identify.identify`.
+    max_rows : int or None
+        Longest record, in file lines, identified; a longer one fails before it is read
+        (None: no limit).
+    budget : str
+        What ``max_rows`` comes from, in words, for the failure's sentence.
     """
 
     key: str
@@ -135,6 +141,8 @@ class BatchTask:
     settings: dict[str, Any] = field(default_factory=dict)
     allow_negative_force: bool = False
     overrides: Any = None
+    max_rows: int | None = None
+    budget: str = ""
 
 
 @dataclass
@@ -289,15 +297,7 @@ def run_task(task: BatchTask) -> dict[str, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            if not Path(task.file).exists():
-                # The loader's own message would send the user to the current folder.
-                raise InputError(
-                    task.path,
-                    "whole file",
-                    "the record file does not exist",
-                    "check the manifest's path column (relative paths start from the "
-                    "manifest's folder)",
-                )
+            _check_record_file(task)
             record = load_record(
                 task.file,
                 mass_kg=task.mass_kg,
@@ -325,6 +325,69 @@ def run_task(task: BatchTask) -> dict[str, Any]:
     out["warnings"] = sorted({str(w.message) for w in caught})
     out["elapsed_s"] = round(time.perf_counter() - start, 3)
     return out
+
+
+def _check_record_file(task: BatchTask) -> None:
+    """Refuse a record that cannot be read, or is too long to identify, before reading it.
+
+    A pipe would hang the worker and ``/dev/zero`` would fill its memory; a record of
+    millions of rows would take the worker's memory and hours. Its rows are counted by
+    streaming the file (nothing held), and the identification's memory is estimated from
+    them as ``workbench identify`` estimates it from the samples.
+    """
+    problem = file_problem(task.file)
+    if problem == FILE_MISSING:
+        # The loader's own message would send the user to the current folder.
+        raise InputError(
+            task.path,
+            "whole file",
+            "the record file does not exist",
+            "check the manifest's path column (relative paths start from the manifest's folder)",
+        )
+    if problem is not None:
+        raise InputError(
+            task.path, "whole file", problem, "list a record file saved on disk in the manifest"
+        )
+    if task.max_rows is None:
+        return
+    rows = _count_lines(task.file, stop_after=task.max_rows)
+    if rows > task.max_rows:
+        raise InputError(
+            task.path,
+            "whole file",
+            f"the record has more than {task.max_rows:,} lines, more than the batch "
+            f"identifies within its per-record budget of {task.budget}",
+            "split it into shorter records, or run the batch with --no-limits",
+        )
+
+
+def _count_lines(path: str, *, stop_after: int) -> int:
+    """Count the lines of a file in 1 MiB chunks, stopping once past ``stop_after``."""
+    lines = 0
+    with open(path, "rb") as handle:
+        while chunk := handle.read(1 << 20):
+            lines += chunk.count(b"\n")
+            if lines > stop_after:
+                break
+    return lines
+
+
+def _file_seed(base_seed: int, path: str, file: Path) -> int:
+    """:func:`record_seed` of a record file, read in chunks; only regular files are read."""
+    if file_problem(file) is not None:
+        return record_seed(base_seed, path, None)
+    h = hashlib.sha256()
+    h.update(str(int(base_seed)).encode())
+    h.update(b"\0")
+    h.update(path.encode("utf-8"))
+    h.update(b"\0")
+    try:
+        with open(file, "rb") as handle:
+            while chunk := handle.read(1 << 20):
+                h.update(chunk)
+    except OSError:
+        return record_seed(base_seed, path, None)
+    return int.from_bytes(h.digest()[:4], "little")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -367,6 +430,8 @@ def run_batch(
     allow_negative_force: bool = False,
     allow_outside_paths: bool = False,
     overrides: Any = None,
+    max_rows: int | None = None,
+    budget: str = "",
 ) -> BatchSummary:
     """Identify every record of a manifest (see the module docstring for the files).
 
@@ -400,6 +465,12 @@ def run_batch(
         A sensitivity design point's changes beyond the settings
         (:class:`~workbench.sensitivity.design.Overrides`), for every record; stored with the
         settings, so ``resume`` refuses to mix them.
+    max_rows : int, optional
+        Per-record budget: a record file of more lines fails (its row in ``failures.csv``)
+        before it is read; None for no limit.
+    budget : str, optional
+        Where ``max_rows`` comes from, in words (``"2 GB of memory"``), quoted in the
+        failure's sentence.
 
     Returns
     -------
@@ -464,10 +535,6 @@ def run_batch(
             if prev is not None and prev.get("status") == "done":
                 skipped += 1
                 continue
-        try:
-            content: bytes | None = e.path.read_bytes()
-        except OSError:
-            content = None
         tasks.append(
             BatchTask(
                 key=key,
@@ -476,10 +543,12 @@ def run_batch(
                 mass_kg=e.mass_kg,
                 pacing_hz=e.pacing_hz,
                 subject=e.subject,
-                seed=record_seed(settings.seed, rel, content),
+                seed=_file_seed(settings.seed, rel, e.path),
                 settings=task_settings,
                 allow_negative_force=allow_negative_force,
                 overrides=overrides,
+                max_rows=max_rows,
+                budget=budget,
             )
         )
 
