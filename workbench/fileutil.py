@@ -16,7 +16,16 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_path", "atomic_write_json", "atomic_write_text"]
+from workbench.errors import OutputError
+
+__all__ = [
+    "atomic_path",
+    "atomic_paths",
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
+    "atomic_write_texts",
+]
 
 
 def _default_mode(target: Path) -> int:
@@ -41,22 +50,79 @@ def atomic_path(target: str | os.PathLike[str]) -> Iterator[Path]:
     ------
     Path
         Where the caller writes. Removed again if the body raises.
+
+    Raises
+    ------
+    OutputError
+        When the system refuses a write (a full disk, for one), naming ``target``; the
+        target is left as it was.
     """
-    target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    with atomic_paths(target) as (tmp,):
+        yield tmp
+
+
+@contextlib.contextmanager
+def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]:
+    """Yield temporary paths beside ``targets``; when all are written, move them into place.
+
+    For files that belong together (a record and its sidecar): every file is written and
+    flushed to disk first, and only then are they renamed, in the order given, so a full disk
+    leaves none of them rather than a sidecar without its data. Temporary files are removed
+    on any failure.
+
+    Parameters
+    ----------
+    *targets : path-like
+        Final file names, in the order they are moved into place. Their folders are created
+        if needed.
+
+    Yields
+    ------
+    tuple of Path
+        Where the caller writes each file.
+
+    Raises
+    ------
+    OutputError
+        When the system refuses a write, naming the target being written.
+    """
+    finals = [Path(target) for target in targets]
+    temporaries: list[Path] = []
+    current = finals[0]
     try:
-        yield tmp_path
-        # mkstemp creates 0600 files; give the result the mode a normal write would have.
-        os.chmod(tmp_path, _default_mode(target))
-        with open(tmp_path, "rb") as handle:
-            os.fsync(handle.fileno())
-        os.replace(tmp_path, target)
+        for final in finals:
+            current = final
+            final.parent.mkdir(parents=True, exist_ok=True)
+            fd, name = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
+            os.close(fd)
+            temporaries.append(Path(name))
+        current = finals[0]
+        yield tuple(temporaries)
+        for final, tmp in zip(finals, temporaries, strict=True):
+            current = final
+            # mkstemp creates 0600 files; give the result the mode a normal write would have.
+            os.chmod(tmp, _default_mode(final))
+            with open(tmp, "rb") as handle:
+                os.fsync(handle.fileno())
+        for final, tmp in zip(finals, temporaries, strict=True):
+            current = final
+            os.replace(tmp, final)
+    except OSError as err:
+        raise OutputError(_named_target(err, finals, current), err) from None
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
+        for tmp in temporaries:
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+
+
+def _named_target(err: OSError, finals: list[Path], current: Path) -> Path:
+    """Return the target a failed write was for: the one whose temporary file it names."""
+    if err.filename:
+        name = Path(os.fsdecode(err.filename)).name
+        for final in finals:
+            if name == final.name or name.startswith(f".{final.name}."):
+                return final
+    return current
 
 
 def atomic_write_text(target: str | os.PathLike[str], text: str) -> Path:
@@ -65,6 +131,38 @@ def atomic_write_text(target: str | os.PathLike[str], text: str) -> Path:
         with open(tmp, "w", encoding="utf-8", newline="\n") as handle:
             handle.write(text)
     return Path(target)
+
+
+def atomic_write_bytes(target: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` to ``target`` atomically; return the path."""
+    with atomic_path(target) as tmp:
+        with open(tmp, "wb") as handle:
+            handle.write(data)
+    return Path(target)
+
+
+def atomic_write_texts(files: dict[Path, str]) -> list[Path]:
+    """Write UTF-8 texts that belong together: all of them, or none (:func:`atomic_paths`).
+
+    Parameters
+    ----------
+    files : dict
+        Target path -> text, in the order the files are moved into place.
+
+    Returns
+    -------
+    list of Path
+        The targets.
+    """
+    targets = list(files)
+    with atomic_paths(*targets) as temporaries:
+        for target, tmp, text in zip(targets, temporaries, files.values(), strict=True):
+            try:
+                with open(tmp, "w", encoding="utf-8", newline="\n") as handle:
+                    handle.write(text)
+            except OSError as err:  # a full disk's error names no file: name this one
+                raise OutputError(target, err) from None
+    return targets
 
 
 def atomic_write_json(target: str | os.PathLike[str], obj: Any) -> Path:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import os
 import re
@@ -182,12 +183,7 @@ def _run(args: argparse.Namespace, handler: Handler) -> int:
         _report_error(args, str(err))
         return err.exit_code
     except OSError as err:
-        target = _written_name(err.filename) if err.filename else "the output"
-        _report_error(
-            args,
-            f"could not write or read {target} ({err.strerror or err}); choose a folder you "
-            "can write to with --out, or check the path",
-        )
+        _report_error(args, _file_error_sentence(args, err))
         return EXIT_USER_ERROR
     except MemoryError:
         _report_error(
@@ -221,6 +217,52 @@ def _written_name(filename: str | os.PathLike[str]) -> str:
     path = Path(filename)
     match = _TEMPORARY_NAME.match(path.name)
     return str(path.with_name(match["name"])) if match else str(filename)
+
+
+def _file_error_sentence(args: argparse.Namespace, err: OSError) -> str:
+    """Say which file the system refused, whether it was being read or written, and why.
+
+    Outputs are written by :mod:`workbench.fileutil`, which names its files itself; what
+    reaches here is mostly an input (a --config, a --laws file) or the making of an output
+    folder, so an error is blamed on --out only when the disk refused a write or a folder
+    of the output could not be made.
+    """
+    reason = _SYSTEM_REASONS.get(err.errno or 0) or (err.strerror or str(err)).lower()
+    out = getattr(args, "out", None)
+    if not err.filename:
+        where = f"under --out {out}" if out else "a file"
+        return f"could not read or write {where} ({reason}); check the paths and free space"
+    name = _written_name(err.filename)
+    # A file being made: the disk refused it, or it lies under --out and is not there yet
+    # (a folder of the output); an existing file, even under --out, was an input.
+    writing = err.errno in _WRITE_REFUSALS or (
+        bool(out) and _lies_under(name, out) and not os.path.lexists(name)
+    )
+    if writing and err.errno != errno.ENOENT:
+        return (
+            f"could not write {name} ({reason}); free space there or choose a folder you can "
+            "write to with --out"
+        )
+    return f"could not read {name} ({reason}); check the path"
+
+
+#: What the system says only about writing: a full disk or quota, a read-only file system.
+_WRITE_REFUSALS = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC), errno.EROFS, errno.EFBIG}
+
+#: The system's reasons in the words of the sentences (its own text names no file).
+_SYSTEM_REASONS = {
+    errno.ELOOP: "it is a loop of symbolic links that point at each other",
+    errno.ENOENT: "it does not exist",
+    errno.ENOSPC: "the disk is full",
+    errno.EROFS: "the file system is read-only",
+    errno.EACCES: "permission denied",
+    errno.ENOTDIR: "a part of the path before it is a file, not a folder",
+}
+
+
+def _lies_under(name: str | os.PathLike[str], out: str | os.PathLike[str]) -> bool:
+    path, folder = Path(name).absolute(), Path(out).absolute()
+    return path == folder or folder in path.parents
 
 
 def _report_error(args: argparse.Namespace, message: str) -> None:
