@@ -236,7 +236,7 @@ def _file_error_sentence(args: argparse.Namespace, err: OSError) -> str:
     # A file being made: the disk refused it, or it lies under --out and is not there yet
     # (a folder of the output); an existing file, even under --out, was an input.
     writing = err.errno in _WRITE_REFUSALS or (
-        bool(out) and _lies_under(name, out) and not os.path.lexists(name)
+        out is not None and _lies_under(name, out) and not os.path.lexists(name)
     )
     if writing and err.errno != errno.ENOENT:
         return (
