@@ -119,3 +119,15 @@ def test_the_streamed_seed_equals_the_seed_of_the_bytes(tmp_path):
     assert _file_seed(7, "r.csv", tmp_path / "r.csv") == record_seed(7, "r.csv", data)
     assert _file_seed(7, "gone.csv", tmp_path / "gone.csv") == record_seed(7, "gone.csv", None)
     assert _file_seed(7, "r.csv", tmp_path / "r.csv") != _file_seed(8, "r.csv", tmp_path / "r.csv")
+
+
+def test_the_documented_per_record_budget_is_the_one_applied():
+    from workbench.cli.population import BATCH_RECORD_LINES
+
+    root = Path(__file__).resolve().parents[1] / "docs"
+    figure = f"{BATCH_RECORD_LINES:,}".replace(",", " ")
+    for page in ("contracts.md", "guide/population.md"):
+        assert (
+            f"{figure} lines" in (root / page).read_text()
+            or f"({figure})" in (root / page).read_text()
+        ), page
