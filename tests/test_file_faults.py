@@ -131,3 +131,27 @@ def test_the_documented_per_record_budget_is_the_one_applied():
             f"{figure} lines" in (root / page).read_text()
             or f"({figure})" in (root / page).read_text()
         ), page
+
+
+@needs_fifo
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["identify", "seed_individual", "--config", "{pipe}"],
+        ["batch", "{ok}", "--out", "{out}", "--config", "{pipe}"],
+        ["population", "{pipe}", "--out", "{out}"],
+        ["sample", "--n", "3", "--laws", "{pipe}", "--out", "{out}.csv"],
+    ],
+    ids=["identify-config", "batch-config", "population-results", "sample-laws"],
+)
+def test_a_named_pipe_as_any_other_input_is_refused_before_any_work(argv, tmp_path, capsys):
+    pipe = _fifo(tmp_path / "input.toml")
+    (tmp_path / "m.csv").write_text("path\nr.csv\n")
+    paths = {"pipe": pipe, "ok": tmp_path / "m.csv", "out": tmp_path / "out"}
+    assert main([a.format(**paths) for a in argv]) == 2
+    line = _error_line(capsys)
+    assert line == (
+        f"workbench: error: {pipe}, whole file: this is a named pipe (FIFO), not a regular "
+        "file; give a file saved on disk."
+    )
+    assert not (tmp_path / "out").exists() and not (tmp_path / "out.csv").exists()

@@ -174,6 +174,7 @@ def _run(args: argparse.Namespace, handler: Handler) -> int:
             check_highpass(args.highpass_hz)
         if getattr(args, "out", None) is not None:
             check_out(args.out, is_file=getattr(args, "out_is_file", False))
+        _refuse_special_inputs(args)
         return handler(args)
     except UsageError as err:
         # Library messages name their parameters; here the user typed flags.
@@ -217,6 +218,35 @@ def _written_name(filename: str | os.PathLike[str]) -> str:
     path = Path(filename)
     match = _TEMPORARY_NAME.match(path.name)
     return str(path.with_name(match["name"])) if match else str(filename)
+
+
+def _refuse_special_inputs(args: argparse.Namespace) -> None:
+    """Refuse an input given as a pipe, a device, a socket or a symbolic link loop, up front.
+
+    Reading a named pipe waits for a writer for ever and a device such as ``/dev/zero``
+    never ends; the record and manifest readers refuse them, and this check does the same
+    for every other path a command reads (settings, laws, results, structures), before
+    any work. Folders and files that do not exist are left to the commands, which say what
+    they expected.
+    """
+    from workbench.errors import InputError
+    from workbench.records.text_table import FILE_MISSING, file_problem
+
+    for name, value in vars(args).items():
+        if name == "out":
+            continue
+        for item in value if isinstance(value, list) else [value]:
+            if not isinstance(item, str | os.PathLike) or not os.path.lexists(item):
+                continue
+            problem = file_problem(item)
+            if problem is None or problem == FILE_MISSING or "folder" in problem:
+                continue
+            fix = (
+                "point the link at the file itself"
+                if "symbolic links" in problem
+                else "give a file saved on disk"
+            )
+            raise InputError(item, "whole file", problem, fix)
 
 
 def _file_error_sentence(args: argparse.Namespace, err: OSError) -> str:
