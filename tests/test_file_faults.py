@@ -155,3 +155,13 @@ def test_a_named_pipe_as_any_other_input_is_refused_before_any_work(argv, tmp_pa
         "file; give a file saved on disk."
     )
     assert not (tmp_path / "out").exists() and not (tmp_path / "out.csv").exists()
+
+
+@needs_fifo
+def test_a_named_pipe_where_the_sidecar_belongs_is_refused_not_ignored(tmp_path, capsys):
+    (tmp_path / "walk.csv").write_text("time,grf\n0,700\n0.01,700\n")
+    pipe = _fifo(tmp_path / "walk.json")
+    assert main(["inspect", str(tmp_path / "walk.csv")]) == 2
+    line = _error_line(capsys)
+    assert line.startswith(f"workbench: error: {pipe}, whole file: the sidecar of walk.csv: ")
+    assert "named pipe" in line
