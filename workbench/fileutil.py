@@ -4,6 +4,12 @@ Batch and report jobs may be interrupted; writing to a temporary file in the sam
 flushing it to disk and renaming it over the target (``os.replace`` is atomic on POSIX and
 Windows) means a crash never leaves a half-written file that a later ``--resume`` would
 mistake for a finished one.
+
+Every file a command writes goes through here. Files that belong together (a record, its
+sidecar and its truth) are written with :func:`atomic_paths` / :func:`atomic_write_texts`:
+all to temporary files first, renamed only once all are on disk. A write the system refuses
+(a full disk) raises :class:`~workbench.errors.OutputError`, one sentence naming the file
+asked for, never its temporary name, and leaves no temporary file behind.
 """
 
 from __future__ import annotations
