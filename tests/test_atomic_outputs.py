@@ -174,3 +174,32 @@ def test_an_unreadable_input_is_not_blamed_on_out(tmp_path, capsys):
         f"workbench: error: could not read {tmp_path / 'a.toml'} (it is a loop of symbolic "
         "links that point at each other); check the path"
     )
+
+
+def test_every_output_goes_through_the_atomic_writer():
+    # A guard on the source: library writers may only write to the temporary path that
+    # workbench.fileutil hands them (or build text/bytes in memory); anything else would
+    # be a file a full disk or a kill could leave half-written.
+    import re
+
+    root = Path(fileutil.__file__).parent
+    writes = re.compile(r"\.(to_csv|savefig|to_netcdf|to_parquet|to_excel|tofile)\(\s*([^,)]*)")
+    direct = re.compile(
+        r"\.write_text\(|\.write_bytes\(|np\.save|json\.dump\(|open\([^)]*[\"'][wax]b?[\"']"
+    )
+    # The workbench's own result writers, atomic themselves (tested above and in identify).
+    own = re.compile(r"result\.to_netcdf\(")
+    offending = []
+    for path in sorted(root.rglob("*.py")):
+        if path.name == "fileutil.py":
+            continue
+        for number, line in enumerate(path.read_text().splitlines(), start=1):
+            where = f"{path.relative_to(root)}:{number}"
+            if direct.search(line):
+                offending.append(where)
+            for match in writes.finditer(line):
+                first = match.group(2).strip()
+                if own.search(line) or first in ("tmp", "str(tmp", "None", "") or "=" in first:
+                    continue
+                offending.append(where)
+    assert offending == []
