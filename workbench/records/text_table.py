@@ -111,8 +111,10 @@ def _read_bytes(p: Path, source: str) -> bytes:
     _require_file(p, source)
     try:
         # Non-blocking, so that a file swapped for a pipe after the check cannot hang the
-        # open; the check is then repeated on what was actually opened.
-        fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        # open; the check is then repeated on what was actually opened. O_BINARY: Windows
+        # would otherwise translate line ends in the bytes read (neither flag exists on
+        # every platform).
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
     except OSError as exc:
         raise InputError(
             source,
