@@ -68,3 +68,32 @@ def test_workers_and_the_resource_tracker_end_when_the_parent_is_killed(tmp_path
                 child.kill()
         if parent.poll() is None:
             parent.kill()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="kill -9 is a POSIX signal")
+def test_a_batch_killed_outright_leaves_no_worker_running(tmp_path):
+    from workbench.population.study import StudyDesign, study_plan, write_study
+
+    design = StudyDesign(n_male=1, n_female=1, n_records=None, duration_s=3.0)
+    manifest = write_study(study_plan(design, seed=11).iloc[:4], tmp_path / "study", design)
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
+    cmd = [sys.executable, "-m", "workbench", "batch", str(manifest), "--out"]
+    cmd += [str(tmp_path / "out"), "--workers", "2", "--method", "rbpf", "--json"]
+    parent = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        # The two workers and the resource tracker, once they have all started.
+        assert _wait_for(lambda: len(psutil.Process(parent.pid).children()) >= 3, 120)
+        children = psutil.Process(parent.pid).children(recursive=True)
+        os.kill(parent.pid, signal.SIGKILL)
+        parent.wait()
+        assert _wait_for(lambda: not any(_alive(c) for c in children), 10), [
+            c.pid for c in children if _alive(c)
+        ]
+    finally:
+        for child in psutil.Process(os.getpid()).children(recursive=True):
+            if child.pid != parent.pid and _alive(child):
+                child.kill()
+        if parent.poll() is None:
+            parent.kill()
