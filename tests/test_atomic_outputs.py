@@ -7,6 +7,7 @@ machine lets the test mount a small tmpfs, a real full disk is tried too (skippe
 import builtins
 import errno
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -171,8 +172,38 @@ def test_an_unreadable_input_is_not_blamed_on_out(tmp_path, capsys):
     assert code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert line == (
-        f"workbench: error: could not read {tmp_path / 'a.toml'} (it is a loop of symbolic "
-        "links that point at each other); check the path"
+        f"workbench: error: {tmp_path / 'a.toml'}, whole file: the path is a loop of symbolic "
+        "links that point at each other; point the link at the file itself."
+    )
+
+
+def test_a_system_error_says_whether_a_file_was_read_or_written(tmp_path):
+    # What reaches the command line's last resort: an OSError from a reader or from making
+    # an output folder. Only a write may be blamed on --out.
+    from argparse import Namespace
+
+    from workbench.cli.main import _file_error_sentence
+
+    out = tmp_path / "out"
+    (tmp_path / "settings.toml").write_text("")
+    args = Namespace(out=str(out))
+    loop = OSError(errno.ELOOP, "Too many levels of symbolic links", str(tmp_path / "x.toml"))
+    assert _file_error_sentence(args, loop) == (
+        f"could not read {tmp_path / 'x.toml'} (it is a loop of symbolic links that point at "
+        "each other); check the path"
+    )
+    inside = OSError(errno.EACCES, "Permission denied", str(out / "figures"))
+    assert _file_error_sentence(args, inside) == (
+        f"could not write {out / 'figures'} (permission denied); free space there or choose a "
+        "folder you can write to with --out"
+    )
+    full = OSError(errno.ENOSPC, "No space left on device", str(out / ".r.csv.abc.tmp"))
+    assert _file_error_sentence(args, full).startswith(
+        f"could not write {out / 'r.csv'} (the disk is full)"
+    )
+    existing_input = OSError(errno.EACCES, "Permission denied", str(tmp_path / "settings.toml"))
+    assert _file_error_sentence(Namespace(out=str(tmp_path)), existing_input).startswith(
+        f"could not read {tmp_path / 'settings.toml'} (permission denied)"
     )
 
 
@@ -203,3 +234,22 @@ def test_every_output_goes_through_the_atomic_writer():
                     continue
                 offending.append(where)
     assert offending == []
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
+def test_a_device_or_pipe_as_out_is_refused_not_replaced(tmp_path, capsys):
+    import stat
+
+    pipe = tmp_path / "sim.csv"
+    os.mkfifo(pipe)
+    # The library: renaming over it would put a regular file in its place.
+    with pytest.raises(OutputError, match=r"sim\.csv \(it is a device, a pipe or a socket"):
+        fileutil.atomic_write_text(pipe, "x\n")
+    # The command line: refused before any work, in one sentence naming --out.
+    assert main(["simulate", "--out", str(pipe)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"workbench: error: --out {pipe}: this is a device, a pipe or a socket, not a file or "
+        "a folder; give the name of a file or folder to write"
+    ]
+    assert stat.S_ISFIFO(os.lstat(pipe).st_mode)
+    assert _leftovers(tmp_path) == ["sim.csv"]

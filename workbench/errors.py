@@ -93,14 +93,16 @@ class OutputError(WorkbenchError):
     ----------
     target : str or path-like
         The file that was to be written (never its temporary name).
-    error : OSError
-        What the system said.
+    error : OSError or str
+        What the system said, or why the workbench refused to write there.
     """
 
-    def __init__(self, target: str | PathLike[str], error: OSError) -> None:
+    def __init__(self, target: str | PathLike[str], error: OSError | str) -> None:
         self.target = str(target)
-        self.errno = error.errno
-        if error.errno in _DISK_FULL:
+        self.errno = error.errno if isinstance(error, OSError) else None
+        if isinstance(error, str):
+            reason, fix = error, "give another file name"
+        elif error.errno in _DISK_FULL:
             reason = "the disk is full"
             fix = "free space on that disk or write to another folder"
         else:

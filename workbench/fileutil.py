@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -95,6 +96,8 @@ def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]
     finals = [Path(target) for target in targets]
     temporaries: list[Path] = []
     current = finals[0]
+    for final in finals:
+        _refuse_special_target(final)
     try:
         for final in finals:
             current = final
@@ -119,6 +122,23 @@ def atomic_paths(*targets: str | os.PathLike[str]) -> Iterator[tuple[Path, ...]]
         for tmp in temporaries:
             with contextlib.suppress(FileNotFoundError):
                 tmp.unlink()
+
+
+def _refuse_special_target(final: Path) -> None:
+    """Refuse to rename over a device, a pipe or a socket (``--out /dev/null``, say).
+
+    A rename replaces the name, not what it names: over ``/dev/null`` it would put a regular
+    file in the device's place. A symbolic link is replaced by the file, leaving the file it
+    pointed to alone, as a rename over a regular file does.
+    """
+    try:
+        mode = os.lstat(final).st_mode
+    except OSError:  # absent (the usual case) or unreadable: the write itself will say
+        return
+    if stat.S_ISREG(mode) or stat.S_ISLNK(mode):
+        return
+    kind = "a folder" if stat.S_ISDIR(mode) else "a device, a pipe or a socket"
+    raise OutputError(final, f"it is {kind}, not a regular file")
 
 
 def _named_target(err: OSError, finals: list[Path], current: Path) -> Path:

@@ -16,6 +16,7 @@ import json
 import os
 import re
 import signal
+import stat
 import sys
 import threading
 import traceback
@@ -232,6 +233,16 @@ def _refuse_special_inputs(args: argparse.Namespace) -> None:
     from workbench.errors import InputError
     from workbench.records.text_table import FILE_MISSING, file_problem
 
+    out = getattr(args, "out", None)
+    if out:
+        # Written by renaming over it: over /dev/null that would replace the device itself.
+        with contextlib.suppress(OSError):
+            mode = os.lstat(out).st_mode
+            if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode) or stat.S_ISLNK(mode)):
+                raise UsageError(
+                    f"--out {out}: this is a device, a pipe or a socket, not a file or a "
+                    "folder; give the name of a file or folder to write"
+                )
     for name, value in vars(args).items():
         if name == "out":
             continue
