@@ -165,3 +165,21 @@ def test_a_named_pipe_where_the_sidecar_belongs_is_refused_not_ignored(tmp_path,
     line = _error_line(capsys)
     assert line.startswith(f"workbench: error: {pipe}, whole file: the sidecar of walk.csv: ")
     assert "named pipe" in line
+
+
+def test_file_problem_names_each_kind_of_path(tmp_path):
+    from workbench.records.text_table import FILE_MISSING, SPECIAL_FILES, file_problem
+
+    (tmp_path / "r.csv").write_text("time,grf\n")
+    assert file_problem(tmp_path / "r.csv") is None
+    assert file_problem(tmp_path / "gone.csv") == FILE_MISSING
+    assert file_problem(tmp_path) == "this is a folder, not a file"
+    assert file_problem(tmp_path / "r.csv" / "x") == (
+        "a part of the path before the file name is a file, not a folder"
+    )
+    # Only what would hang or never end a read counts as special; folders are the
+    # commands' own business (a results folder is one).
+    assert file_problem(_loop(tmp_path)) in SPECIAL_FILES
+    assert file_problem(tmp_path) not in SPECIAL_FILES
+    if hasattr(os, "mkfifo"):
+        assert file_problem(_fifo(tmp_path / "p")) in SPECIAL_FILES

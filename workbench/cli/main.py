@@ -231,7 +231,7 @@ def _refuse_special_inputs(args: argparse.Namespace) -> None:
     they expected.
     """
     from workbench.errors import InputError
-    from workbench.records.text_table import FILE_MISSING, file_problem
+    from workbench.records.text_table import LINK_LOOP, SPECIAL_FILES, file_problem
 
     out = getattr(args, "out", None)
     if out:
@@ -250,11 +250,11 @@ def _refuse_special_inputs(args: argparse.Namespace) -> None:
             if not isinstance(item, str | os.PathLike) or not os.path.lexists(item):
                 continue
             problem = file_problem(item)
-            if problem is None or problem == FILE_MISSING or "folder" in problem:
-                continue
+            if problem not in SPECIAL_FILES:
+                continue  # a folder, a missing or unreadable file: the command says more
             fix = (
                 "point the link at the file itself"
-                if "symbolic links" in problem
+                if problem == LINK_LOOP
                 else "give a file saved on disk"
             )
             raise InputError(item, "whole file", problem, fix)

@@ -49,6 +49,15 @@ _FILE_KINDS = (
 #: :func:`file_problem`'s words for a path where nothing is.
 FILE_MISSING = "the file does not exist"
 
+#: :func:`file_problem`'s words for a symbolic link that leads back to itself.
+LINK_LOOP = "the path is a loop of symbolic links that point at each other"
+
+#: :func:`file_problem`'s sentences for the paths whose reading would hang or never end:
+#: pipes, devices, sockets and symbolic link loops (not folders or missing files).
+SPECIAL_FILES = frozenset(
+    [*(problem for _, problem in _FILE_KINDS[1:]), "this is not a regular file", LINK_LOOP]
+)
+
 #: What to do about a path that is not a regular file.
 _NOT_REGULAR_FIX = "give a file saved on disk"
 
@@ -78,7 +87,7 @@ def file_problem(p: str | os.PathLike[str]) -> str | None:
         return FILE_MISSING
     except OSError as exc:
         if exc.errno == errno.ELOOP:
-            return "the path is a loop of symbolic links that point at each other"
+            return LINK_LOOP
         if exc.errno == errno.ENOTDIR:
             return "a part of the path before the file name is a file, not a folder"
         return f"the file cannot be looked at ({exc.strerror or type(exc).__name__})"
@@ -100,8 +109,10 @@ def _require_file(p: Path, source: str) -> None:
         fix = "check the path (relative paths start from the current folder)"
     elif problem.startswith("this is a folder"):
         fix = "give a record file"
-    elif "symbolic links" in problem:
+    elif problem == LINK_LOOP:
         fix = "point the link at the file itself"
+    elif problem.startswith("the file cannot be looked at"):
+        fix = "check its permissions and those of its folders"
     else:
         fix = _NOT_REGULAR_FIX
     raise InputError(source, "whole file", problem, fix)
