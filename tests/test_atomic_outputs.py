@@ -131,38 +131,59 @@ def test_a_crosscheck_netcdf_on_a_full_disk_is_one_sentence(tmp_path, monkeypatc
     assert _leftovers(tmp_path) == []
 
 
-@pytest.fixture
-def tiny_disk(tmp_path):
-    """A 64 kB tmpfs, where this machine lets the test mount one (root on Linux)."""
-    folder = tmp_path / "tiny"
+def _mount_tmpfs(folder: Path, size: str) -> bool:
     folder.mkdir()
     mounted = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(folder)],
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
         capture_output=True,
         check=False,
     )
-    if mounted.returncode != 0:
+    return mounted.returncode == 0
+
+
+@pytest.fixture
+def small_disks(tmp_path):
+    """A 64 kB and a 1.2 MB tmpfs, where this machine lets the test mount them (root)."""
+    tiny, small = tmp_path / "tiny", tmp_path / "small"
+    if not _mount_tmpfs(tiny, "64k"):
         pytest.skip("mounting a tmpfs is not permitted here")
     try:
-        yield folder
+        if not _mount_tmpfs(small, "1200k"):
+            pytest.skip("mounting a second tmpfs is not permitted here")
+        try:
+            yield tiny, small
+        finally:
+            subprocess.run(["umount", str(small)], check=False)
     finally:
-        subprocess.run(["umount", str(folder)], check=False)
+        subprocess.run(["umount", str(tiny)], check=False)
 
 
-def test_a_real_full_disk_ends_in_one_sentence(tiny_disk):
-    # The record of 30 s at the default rate is about 145 kB, over the 64 kB disk.
-    run = subprocess.run(
-        [sys.executable, "-m", "workbench", "simulate", "--out", str(tiny_disk / "sim.csv")],
+def _simulate(out: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "workbench", "simulate", "--out", str(out), *extra],
         capture_output=True,
         text=True,
         check=False,
     )
+
+
+def test_a_real_full_disk_ends_in_one_sentence(small_disks):
+    tiny, small = small_disks
+    # A nearly full disk is refused before the computation, whose result would be lost.
+    run = _simulate(tiny / "sim.csv")
+    assert run.returncode == 2, run.stderr
+    (line,) = run.stderr.strip().splitlines()
+    assert line.startswith(f"workbench: error: --out {tiny / 'sim.csv'}: its disk has only ")
+    assert line.endswith("free space there or choose a folder on another disk")
+    # A record larger than the free space (300 s at the default rate: about 1.4 MB on a
+    # 1.2 MB disk) meets the full disk while being written.
+    run = _simulate(small / "sim.csv", "--duration", "300")
     assert run.returncode == 2, run.stderr
     assert run.stderr.strip().splitlines() == [
-        f"workbench: error: could not write {tiny_disk / 'sim.csv'} (the disk is full) and "
+        f"workbench: error: could not write {small / 'sim.csv'} (the disk is full) and "
         "left no half-written file; free space on that disk or write to another folder"
     ]
-    assert _leftovers(tiny_disk) == []
+    assert _leftovers(tiny) == [] and _leftovers(small) == []
 
 
 def test_an_unreadable_input_is_not_blamed_on_out(tmp_path, capsys):

@@ -176,6 +176,8 @@ def _run(args: argparse.Namespace, handler: Handler) -> int:
         if getattr(args, "out", None) is not None:
             check_out(args.out, is_file=getattr(args, "out_is_file", False))
         _refuse_special_inputs(args)
+        if getattr(args, "out", None):
+            _check_free_space(args.out)
         return handler(args)
     except UsageError as err:
         # Library messages name their parameters; here the user typed flags.
@@ -258,6 +260,31 @@ def _refuse_special_inputs(args: argparse.Namespace) -> None:
                 else "give a file saved on disk"
             )
             raise InputError(item, "whole file", problem, fix)
+
+
+#: Free space an --out disk must have before a command starts [bytes]: a nearly full disk is
+#: refused before the computation, whose result a write failing at the end would lose. A
+#: larger output that still meets a full disk ends in the atomic writer's sentence.
+MIN_FREE_BYTES = 1 << 20
+
+
+def _check_free_space(out: str | os.PathLike[str]) -> None:
+    """Refuse an --out on a disk with less than :data:`MIN_FREE_BYTES` free, before any work."""
+    import shutil
+
+    folder = Path(out).absolute()
+    while not folder.is_dir() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:  # not measurable here: the writers will say if the disk is full
+        return
+    if free < MIN_FREE_BYTES:
+        raise UsageError(
+            f"--out {out}: its disk has only {free / 1024:.0f} kB free, less than the "
+            f"{MIN_FREE_BYTES >> 20} MB the workbench asks for before it starts; free space "
+            "there or choose a folder on another disk"
+        )
 
 
 def _file_error_sentence(args: argparse.Namespace, err: OSError) -> str:
