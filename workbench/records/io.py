@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError
-from workbench.fileutil import atomic_write_text
+from workbench.fileutil import atomic_write_texts
 from workbench.records.formats import (
     _EXTENSIONS,
     _FORCE_UNIT_NAMES,
@@ -104,6 +104,7 @@ __all__ = [
     "detect_format",
     "load_manifest",
     "load_record",
+    "record_texts",
     "save_record",
 ]
 
@@ -319,18 +320,7 @@ def save_record(
     *,
     extra_metadata: Mapping[str, Any] | None = None,
 ) -> tuple[Path, Path]:
-    """Write a record as CSV plus JSON sidecar, each file atomically.
-
-    Only the columns the record has are written (``time``, ``grf`` and whichever of
-    ``grf_left``, ``grf_right``, ``ground_acc`` are present), every value in its shortest
-    exact decimal form, so ``load_record(save_record(r, p)[0])`` gives identical arrays. The
-    sidecar holds ``mass_kg``, ``pacing_hz``, ``subject``, ``notes`` (when set), the record's
-    other metadata except the keys that describe how its original file was read (format,
-    column names, line numbers, mass source ...), then ``extra_metadata``.
-
-    Each file is written to a temporary file in the same folder and moved into place with
-    :func:`os.replace`, so a reader never sees a half-written file; the sidecar is replaced
-    first, so an existing CSV always has its sidecar.
+    """Write a record as CSV plus JSON sidecar, both or neither (:func:`record_texts`).
 
     Parameters
     ----------
@@ -346,6 +336,54 @@ def save_record(
     -------
     tuple of Path
         ``(csv_path, json_path)``.
+
+    Raises
+    ------
+    UsageError
+        As :func:`record_texts`.
+    OutputError
+        When a file cannot be written (a full disk); neither file is then changed.
+    """
+    files = record_texts(record, path, extra_metadata=extra_metadata)
+    json_path, csv_path = atomic_write_texts(files)
+    return csv_path, json_path
+
+
+def record_texts(
+    record: Record,
+    path: str | os.PathLike[str],
+    *,
+    extra_metadata: Mapping[str, Any] | None = None,
+) -> dict[Path, str]:
+    """Return the files :func:`save_record` writes: the JSON sidecar, then the CSV.
+
+    Only the columns the record has are written (``time``, ``grf`` and whichever of
+    ``grf_left``, ``grf_right``, ``ground_acc`` are present), every value in its shortest
+    exact decimal form, so ``load_record(save_record(r, p)[0])`` gives identical arrays. The
+    sidecar holds ``mass_kg``, ``pacing_hz``, ``subject``, ``notes`` (when set), the record's
+    other metadata except the keys that describe how its original file was read (format,
+    column names, line numbers, mass source ...), then ``extra_metadata``.
+
+    Written with :func:`workbench.fileutil.atomic_write_texts`, each file goes to a
+    temporary file in the same folder and both are moved into place with :func:`os.replace`
+    only once both are on disk, so a reader never sees a half-written file or a sidecar
+    without its data (a full disk leaves neither); the sidecar is replaced first, so an
+    existing CSV always has its sidecar.
+
+    Parameters
+    ----------
+    record : Record
+        The record to write.
+    path : str or path-like
+        The CSV path (must end in ``.csv``); the sidecar is the same path with ``.json``.
+        Missing folders are created.
+    extra_metadata : mapping, optional
+        More JSON-serialisable keys for the sidecar (e.g. ``{"truth": {...}}``).
+
+    Returns
+    -------
+    dict
+        ``{json_path: text, csv_path: text}``, in the order they are moved into place.
 
     Raises
     ------
@@ -397,10 +435,7 @@ def save_record(
     rows = (",".join(map(repr, row)) for row in zip(*columns, strict=True))
     csv_text = ",".join(names) + "\n" + "".join(f"{row}\n" for row in rows)
 
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(json_path, json_text)
-    atomic_write_text(csv_path, csv_text)
-    return csv_path, json_path
+    return {json_path: json_text, csv_path: csv_text}
 
 
 def _number_argument(value: Any, name: str) -> float | None:
