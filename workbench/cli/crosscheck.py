@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -101,8 +102,10 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         )
     ident = identify(insp, settings=settings, progress=False)
     if "surface_route" in ident.extra:
-        out = _route_check(args, ident, settings.seed)
+        out = _route_check(args, ident, settings.seed, record.name)
         out["record"] = record.name
+        for warning in out["warnings"]:
+            print(f"workbench: warning: {warning}", file=sys.stderr)
         emit(args, out, _route_text(out))
         return 0
     out = _step_check(args, ident, settings.seed, record.name)
@@ -147,15 +150,43 @@ def _step_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> d
     return out
 
 
-def _route_check(args: argparse.Namespace, ident: Any, seed: int) -> dict[str, Any]:
+#: The options of the per-step filter check, with their defaults: on the transmissibility
+#: route no filter runs, so a value other than the default is reported as not used.
+_FILTER_OPTIONS = {
+    "method": ("--method", "rbpf"),
+    "particles": ("--particles", None),
+    "mode": ("--mode", "collapsed"),
+    "prior": ("--prior", "sequential"),
+    "noise_scale": ("--noise-scale", "fixed"),
+    "history": ("--history", "grid"),
+    "max_steps": ("--max-steps", None),
+}
+
+
+def _route_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> dict[str, Any]:
     """Check identify's transmissibility posterior against MCMC on its likelihood."""
+    from workbench.fileutil import atomic_path
     from workbench.inference.crosscheck_surface import ROUTE_CHECKED, crosscheck_surface_route
 
+    unused = [
+        flag
+        for attr, (flag, default) in _FILTER_OPTIONS.items()
+        if getattr(args, attr, default) != default
+    ]
+    warnings = (
+        [
+            f"{', '.join(unused)} set the per-step filter check, which does not run when C and "
+            "K come from the deck's transmissibility; add --surface joint to check the joint "
+            "filter step by step"
+        ]
+        if unused
+        else []
+    )
     check = crosscheck_surface_route(
         ident.problem, ident, seed=seed, n_ensembles=args.ensembles, n_walkers=args.walkers
     )
     route = check.to_json()
-    return {
+    out: dict[str, Any] = {
         "checks": "transmissibility route",
         "checked": ROUTE_CHECKED,
         "surface": "coupled",
@@ -165,7 +196,14 @@ def _route_check(args: argparse.Namespace, ident: Any, seed: int) -> dict[str, A
         "mass_kg": ident.problem.mass_kg,
         "identifiability": ident.identifiability,
         "noise": ident.noise,
+        "warnings": warnings,
     }
+    if args.out:
+        path = Path(args.out) / f"{safe_key(name)}_crosscheck_transmissibility.nc"
+        with atomic_path(path) as tmp:
+            check.mcmc.inference_data.to_netcdf(str(tmp))
+        out["netcdf"] = str(path)
+    return out
 
 
 def _percent(share: float) -> str:
@@ -232,6 +270,7 @@ def _route_text(out: dict[str, Any]) -> str:
             f"{_rounded(mcmc['ess_bulk_min'], 0)}, tau max {_rounded(mcmc['tau_max'], 1)}, "
             f"{mcmc['n_ensembles']} ensembles of {mcmc['n_walkers']} walkers",
             f"identifiability  {out['identifiability'].get('sentence', 'not assessed')}",
+            *([f"netcdf       {out['netcdf']}"] if out.get("netcdf") else []),
         ]
     )
 
