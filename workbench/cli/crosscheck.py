@@ -113,7 +113,8 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     out["surface"] = settings.model.surface
     out["checks"] = "per-step filter"
     out["checked"] = _what_is_checked(record, settings.model.surface)
-    emit(args, out, _text(out))
+    floor = None if record.ground_acc_m_s2 is not None else "rigid floor, no surface measured"
+    emit(args, out, _text(out, floor))
     return 0
 
 
@@ -214,7 +215,8 @@ def _rounded(value: Any, digits: int) -> str:
     return "n/a" if value is None else f"{value:.{digits}f}"
 
 
-def _text(out: dict[str, Any]) -> str:
+def _text(out: dict[str, Any], floor: str | None = None) -> str:
+    """Word the per-step check; ``floor`` names the surface when none was measured."""
     diag = out["mcmc_diagnostics"]
     compared = [s for s in out["steps"] if s["converged"]]
     agreeing = sum(bool(s["agree"]) for s in compared)
@@ -225,7 +227,7 @@ def _text(out: dict[str, Any]) -> str:
     )
     lines = [
         f"record       {out['record']} ({out['method']} vs MCMC, {out['mode']} mode, "
-        f"{out['prior']} prior, {out['surface']} surface)",
+        f"{out['prior']} prior, {floor or out['surface'] + ' surface'})",
         f"checks       {out['checked']}",
         f"steps        {len(out['steps'])} checked, {diag['converged_steps']} converged",
         f"agreement    {agreement}",
