@@ -199,3 +199,40 @@ def test_inspect_reads_the_c3d_file_with_its_mass(walk, tmp_path, capsys):
     report = json.loads(out)
     assert report["mass_kg"] == pytest.approx(MASS_KG, rel=1e-6)
     assert report["sample_rate_hz"] == pytest.approx(ANALOG_RATE_HZ)
+
+
+def test_a_file_ezc3d_cannot_read_is_one_sentence(tmp_path):
+    path = tmp_path / "broken.c3d"
+    path.write_bytes(b"\x02\x50" + bytes(510))  # a C3D key and nothing else
+    with pytest.raises(InputError) as err:
+        load_record(path, mass_kg=70.0)
+    msg = str(err.value)
+    assert msg.startswith(f"{path}, whole file: ezc3d could not read") and "\n" not in msg
+
+
+@pytest.mark.skipif(
+    "fork" not in __import__("multiprocessing").get_all_start_methods(),
+    reason="the stand-in crash reaches the child only when it is forked",
+)
+def test_ezc3d_crashing_on_a_damaged_file_is_one_sentence(walk, tmp_path, monkeypatch):
+    """ezc3d segfaults on some damaged files; the child process dies, the workbench speaks.
+
+    The crash is staged (the reading function kills its own process with SIGSEGV), since
+    which damaged bytes crash a given ezc3d version is not stable.
+    """
+    import os
+    import signal
+
+    from workbench.records import c3d_file
+
+    def crash(path: str) -> dict:
+        os.kill(os.getpid(), signal.SIGSEGV)
+        raise AssertionError("not reached")
+
+    monkeypatch.setattr(c3d_file, "_read", crash)
+    path = write_two_plate_c3d(tmp_path / "trial.c3d", walk["first"], walk["second"])
+    with pytest.raises(InputError) as err:
+        load_record(path)
+    msg = str(err.value)
+    assert msg.startswith(f"{path}, whole file: ezc3d crashed reading the file (signal SIGSEGV)")
+    assert "\n" not in msg

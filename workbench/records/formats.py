@@ -363,48 +363,6 @@ def _read_insole(p: Path, source: str) -> _Table:
     return _Table(arrays, metadata)
 
 
-def _c3d_body_mass(c3d: Any) -> float | None:
-    """Return the body mass a C3D file states in ``PROCESSING:Bodymass`` [kg], if any.
-
-    Vicon's processing writes the subject's mass there; other software leaves it out.
-    """
-    try:
-        value = c3d["parameters"]["PROCESSING"]["Bodymass"]["value"]
-        mass = float(np.asarray(value, dtype=np.float64).reshape(-1)[0])
-    except (KeyError, IndexError, TypeError, ValueError):
-        return None
-    return mass if math.isfinite(mass) and mass > 0 else None
-
-
-def _vertical_channel_units(c3d: Any, n_platforms: int) -> list[str | None]:
-    """Return the unit ``ANALOG:UNITS`` states for each platform's Fz channel, or None.
-
-    ezc3d labels every platform's force with ``POINT:FORCE_UNITS`` (N when absent), but the
-    samples are in their analog channels' units: for platforms of types 2 and 4 the third
-    channel of ``FORCE_PLATFORM:CHANNEL`` is Fz (for type 4 after the calibration matrix,
-    whose output unit the channel does not state unless it is a force unit).
-    """
-    units: list[str | None] = [None] * n_platforms
-    try:
-        params = c3d["parameters"]
-        types = np.asarray(params["FORCE_PLATFORM"]["TYPE"]["value"]).reshape(-1)
-        channels = np.asarray(params["FORCE_PLATFORM"]["CHANNEL"]["value"])
-        analog_units = list(params["ANALOG"]["UNITS"]["value"])
-    except (KeyError, TypeError, ValueError):
-        return units
-    for k in range(n_platforms):
-        try:
-            if int(types[k]) not in (2, 4):
-                continue
-            index = int(channels[2, k]) - 1  # 1-based analog channel of Fz
-            unit = str(analog_units[index]).strip()
-        except (IndexError, TypeError, ValueError):
-            continue
-        if _FORCE_UNIT_NAMES.get(unit.lower()) is not None:
-            units[k] = unit
-    return units
-
-
 def _plate_sign(vertical: FloatArray) -> float:
     """+1 or -1: the sign that makes a platform's vertical force the force on the person.
 
@@ -427,25 +385,18 @@ def _read_c3d(p: Path, source: str) -> _Table:
     turned to the force on the person (:func:`_plate_sign`), summed, on the analog clock.
     """
     try:
-        import ezc3d  # optional extra, imported only when a C3D file is read
+        import ezc3d  # noqa: F401 - optional extra, imported only when a C3D file is read
     except ImportError:
         raise UsageError(
             f"reading the C3D file {source} needs the optional package ezc3d; install it with "
             "pip install 'workbench[c3d]'"
         ) from None
-    try:
-        c3d = ezc3d.c3d(str(p), extract_forceplat_data=True)
-        platforms = list(c3d["data"]["platform"])
-        analog_rate = float(c3d["header"]["analogs"]["frame_rate"])
-        point_rate = float(c3d["header"]["points"]["frame_rate"])
-        first_frame = int(c3d["header"]["points"]["first_frame"])
-    except Exception as exc:  # ezc3d raises plain RuntimeErrors for damaged files
-        raise InputError(
-            source,
-            "whole file",
-            f"ezc3d could not read the force platforms ({type(exc).__name__})",
-            "check that this is a C3D file with force platform data",
-        ) from None
+    from workbench.records.c3d_file import read_force_platforms
+
+    read = read_force_platforms(str(p), source)
+    platforms: list[FloatArray] = read["forces"]
+    analog_rate, point_rate = read["analog_rate"], read["point_rate"]
+    first_frame = read["first_frame"]
     if not platforms:
         raise InputError(
             source,
@@ -462,11 +413,13 @@ def _read_c3d(p: Path, source: str) -> _Table:
             source, "header", f"the point rate {point_rate!r} Hz is not valid", "repair the file"
         )
     forces: list[FloatArray] = []
-    stated = _vertical_channel_units(c3d, len(platforms))
     units: list[str] = []
-    for k, platform in enumerate(platforms, start=1):
-        force = np.asarray(platform["force"], dtype=np.float64)
-        unit = stated[k - 1] or str(platform.get("unit_force", "N")).strip()
+    for k, (force, stated, labelled) in enumerate(
+        zip(platforms, read["channel_units"], read["unit_force"], strict=True), start=1
+    ):
+        # The Fz channel's own unit when it names a force unit; else ezc3d's label.
+        known = stated is not None and _FORCE_UNIT_NAMES.get(stated.lower()) is not None
+        unit = stated if known else labelled.strip()
         units.append(unit)
         factor = FORCE_UNITS.get(_FORCE_UNIT_NAMES.get(unit.lower(), ""), None)
         if factor is None:
@@ -536,7 +489,7 @@ def _read_c3d(p: Path, source: str) -> _Table:
             "force_units": units,
             "vertical_sign": signs[0] if len(set(signs)) == 1 else None,
             "vertical_signs": signs,
-            "body_mass_kg": _c3d_body_mass(c3d),
+            "body_mass_kg": read["body_mass_kg"],
         }
     }
     if len(vertical) == 2:
