@@ -1,8 +1,8 @@
 """A C3D file's force platforms read with ezc3d in a child process.
 
 ezc3d is C++: on some damaged files it does not raise but crashes the process (a
-segmentation fault on about one file in 150 with a few bytes changed at random), which
-would end the workbench without a word and lose any result it held. So the file is read
+segmentation fault; files with a few bytes changed at random show it), which would end the
+workbench without a word and lose any result it held. So the file is read
 in a child process that sends back plain arrays and numbers; a child that dies becomes
 one sentence naming the file. The reader proper (axis, sign, sum, clock) is
 :func:`workbench.records.formats._read_c3d`.
