@@ -1,4 +1,8 @@
-"""``workbench crosscheck``: every footstep of a record, particle filter against emcee."""
+"""``workbench crosscheck``: the posterior identify reports, checked against emcee.
+
+Per footstep for a particle filter; on a deck record, where identify reads C and K from the
+deck's transmissibility, that posterior as a whole (:mod:`workbench.inference.crosscheck_surface`).
+"""
 
 from __future__ import annotations
 
