@@ -124,3 +124,26 @@ def test_filter_options_on_the_route_are_reported_as_unused(deck_file, tmp_path,
 
     idata = az.from_netcdf(out["netcdf"])
     assert set(PARAMS) <= set(idata.posterior.data_vars)
+
+
+@pytest.mark.parametrize(
+    ("has_deck", "surface", "words"),
+    [
+        (True, "joint", ["joint time-history model", "transmissibility"]),
+        (True, "rigid", ["rigid-floor model", "transmissibility"]),
+        (True, "coupled", ["fell back to the joint time-history model"]),
+        (False, "coupled", ["per-step posterior of the model identify uses"]),
+    ],
+)
+def test_the_per_step_check_says_which_model_it_checks(has_deck, surface, words):
+    """Every per-step check names its model; on a deck record, also where identify's C and K
+    come from by default (the sentence of the JSON's "checked" and the text's "checks")."""
+    from types import SimpleNamespace
+
+    from workbench.cli.crosscheck import _what_is_checked
+
+    record = SimpleNamespace(ground_acc_m_s2=np.zeros(3) if has_deck else None)
+    sentence = _what_is_checked(record, surface)
+    for word in words:
+        assert word in sentence
+    assert "transmissibility" not in sentence or has_deck

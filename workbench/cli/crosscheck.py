@@ -66,6 +66,12 @@ def _what_is_checked(record: Any, surface: str) -> str:
             "without --surface reads C and K from the deck's transmissibility instead, which "
             "crosscheck without --surface checks"
         )
+    if record.ground_acc_m_s2 is not None and surface == "rigid":
+        return (
+            "this cross-check checks the rigid-floor model, which ignores the record's "
+            "ground_acc (--surface rigid); identify without --surface reads C and K from the "
+            "deck's transmissibility instead, which crosscheck without --surface checks"
+        )
     if record.ground_acc_m_s2 is not None and surface == "coupled":
         return (
             "identify fell back to the joint time-history model (the deck has no power away "
