@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -298,6 +299,7 @@ def test_rbpf_and_mcmc_agree_on_synthetic_walks(synthetic_crosschecks: list[tupl
         assert result.verdict() in text
         assert len(text.splitlines()) == len(result.steps) + 6
         assert f"{result.steps[0].mcmc_mean[1]:.0f}" in text
+        assert not re.search(r"\d\.\d{5,}", text), text  # rounded for reading
 
 
 @pytest.mark.slow

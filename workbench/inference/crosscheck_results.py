@@ -259,10 +259,12 @@ class CrosscheckResult:
                 + ("; ".join(s.flags) if s.flags else "")
             )
         diag = self.diagnostics()
+        rhat = "n/a" if diag["rhat_max"] is None else f"{diag['rhat_max']:.3f}"
+        ess = "n/a" if diag["ess_bulk_min"] is None else f"{diag['ess_bulk_min']:.0f}"
         lines += [
             "",
             self.verdict(),
-            f"MCMC: R-hat max {diag['rhat_max']}, bulk ESS min {diag['ess_bulk_min']}, "
+            f"MCMC: R-hat max {rhat}, bulk ESS min {ess}, "
             f"{diag['converged_steps']} of {len(self.steps)} steps converged",
         ]
         return "\n".join(lines)

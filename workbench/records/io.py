@@ -30,10 +30,16 @@ Formats (docs/contracts.md)
     total left and right foot force [N] in columns 18 and 19 (1-based); GRF = 18 + 19.
 ``c3d``
     Needs the optional extra ``ezc3d`` (``pip install workbench[c3d]``). The vertical force is
-    the z component (ezc3d assumes z up) of every force platform, summed, on the analog time
-    base. Force platforms report the force the person exerts on the plate in some labs and
-    the reaction in others, so a negative mean is flipped and the flip recorded in
-    ``metadata["warnings"]``.
+    the laboratory's z component of every force platform (ezc3d turns each platform's force
+    into the laboratory frame with its corners; a file whose z axis carries less force than
+    x or y is refused), each platform turned to the force on the person (force platforms
+    report the force the person exerts on the plate in some labs and the reaction in others:
+    a platform whose largest load is negative is flipped and the flip recorded in
+    ``metadata["warnings"]``), summed, on the analog clock from the first point frame. The
+    mass is ``--mass``, else the sidecar's, else the file's ``PROCESSING:Bodymass``. The
+    force unit is the one ``ANALOG:UNITS`` states for a platform's Fz channel (platform types
+    2 and 4), else ezc3d's (``POINT:FORCE_UNITS``, N when absent); ``--force-unit`` converts
+    on top of it, for a file whose stated unit is wrong.
 
 Places in error messages are file line numbers (1-based, every line counted, including
 header, comment and blank lines), written ``line N``.
@@ -280,6 +286,9 @@ def load_record(
     mass_source = f'"mass_kg" in {sidecar_path.name}' if sidecar_path and mass is not None else None
     if mass_arg is not None:
         mass, mass_source = mass_arg, "given as --mass or mass_kg"
+    c3d_mass = metadata.get("c3d", {}).get("body_mass_kg") if fmt == "c3d" else None
+    if mass is None and c3d_mass is not None:
+        mass, mass_source = c3d_mass, "PROCESSING:Bodymass in the C3D file"
     if mass is None:
         embedded = _embedded_entry(p)
         if embedded is not None:
