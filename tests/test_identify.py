@@ -161,6 +161,12 @@ def test_prior_bound_posterior_is_not_called_identified(short_record):
     assert "stiffness_n_per_m" in res.parameters_at_prior_bound
     assert res.identifiability["level"] == "not identified"
     assert not res.to_json()["diagnostics"]["trustworthy"]
+    # Said in words, the verb agreeing with how many parameters sit there, and once.
+    sentence = res.identifiability["sentence"]
+    agreeing = "sits" if len(res.parameters_at_prior_bound) == 1 else "sit"
+    assert f"stiffness K {agreeing} at the edge of the prior box" in sentence
+    assert not any("_per_m" in text for text in (sentence, *res.warnings))
+    assert res.summary().count(sentence) == 1
 
 
 @pytest.mark.slow

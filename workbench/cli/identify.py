@@ -7,6 +7,8 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    IDENTIFY_BASE_BYTES,
+    IDENTIFY_BYTES_PER_SAMPLE,
     add_no_limits,
     add_rigid_floor_flag,
     check_budget,
@@ -20,14 +22,6 @@ from workbench.cli.common import (
 from workbench.errors import UsageError
 
 __all__ = ["add_identify_parser"]
-
-#: Peak memory of ``identify`` [bytes]: the interpreter, its libraries and the compiled
-#: filter, then the problem, the filter's per-step clouds and the result per record sample;
-#: measured as the peak resident size of the default identification (RBPF, 256 particles) of
-#: simulated 200 Hz walks of 12 000 (0.210 GB) and 48 000 samples (0.395 GB), a straight line
-#: through both (10 M samples: 51 GB; the run that found it had reached 4.4 GB in 150 s).
-IDENTIFY_BASE_BYTES = 150e6
-IDENTIFY_BYTES_PER_SAMPLE = 5100.0
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
@@ -57,7 +51,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--crosscheck checks a filter step by step, but C and K of {record.name} came "
             "from the deck's transmissibility, which has no steps; run 'workbench crosscheck' "
-            "on the record (it checks the joint time-history filter) or add --surface joint"
+            "on the record (it checks the transmissibility posterior with MCMC) or add "
+            "--surface joint"
         )
     if args.crosscheck:
         from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability

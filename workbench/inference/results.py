@@ -35,6 +35,7 @@ from workbench.inference.problem import IdentificationProblem
 from workbench.inference.weighted import _moments, weighted_quantile
 from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2
+from workbench.wording import count, p_value, parameters_in_words, verb
 
 if TYPE_CHECKING:
     import arviz
@@ -520,7 +521,7 @@ class IdentificationResult:
         out = []
         if self.frozen_parameters:
             out.append(
-                f"{' and '.join(self.frozen_parameters)} froze: the particles hold at most "
+                f"{parameters_in_words(self.frozen_parameters)} froze: the particles hold at most "
                 f"{FROZEN_UNIQUE_VALUES} distinct values at the end, so the reported sd is not "
                 "a posterior sd; use more particles, jitter, or method rbpf/exact."
             )
@@ -535,7 +536,7 @@ class IdentificationResult:
             and self.static_parameters
         ):
             out.append(
-                f"all particles descend from {anc} initial particle(s): the filter lost its "
+                f"all particles descend from {count(anc, 'initial particle')}: the filter lost its "
                 "diversity, so the reported spread understates the uncertainty."
             )
         if self.degenerate:
@@ -546,9 +547,9 @@ class IdentificationResult:
         bound = self.parameters_at_prior_bound
         if bound:
             out.append(
-                f"{' and '.join(bound)} reach the edge of the prior box: the data push the "
-                "value outside the range the prior allows, so it is not an estimate and its "
-                "sd is not an uncertainty (check the model fit and the noise setting)."
+                f"{parameters_in_words(bound)} {verb(len(bound), 'reaches', 'reach')} the edge of "
+                "the prior box: the data push the value outside the range the prior allows, so it "
+                "is no estimate and its sd no uncertainty (check the model fit and noise setting)."
             )
         sentence = self.identifiability.get("sentence")
         level = self.identifiability.get("level")
@@ -643,8 +644,8 @@ class IdentificationResult:
         p = self.problem
         lines = [
             f"SMD identification ({self.method}) of {p.source}",
-            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, {p.n_pieces} pieces "
-            f"({p.time_basis} basis, n = {p.harmonics}), noise {self.noise.get('label', '')}",
+            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, {count(p.n_pieces, 'piece')}"
+            f" ({p.time_basis} basis, n = {p.harmonics}), noise {self.noise.get('label', '')}",
             "",
             f"{'parameter':<24}{'estimate':>12}{'sd':>12}{'95 % interval':>26}",
         ]
@@ -679,12 +680,13 @@ class IdentificationResult:
             for i, (b, s) in enumerate(zip(self.blf[:5], self.blf_sd[:5], strict=True), start=1):
                 lines.append(f"{'BLF' + str(i):<24}{b:>12.3f}{s:>12.3f}")
         lb = self.test_serial_correlation()
+        sentence = self.identifiability.get("sentence", "not assessed")  # not again as a warning
         lines += [
             "",
-            f"identifiability: {self.identifiability.get('sentence', 'not assessed')}",
+            f"identifiability: {sentence}",
             *([f"surface: {self.extra['surface']['sentence']}"] if "surface" in self.extra else []),
             f"log-likelihood {self.loglik:.2f}; Ljung-Box p of GRF residuals "
-            f"{float(lb['lb_pvalue'].iloc[0]):.3g} at lag {int(lb.index[0])}",
+            f"{p_value(float(lb['lb_pvalue'].iloc[0]))} at lag {int(lb.index[0])}",
         ]
         if self.not_identified:
             lines.append(
@@ -692,7 +694,7 @@ class IdentificationResult:
                 "prior box, not estimates, and are kept for diagnosis under "
                 f"{CONDITIONAL_KEY} (JSON and Python)."
             )
-        lines += [f"warning: {w}" for w in self.warnings]
+        lines += [f"warning: {w}" for w in self.warnings if w != sentence]
         return "\n".join(lines)
 
     def to_inference_data(self, n_draws: int | None = None) -> arviz.InferenceData:
