@@ -1,7 +1,8 @@
 """Regenerate the embedded synthetic records in ``workbench/datasets/synthetic/``.
 
-Run ``python analyses/make_demo_data.py``; the output is bit-for-bit reproducible (fixed
-seeds). Each record is a CSV with a JSON sidecar holding its mass and the simulator's truth.
+Run ``python analyses/make_demo_data.py``; the output is reproducible (fixed seeds): bit for
+bit on one machine, and to rounding (1e-7 of each column's RMS, tested) across processors.
+Each record is a CSV with a JSON sidecar holding its mass and the simulator's truth.
 ``--out`` is the datasets folder: the walks go to its ``synthetic/``, the benchmark signal to
 its ``benchmark/``.
 

@@ -176,22 +176,35 @@ def test_the_session_is_the_same_everywhere() -> None:
 
 
 @pytest.mark.slow
-def test_the_notebook_session_runs(capsys: pytest.CaptureFixture[str]) -> None:
-    """The README's session, run as a notebook would (bare expressions displayed)."""
+def test_the_notebook_session_runs_and_its_page_shows_a_fresh_run() -> None:
+    """The session, run as a notebook would (bare expressions displayed), is the docs' page.
+
+    CI also runs ``python docs/examples/run_session.py --check docs/notebook.md``; this is
+    the same comparison from the test suite.
+    """
     sys.path.insert(0, str(ROOT / "docs" / "examples"))
     try:
-        from run_session import run
+        from run_session import page_block, session_run
     finally:
         sys.path.pop(0)
-    namespace = run(_readme_session())
-    out = capsys.readouterr().out
-    res, d = namespace["res"], namespace["d"]
-    # The session printed both summaries and displayed the estimates and intervals.
-    assert "SMD identification (rbpf)" in out and "gait_asymmetry" in out
-    assert "natural_frequency_hz" in out and "lower" in out and "upper" in out
+    out, namespace = session_run()
+    page = (ROOT / "docs" / "notebook.md").read_text(encoding="utf-8")
+    assert page_block(page) == out, "docs/notebook.md is stale: run_session.py --write it"
+    assert str(ROOT) not in out  # no machine paths
+
+    # The deck record identifies C and K, and the intervals hold the simulated values.
+    res, rec, rigid, d = (namespace[k] for k in ("res", "rec", "rigid", "d"))
+    truth = rec.metadata["truth"]  # type: ignore[attr-defined]
     params = res.params  # type: ignore[attr-defined]
     ci = res.conf_int()  # type: ignore[attr-defined]
-    assert set(params.index) == set(ci.index)
+    assert res.not_identified == []  # type: ignore[attr-defined]
+    assert params.notna().all() and set(params.index) == set(ci.index)
     assert (ci["lower"] <= params).all() and (params <= ci["upper"]).all()
-    assert "gait_asymmetry.a_half_n" in params.index
+    for key in ("stiffness_n_per_m", "damping_ns_per_m"):
+        assert ci.loc[key, "lower"] <= float(truth[key]) <= ci.loc[key, "upper"], key
+    assert "natural_frequency_hz" in out and "lower" in out and "upper" in out
+    # The rigid stretch is graded not identified and prints no estimate for C and K.
+    assert {"stiffness_n_per_m", "damping_ns_per_m"} <= set(rigid.not_identified)  # type: ignore[attr-defined]
+    assert rigid.params[rigid.not_identified].isna().all()  # type: ignore[attr-defined]
+    assert "K [N/m]                           not identified" in out
     assert d.to_json()["verdict"] in out  # type: ignore[attr-defined]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -298,6 +299,7 @@ def test_rbpf_and_mcmc_agree_on_synthetic_walks(synthetic_crosschecks: list[tupl
         assert result.verdict() in text
         assert len(text.splitlines()) == len(result.steps) + 6
         assert f"{result.steps[0].mcmc_mean[1]:.0f}" in text
+        assert not re.search(r"\d\.\d{5,}", text), text  # rounded for reading
 
 
 @pytest.mark.slow
@@ -319,18 +321,32 @@ def test_a_starved_filter_is_flagged_on_most_steps(synthetic_crosschecks: list[t
 
 @pytest.mark.slow
 def test_a_seed_filter_with_few_particles_is_flagged(synthetic_crosschecks: list[tuple]) -> None:
-    """The seed-faithful pf (per-sample traces) with 50 particles: degenerate, flagged."""
+    """The seed-faithful pf (per-sample traces) with 50 particles: degenerate, flagged.
+
+    Whether one run's effective sample size falls below the threshold in a given step is a
+    matter of chance (seed 1 of the second walk has no degenerate step on some processors),
+    so the claim is a rate over the filter seeds 1-6, fixed in advance: measured, every
+    step of every run is flagged by some check and about 40 % of the steps (10 of 12 runs)
+    are flagged degenerate; the floors below leave room for the binomial spread over 72
+    steps and 12 runs.
+    """
     from workbench.inference.pf import run_pf
 
-    flagged, total = 0, 0
+    flagged, degenerate, runs_with_degenerate, total, runs = 0, 0, 0, 0, 0
     for problem, _, _, result in synthetic_crosschecks:
         pf_problem = problem.with_noise(problem.noise_from_fractions(problem.noise.obs_fraction))
-        bad = recompare(problem, result, run_pf(pf_problem, n_particles=50, seed=1))
-        assert bad.method == "pf" and len(bad.steps) == problem.n_pieces
-        flagged += sum(bool(s.flags) for s in bad.steps)
-        total += len(bad.steps)
-        assert any("filter degenerate" in f for s in bad.steps for f in s.flags)
-    assert flagged / total > 0.5
+        for seed in range(1, 7):
+            bad = recompare(problem, result, run_pf(pf_problem, n_particles=50, seed=seed))
+            assert bad.method == "pf" and len(bad.steps) == problem.n_pieces
+            hits = [any("filter degenerate" in f for f in s.flags) for s in bad.steps]
+            flagged += sum(bool(s.flags) for s in bad.steps)
+            degenerate += sum(hits)
+            runs_with_degenerate += any(hits)
+            total += len(bad.steps)
+            runs += 1
+    assert flagged / total >= 0.9
+    assert degenerate / total >= 0.2
+    assert runs_with_degenerate / runs >= 0.5
 
 
 def test_multimodality_detector() -> None:

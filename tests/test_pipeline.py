@@ -271,10 +271,36 @@ def test_preprocessed_response_from_rest_matches_inside_the_edge_margin():
     assert vel_in < 0.02 and disp_in < 0.02
 
 
-def test_embedded_synthetic_set_regenerates_bit_for_bit(tmp_path):
-    """``analyses/make_demo_data.py`` reproduces the shipped synthetic records exactly."""
+def _assert_json_close(a: object, b: object, rtol: float, where: str) -> None:
+    """Equal JSON trees: numbers to ``rtol`` of their size, everything else exactly."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert a.keys() == b.keys(), where
+        for key in a:
+            _assert_json_close(a[key], b[key], rtol, f"{where}.{key}")
+    elif isinstance(a, list) and isinstance(b, list):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_json_close(x, y, rtol, f"{where}[{i}]")
+    elif isinstance(a, float | int) and not isinstance(a, bool):
+        assert isinstance(b, float | int), where
+        assert b == pytest.approx(a, rel=rtol, abs=1e-12), where
+    else:
+        assert a == b, where
+
+
+def test_embedded_synthetic_set_regenerates(tmp_path):
+    """``analyses/make_demo_data.py`` reproduces the shipped synthetic records.
+
+    Values, not bytes: the simulator integrates thousands of steps through BLAS and compiled
+    code whose rounding differs from one processor to the next (the trailing digits of
+    ``cubic_stiffness.csv`` did, 3e-11 relative). The tolerance, 1e-7 of each column's RMS,
+    is far above that accumulated rounding and five orders below the records' own
+    measurement noise (about 1 % of the GRF), so any change of the generator still fails.
+    """
     import subprocess
     import sys
+
+    import pandas as pd
 
     from workbench.datasets import benchmark_paths, synthetic_paths
 
@@ -285,7 +311,16 @@ def test_embedded_synthetic_set_regenerates_bit_for_bit(tmp_path):
     shipped = [*synthetic_paths(), *benchmark_paths()]
     assert len(shipped) == 5
     for path in shipped:
-        for suffix in (".csv", ".json"):
-            a = path.with_suffix(suffix).read_bytes()
-            b = (tmp_path / path.parent.name / path.with_suffix(suffix).name).read_bytes()
-            assert a == b, path.with_suffix(suffix).name
+        fresh = tmp_path / path.parent.name / path.name
+        a, b = pd.read_csv(path.with_suffix(".csv")), pd.read_csv(fresh.with_suffix(".csv"))
+        assert list(a.columns) == list(b.columns) and len(a) == len(b), path.name
+        for column in a.columns:
+            x, y = a[column].to_numpy(float), b[column].to_numpy(float)
+            scale = float(np.sqrt(np.mean(x**2)))
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-7 * scale, err_msg=column)
+        _assert_json_close(
+            json.loads(path.with_suffix(".json").read_text()),
+            json.loads(fresh.with_suffix(".json").read_text()),
+            rtol=1e-7,
+            where=path.with_suffix(".json").name,
+        )

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -447,37 +446,7 @@ def test_c3d_without_ezc3d_says_how_to_install(
     assert isinstance(err.value, WorkbenchError)
 
 
-def test_c3d_reader_sums_platform_fz_on_analog_time_base(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    # A stand-in for ezc3d with the documented structure: data/platform[i]/force is 3 x n
-    # at the analog rate. Plates report the force on the plate (negative z), so it is flipped.
-    rec0 = walking(rate_hz=1000.0)
-    n = rec0.n_samples
-
-    def plate(fz: np.ndarray) -> dict[str, object]:
-        return {"force": np.vstack([np.zeros(n), np.ones(n), -fz]), "unit_force": "N"}
-
-    class FakeC3d(dict[str, object]):
-        def __init__(self, path: str, extract_forceplat_data: bool = False) -> None:
-            assert extract_forceplat_data
-            super().__init__(
-                data={"platform": [plate(req(rec0.grf_left_n)), plate(req(rec0.grf_right_n))]},
-                header={
-                    "analogs": {"frame_rate": 1000.0},
-                    "points": {"frame_rate": 100.0, "first_frame": 10},
-                },
-            )
-
-    monkeypatch.setitem(sys.modules, "ezc3d", types.SimpleNamespace(c3d=FakeC3d))
-    path = tmp_path / "trial.c3d"
-    path.write_bytes(b"\x02\x50" + bytes(510))
-    rec = load_record(path, mass_kg=70.0)
-    np.testing.assert_allclose(rec.grf_n, rec0.grf_n, rtol=1e-12)
-    np.testing.assert_array_equal(rec.grf_left_n, req(rec0.grf_left_n))
-    np.testing.assert_allclose(rec.time_s, 0.1 + np.arange(n) / 1000.0, rtol=0, atol=1e-12)
-    assert rec.metadata["c3d"]["vertical_sign"] == -1.0
-    assert any("flipped" in w for w in rec.metadata["warnings"])
+# The reader on real two-plate files written with ezc3d: tests/test_c3d.py.
 
 
 # --------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 
 import numpy as np
 import pytest
@@ -386,16 +387,28 @@ def test_criticism_couples_the_surface_and_the_rigid_floor_misses_it():
         diagnose(data, model=wb.SMDModel(surface="rigid"), surface="coupled")
 
 
-def test_the_crosscheck_checks_the_joint_filter_on_a_deck_record(tmp_path, capsys):
-    """The cross-check compares a filter step by step; the default route has no steps, so on
-    a deck record crosscheck runs the joint time-history filter, and identify --crosscheck
-    says so instead of failing."""
+def test_the_crosscheck_checks_the_joint_filter_on_a_deck_record_when_asked(tmp_path, capsys):
+    """With --surface joint, crosscheck compares the joint filter step by step and says that
+    identify's default reads C and K from the transmissibility instead; identify
+    --crosscheck on the default route says why it cannot check steps, instead of failing."""
+    from workbench.cli.crosscheck import _text
+
     path = tmp_path / "deck.csv"
     save_record(deck_walk(2, duration_s=20.0).record, path)
-    out = _run(["crosscheck", path, "--max-steps", "3", "--particles", "64", "--json"], capsys)
+    argv = ["crosscheck", path, "--surface", "joint", "--max-steps", "3", "--particles", "64"]
+    out = _run([*argv, "--json"], capsys)
     assert out["surface"] == "joint"
+    assert out["checks"] == "per-step filter"
+    assert "joint time-history model" in out["checked"]
+    assert "transmissibility" in out["checked"]
     assert len(out["steps"]) == 3
     assert 0.0 <= out["agreement"] <= 1.0
+    # The text says the share in words, never as an unrounded fraction.
+    text = _text(out)
+    agreeing = sum(bool(s["agree"]) for s in out["steps"] if s["converged"])
+    compared = sum(s["converged"] for s in out["steps"])
+    assert f"{agreeing} of {compared} compared steps ({100 * out['agreement']:.0f} %)" in text
+    assert not re.search(r"\d\.\d{5,}", text), text
     code = main([str(a) for a in ["identify", path, "--crosscheck", "--json"]])
     _, err = capsys.readouterr()
     assert code != 0 and "Traceback" not in err

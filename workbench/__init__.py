@@ -7,11 +7,13 @@ laws and simulate pedestrians on structures.
 The notebook session::
 
     import workbench as wb
-    rec = wb.datasets.load("treadmill")
-    model = wb.SMDModel(harmonics=6) + wb.effects.GaitAsymmetry()
-    res = wb.identify(rec.slice(10, 40), model, method="rbpf", seed=1)
+    rec = wb.datasets.load("seed_individual_deck")
+    model = wb.SMDModel(harmonics=6)
+    res = wb.identify(rec, model, seed=1)
     print(res.summary()); res.params; res.conf_int(); res.plot_diagnostics()
-    d = wb.diagnose(rec.slice(10, 70), model); print(d.summary())
+    rigid = wb.identify(wb.datasets.load("treadmill").slice(40, 70), model, seed=1)
+    print(rigid.summary())
+    d = wb.diagnose(rec, model); print(d.summary())
 
 One pedestrian model (:class:`SMDModel`, effects composed with ``+``) is what the simulator,
 every identification method, the criticism and the human-structure interaction consume;

@@ -8,6 +8,7 @@ never shows a traceback for these.
 
 from __future__ import annotations
 
+import errno
 from os import PathLike
 
 
@@ -80,6 +81,40 @@ class UsageError(WorkbenchError):
         if flag is None:
             return text
         return text.replace(f"'{self.parameter}'", flag, 1)
+
+
+class OutputError(WorkbenchError):
+    """A result file that could not be written (a full disk, a folder turned read-only).
+
+    Raised by the atomic writers (:mod:`workbench.fileutil`), which leave the target as it
+    was, so the sentence can say that nothing half-written is left.
+
+    Parameters
+    ----------
+    target : str or path-like
+        The file that was to be written (never its temporary name).
+    error : OSError or str
+        What the system said, or why the workbench refused to write there.
+    """
+
+    def __init__(self, target: str | PathLike[str], error: OSError | str) -> None:
+        self.target = str(target)
+        self.errno = error.errno if isinstance(error, OSError) else None
+        if isinstance(error, str):
+            reason, fix = error, "give another file name"
+        elif error.errno in _DISK_FULL:
+            reason = "the disk is full"
+            fix = "free space on that disk or write to another folder"
+        else:
+            reason = (error.strerror or str(error)).rstrip(".").lower()
+            fix = "write to a folder you can write to"
+        super().__init__(
+            f"could not write {self.target} ({reason}) and left no half-written file; {fix}"
+        )
+
+
+#: errno values of a full disk or an exhausted quota.
+_DISK_FULL = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC), errno.EFBIG}
 
 
 def check_seed(seed: object, where: str = "") -> int:

@@ -9,13 +9,16 @@ workers or the order in which they finish; callers sort what they collect.
 - one worker: in this process, in order;
 - several: a local ``ProcessPoolExecutor`` with the ``spawn`` start method (no state of the
   parent leaks into the workers, and the same code runs on every platform; scripts that start
-  several workers need the ``if __name__ == "__main__":`` guard);
+  several workers need the ``if __name__ == "__main__":`` guard); each worker watches its
+  parent and ends when the parent is gone, killed outright (kill -9) included;
 - ``scheduler``: a Dask distributed cluster at that address (``pip install 'workbench[dask]'``),
   with one named task per item so the cluster's dashboard says what runs.
 """
 
 from __future__ import annotations
 
+import os
+import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
@@ -37,7 +40,12 @@ def _pool(fn: Callable[[T], R], tasks: Sequence[T], workers: int) -> Iterator[R]
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     ctx = multiprocessing.get_context("spawn")
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    pool = ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=ctx,
+        initializer=_exit_with_parent,
+        initargs=(os.getpid(), _PARENT_POLL_S),
+    )
     try:
         futures = [pool.submit(fn, t) for t in tasks]
         for fut in as_completed(futures):
@@ -50,6 +58,35 @@ def _pool(fn: Callable[[T], R], tasks: Sequence[T], workers: int) -> Iterator[R]
         raise
     else:
         pool.shutdown(wait=True)
+
+
+#: How often a pool worker looks whether its parent is still there [s].
+_PARENT_POLL_S = 0.5
+
+
+def _exit_with_parent(parent_pid: int, poll_s: float) -> None:
+    """Pool worker initializer: end this worker as soon as the process that started it is gone.
+
+    A parent killed outright (kill -9, the out-of-memory killer) cannot stop its workers;
+    they would wait for tasks for ever, holding memory and the resource tracker. The
+    parent's death re-parents the worker, so a daemon thread that sees its parent id change
+    ends the worker (and the tracker, once no worker holds it, ends too).
+
+    Parameters
+    ----------
+    parent_pid : int
+        The process id of the parent.
+    poll_s : float
+        Seconds between looks.
+    """
+    import threading
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(poll_s)
+        os._exit(1)  # no clean-up to wait for: the parent that would collect results is gone
+
+    threading.Thread(target=watch, name="workbench-parent-watch", daemon=True).start()
 
 
 def _stop_workers(pool: Any) -> None:

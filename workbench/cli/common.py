@@ -398,8 +398,8 @@ def load(args: argparse.Namespace) -> Any:
     from workbench import datasets
     from workbench.records.io import load_record
 
-    name = datasets.named(args.record)
-    reader: Any = load_record if name is None else datasets.load
+    datasets.require_record(args.record)  # a mistyped name gets the list of names
+    reader: Any = load_record if datasets.named(args.record) is None else datasets.load
     record = reader(
         args.record,
         fmt=args.fmt,

@@ -16,6 +16,7 @@ from workbench.cli.common import (
     surface_choice,
 )
 from workbench.errors import UsageError
+from workbench.wording import p_value
 
 __all__ = ["add_criticism_parser", "parse_effect_names"]
 
@@ -83,27 +84,29 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     obj = result.to_dict()
     if check is not None:
         obj["posterior_predictive"] = check
+    # "baseline" alone, or "baseline + effects" when --effects joined them to it.
     lines = [
-        f"baseline ({obj['baseline']['model']}): held-out RMSE "
+        f"Model criticism of {data.source}",
+        f"{obj['baseline']['model']}: held-out RMSE "
         f"{obj['baseline']['heldout_rmse_n']:.3g} N, fit {obj['baseline']['fit_percent']:.1f} %",
     ]
     if result.one_step is not None:
         lines.append(
             f"one-step-ahead (identified model): RMSE {result.one_step.rmse_n:.3g} N, "
-            f"Ljung-Box p {result.one_step.ljung_box_p:.3g}, log score "
+            f"Ljung-Box p {p_value(result.one_step.ljung_box_p)}, log score "
             f"{result.one_step.log_score:.3f} nats/sample"
         )
     if check is not None:
         lines.append(
             "posterior-predictive p: sub-harmonic lines "
-            f"{check['subharmonic_power']['p_value']:.3g}, odd/even contrast "
-            f"{check['odd_even_contrast_n']['p_value']:.3g}"
+            f"{p_value(check['subharmonic_power']['p_value'])}, odd/even contrast "
+            f"{p_value(check['odd_even_contrast_n']['p_value'])}"
         )
-    for c in obj["candidates"]:
-        mark = "*" if c["significant"] else " "
+    for c in result.candidates_by_score:
+        mark = "*" if c.significant else " "
         lines.append(
-            f"{mark} {c['effect']:<18} score {c['score']:+.3f}  drop "
-            f"{100 * c['expected_error_drop']:5.1f} %  {c['evidence']}"
+            f"{mark} {c.effect:<18} score {c.score:+.3f}  drop "
+            f"{100 * c.expected_error_drop:5.1f} %  {c.evidence}"
         )
     lines.append(obj["verdict"])
     if args.out:
@@ -159,7 +162,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     obj = {"rows": [r.to_dict() for r in rows]}
     text = "\n".join(
         f"{r.model:<50} RMSE {r.heldout_rmse_n:8.3f} N  fit {r.fit_percent:6.1f} %  "
-        f"LB p {r.ljung_box_p:.3g}  score {r.score:.3f}"
+        f"LB p {p_value(r.ljung_box_p)}  score {r.score:.3f}"
         for r in rows
     )
     emit(args, obj, text)

@@ -1,8 +1,13 @@
-"""``workbench crosscheck``: every footstep of a record, particle filter against emcee."""
+"""``workbench crosscheck``: the posterior identify reports, checked against emcee.
+
+Per footstep for a particle filter; on a deck record, where identify reads C and K from the
+deck's transmissibility, that posterior as a whole (:mod:`workbench.inference.crosscheck_surface`).
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -78,21 +83,29 @@ def _check_walkers(args: argparse.Namespace) -> None:
     )
 
 
-def _surface_for_the_filter(record: Any, chosen: str | None) -> str | None:
-    """Return the surface model the cross-checked filter runs.
-
-    The cross-check compares a filter's posterior after every step with that step's MCMC
-    posterior. On a deck record the default route reads C and K from the transmissibility,
-    which has no steps, so the filter runs the joint time-history model, in which the deck
-    acts through the same K and C (docs/science.md 6).
-    """
-    if record.ground_acc_m_s2 is not None and chosen in (None, "coupled"):
-        return "joint"
-    return chosen
+def _what_is_checked(record: Any, surface: str) -> str:
+    """One sentence: which posterior the per-step check compares, and identify's with it."""
+    if record.ground_acc_m_s2 is not None and surface == "joint":
+        return (
+            "this cross-check checks the joint time-history model (--surface joint); identify "
+            "without --surface reads C and K from the deck's transmissibility instead, which "
+            "crosscheck without --surface checks"
+        )
+    if record.ground_acc_m_s2 is not None and surface == "rigid":
+        return (
+            "this cross-check checks the rigid-floor model, which ignores the record's "
+            "ground_acc (--surface rigid); identify without --surface reads C and K from the "
+            "deck's transmissibility instead, which crosscheck without --surface checks"
+        )
+    if record.ground_acc_m_s2 is not None and surface == "coupled":
+        return (
+            "identify fell back to the joint time-history model (the deck has no power away "
+            "from the gait's harmonics), and this cross-check checks that model step by step"
+        )
+    return "this cross-check checks the filter's per-step posterior of the model identify uses"
 
 
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
-    from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability
     from workbench.inference.identify import identify
     from workbench.inference.settings import IdentifySettings
     from workbench.records.inspection import inspect_record
@@ -107,11 +120,11 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         "observe": args.observe,
         "seed": args.seed,
         "force_check": False,
+        "surface": surface_choice(args),
     }
     _check_walkers(args)
     record = load(args)
     check_record_size(args, record, "crosscheck")
-    overrides["surface"] = _surface_for_the_filter(record, surface_choice(args))
     settings = IdentifySettings().replace(**overrides)
     check_particles(args, settings)
     if settings.model.pieces != "steps":
@@ -135,6 +148,27 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         minutes=MCMC_SECONDS_PER_WALKER_SAMPLE * walkers * samples / 60,
     )
     ident = identify(insp, settings=settings, progress=False)
+    if "surface_route" in ident.extra:
+        out = _route_check(args, ident, settings.seed, record.name)
+        out["record"] = record.name
+        for warning in out["warnings"]:
+            print(f"workbench: warning: {warning}", file=sys.stderr)
+        emit(args, out, _route_text(out))
+        return 0
+    out = _step_check(args, ident, settings.seed, record.name)
+    out["record"] = record.name
+    out["surface"] = settings.model.surface
+    out["checks"] = "per-step filter"
+    out["checked"] = _what_is_checked(record, settings.model.surface)
+    floor = None if record.ground_acc_m_s2 is not None else "rigid floor, no surface measured"
+    emit(args, out, _text(out, floor))
+    return 0
+
+
+def _step_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> dict[str, Any]:
+    """Check the filter's per-step posterior against per-step MCMC; return the JSON."""
+    from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability
+
     problem = ident.problem
     result = crosscheck(
         problem,
@@ -142,7 +176,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         mode=args.mode,
         prior=args.prior,
         noise_scale=args.noise_scale,
-        seed=settings.seed,
+        seed=seed,
         max_pieces=args.max_steps,
         n_ensembles=args.ensembles,
         n_walkers=args.walkers,
@@ -151,8 +185,6 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     )
     ident = with_mcmc_identifiability(ident, result)
     out: dict[str, Any] = result.to_json()
-    out["record"] = record.name
-    out["surface"] = settings.model.surface
     out["mass_kg"] = problem.mass_kg
     out["identifiability"] = ident.identifiability
     out["noise"] = ident.noise
@@ -160,33 +192,136 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         from workbench.reporting.crosscheck import crosscheck_figures
 
         out_dir = Path(args.out)
-        key = safe_key(record.name)
+        key = safe_key(name)
         out["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_crosscheck_{result.method}.nc"))
         out["figures"] = [str(p) for p in crosscheck_figures(result, problem, out_dir, key)]
-    emit(args, out, _text(out))
-    return 0
+    return out
 
 
-def _text(out: dict[str, Any]) -> str:
+#: The options of the per-step filter check, with their defaults: on the transmissibility
+#: route no filter runs, so a value other than the default is reported as not used.
+_FILTER_OPTIONS = {
+    "method": ("--method", "rbpf"),
+    "particles": ("--particles", None),
+    "mode": ("--mode", "collapsed"),
+    "prior": ("--prior", "sequential"),
+    "noise_scale": ("--noise-scale", "fixed"),
+    "history": ("--history", "grid"),
+    "max_steps": ("--max-steps", None),
+}
+
+
+def _route_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> dict[str, Any]:
+    """Check identify's transmissibility posterior against MCMC on its likelihood."""
+    from workbench.fileutil import atomic_path
+    from workbench.inference.crosscheck_surface import ROUTE_CHECKED, crosscheck_surface_route
+
+    unused = [
+        flag
+        for attr, (flag, default) in _FILTER_OPTIONS.items()
+        if getattr(args, attr, default) != default
+    ]
+    warnings = (
+        [
+            f"{', '.join(unused)} set the per-step filter check, which does not run when C and "
+            "K come from the deck's transmissibility; add --surface joint to check the joint "
+            "filter step by step"
+        ]
+        if unused
+        else []
+    )
+    check = crosscheck_surface_route(
+        ident.problem, ident, seed=seed, n_ensembles=args.ensembles, n_walkers=args.walkers
+    )
+    route = check.to_json()
+    out: dict[str, Any] = {
+        "checks": "transmissibility route",
+        "checked": ROUTE_CHECKED,
+        "surface": "coupled",
+        "method": "exact",
+        "route_check": route,
+        "verdict": route["verdict"],
+        "mass_kg": ident.problem.mass_kg,
+        "identifiability": ident.identifiability,
+        "noise": ident.noise,
+        "warnings": warnings,
+    }
+    if args.out:
+        path = Path(args.out) / f"{safe_key(name)}_crosscheck_transmissibility.nc"
+        with atomic_path(path) as tmp:
+            check.mcmc.inference_data.to_netcdf(str(tmp))
+        out["netcdf"] = str(path)
+    return out
+
+
+def _percent(share: float) -> str:
+    return f"{100 * share:.0f} %"
+
+
+def _rounded(value: Any, digits: int) -> str:
+    return "n/a" if value is None else f"{value:.{digits}f}"
+
+
+def _text(out: dict[str, Any], floor: str | None = None) -> str:
+    """Word the per-step check; ``floor`` names the surface when none was measured."""
     diag = out["mcmc_diagnostics"]
+    compared = [s for s in out["steps"] if s["converged"]]
+    agreeing = sum(bool(s["agree"]) for s in compared)
+    agreement = (
+        f"{agreeing} of {len(compared)} compared steps ({_percent(out['agreement'])})"
+        if out["agreement"] is not None
+        else "no step compared (no step's MCMC converged)"
+    )
     lines = [
         f"record       {out['record']} ({out['method']} vs MCMC, {out['mode']} mode, "
-        f"{out['prior']} prior)",
+        f"{out['prior']} prior, {floor or out['surface'] + ' surface'})",
+        f"checks       {out['checked']}",
         f"steps        {len(out['steps'])} checked, {diag['converged_steps']} converged",
-        f"agreement    {out['agreement']}",
+        f"agreement    {agreement}",
         f"verdict      {out['verdict']}",
-        f"MCMC         R-hat max {diag['rhat_max']}, ESS bulk min {diag['ess_bulk_min']}, "
-        f"tau max {diag['tau_max']}, {diag['seconds_per_step']} s per step",
+        f"MCMC         R-hat max {_rounded(diag['rhat_max'], 3)}, ESS bulk min "
+        f"{_rounded(diag['ess_bulk_min'], 0)}, tau max {_rounded(diag['tau_max'], 1)}, "
+        f"{_rounded(diag['seconds_per_step'], 2)} s per step",
         f"identifiability  {out['identifiability'].get('sentence', 'not assessed')}",
     ]
     for d in out["disagreements"]:
-        lines.append(f"  step {d['index']} ({d['start_s']} s): {'; '.join(d['reasons'])}")
+        lines.append(f"  step {d['index']} ({d['start_s']:.2f} s): {'; '.join(d['reasons'])}")
     for key in ("netcdf",):
         if out.get(key):
             lines.append(f"{key:<12} {out[key]}")
     for fig in out.get("figures", []):
         lines.append(f"figure       {fig}")
     return "\n".join(lines)
+
+
+def _route_text(out: dict[str, Any]) -> str:
+    """Show identify's grid posterior and the MCMC's side by side, rounded."""
+    route = out["route_check"]
+    mcmc = route["mcmc"]
+    rows = []
+    for key, label, unit, digits in (
+        ("damping_ns_per_m", "C", "N s/m", 1),
+        ("stiffness_n_per_m", "K", "N/m", 0),
+    ):
+        rows.append(
+            f"  {label}  identify {_rounded(route['grid_mean'][key], digits)} "
+            f"(sd {_rounded(route['grid_sd'][key], digits)}), MCMC "
+            f"{_rounded(route['mcmc_mean'][key], digits)} "
+            f"(sd {_rounded(route['mcmc_sd'][key], digits)}) {unit}"
+        )
+    return "\n".join(
+        [
+            f"record       {out['record']} (transmissibility posterior vs MCMC, coupled surface)",
+            f"checks       {out['checked']}",
+            *rows,
+            f"verdict      {out['verdict']}",
+            f"MCMC         R-hat max {_rounded(mcmc['rhat_max'], 3)}, ESS bulk min "
+            f"{_rounded(mcmc['ess_bulk_min'], 0)}, tau max {_rounded(mcmc['tau_max'], 1)}, "
+            f"{mcmc['n_ensembles']} ensembles of {mcmc['n_walkers']} walkers",
+            f"identifiability  {out['identifiability'].get('sentence', 'not assessed')}",
+            *([f"netcdf       {out['netcdf']}"] if out.get("netcdf") else []),
+        ]
+    )
 
 
 def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
@@ -206,7 +341,11 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "posterior of (C, K) with several independent emcee ensembles (force coefficients "
         "integrated out by default) under the prior a correct filter carries into the step; "
         "report per step the filter's and the MCMC's mean and sd, z-score, sd ratio, "
-        "1-Wasserstein distance, convergence, and flags with reasons.",
+        "1-Wasserstein distance, convergence, and flags with reasons. On a record with a "
+        "ground_acc column identify reads C and K from the deck's transmissibility (the "
+        "default coupled surface), so crosscheck samples that posterior with emcee and "
+        "compares it with identify's instead; --surface joint checks the joint time-history "
+        "filter step by step.",
     )
     p.add_argument(
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"

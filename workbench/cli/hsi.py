@@ -22,6 +22,7 @@ from workbench.cli.common import (
     warn_many_workers,
 )
 from workbench.errors import UsageError
+from workbench.wording import count
 
 __all__ = ["add_hsi_parser"]
 
@@ -339,16 +340,20 @@ def _cmd_hsi(args: argparse.Namespace) -> int:
 def _text(o: dict[str, Any]) -> str:
     s = o["structure"]
     lines = [
-        f"{o['crossings']} {o['crowd']} crossing(s) of a {s['span_m']:g} m span "
+        f"{count(int(o['crossings']), o['crowd'] + ' crossing')} of a {s['span_m']:g} m span "
         f"({', '.join(f'{f:g}' for f in s['frequencies_hz'])} Hz), pedestrians from "
         f"{o['pedestrians']}, seed {o['seed']}, dt {o['dt_s']:g} s",
     ]
-    for m in ("interaction", "moving_force"):
+    # The comfort classes are Setra's: "maximum comfort" and so on, not statistics.
+    for m, name in (("interaction", "coupled SMDs"), ("moving_force", "moving forces")):
         r = o[m]
+        classes = ", ".join(
+            f"{k if k == 'unacceptable' else k + ' comfort'} {v}"
+            for k, v in r["comfort_counts"].items()
+        )
         lines.append(
-            f"  {m:13s} peak mean {r['peak_mean_m_s2']:.3f}  p95 {r['peak_p95_m_s2']:.3f}  "
-            f"max {r['peak_max_m_s2']:.3f} m/s^2; comfort "
-            + ", ".join(f"{k} {v}" for k, v in r["comfort_counts"].items())
+            f"  {name:13s} peak mean {r['peak_mean_m_s2']:.3f}  p95 {r['peak_p95_m_s2']:.3f}  "
+            f"max {r['peak_max_m_s2']:.3f} m/s^2; crossings per comfort class: {classes}"
         )
     ir = o["interaction_ratio"]
     lines.append(
@@ -369,8 +374,8 @@ def _text(o: dict[str, Any]) -> str:
         r = o["records"]
         where = r["manifest"] or f"{r['folder']} (no manifest: nothing to list)"
         lines.append(
-            f"  wrote {r['records']} walker record(s) of the first {r['crossings']} "
-            f"crossing(s): {where}"
+            f"  wrote {count(r['records'], 'walker record')} of the first "
+            f"{count(r['crossings'], 'crossing')}: {where}"
         )
         lines.extend(f"  skipped {k['record']}: {k['reason']}" for k in r["skipped"])
     lines.extend(f"  wrote {f}" for f in o.get("files", []))

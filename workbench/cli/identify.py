@@ -45,7 +45,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--crosscheck checks a filter step by step, but C and K of {record.name} came "
             "from the deck's transmissibility, which has no steps; run 'workbench crosscheck' "
-            "on the record (it checks the joint time-history filter) or add --surface joint"
+            "on the record (it checks the transmissibility posterior with MCMC) or add "
+            "--surface joint"
         )
     if args.crosscheck:
         from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability

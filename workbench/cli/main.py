@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import os
 import re
 import signal
+import stat
 import sys
 import threading
 import traceback
@@ -173,6 +175,9 @@ def _run(args: argparse.Namespace, handler: Handler) -> int:
             check_highpass(args.highpass_hz)
         if getattr(args, "out", None) is not None:
             check_out(args.out, is_file=getattr(args, "out_is_file", False))
+        _refuse_special_inputs(args)
+        if getattr(args, "out", None):
+            _check_free_space(args.out)
         return handler(args)
     except UsageError as err:
         # Library messages name their parameters; here the user typed flags.
@@ -182,12 +187,7 @@ def _run(args: argparse.Namespace, handler: Handler) -> int:
         _report_error(args, str(err))
         return err.exit_code
     except OSError as err:
-        target = _written_name(err.filename) if err.filename else "the output"
-        _report_error(
-            args,
-            f"could not write or read {target} ({err.strerror or err}); choose a folder you "
-            "can write to with --out, or check the path",
-        )
+        _report_error(args, _file_error_sentence(args, err))
         return EXIT_USER_ERROR
     except MemoryError:
         _report_error(
@@ -221,6 +221,116 @@ def _written_name(filename: str | os.PathLike[str]) -> str:
     path = Path(filename)
     match = _TEMPORARY_NAME.match(path.name)
     return str(path.with_name(match["name"])) if match else str(filename)
+
+
+def _refuse_special_inputs(args: argparse.Namespace) -> None:
+    """Refuse an input given as a pipe, a device, a socket or a symbolic link loop, up front.
+
+    Reading a named pipe waits for a writer for ever and a device such as ``/dev/zero``
+    never ends; the record and manifest readers refuse them, and this check does the same
+    for every other path a command reads (settings, laws, results, structures), before
+    any work. Folders and files that do not exist are left to the commands, which say what
+    they expected.
+    """
+    from workbench.errors import InputError
+    from workbench.records.text_table import LINK_LOOP, SPECIAL_FILES, file_problem
+
+    out = getattr(args, "out", None)
+    if out:
+        # Written by renaming over it: over /dev/null that would replace the device itself.
+        with contextlib.suppress(OSError):
+            mode = os.lstat(out).st_mode
+            if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode) or stat.S_ISLNK(mode)):
+                raise UsageError(
+                    f"--out {out}: this is a device, a pipe or a socket, not a file or a "
+                    "folder; give the name of a file or folder to write"
+                )
+    for name, value in vars(args).items():
+        if name == "out":
+            continue
+        for item in value if isinstance(value, list) else [value]:
+            if not isinstance(item, str | os.PathLike) or not os.path.lexists(item):
+                continue
+            problem = file_problem(item)
+            if problem not in SPECIAL_FILES:
+                continue  # a folder, a missing or unreadable file: the command says more
+            fix = (
+                "point the link at the file itself"
+                if problem == LINK_LOOP
+                else "give a file saved on disk"
+            )
+            raise InputError(item, "whole file", problem, fix)
+
+
+#: Free space an --out disk must have before a command starts [bytes]: a nearly full disk is
+#: refused before the computation, whose result a write failing at the end would lose. A
+#: larger output that still meets a full disk ends in the atomic writer's sentence.
+MIN_FREE_BYTES = 1 << 20
+
+
+def _check_free_space(out: str | os.PathLike[str]) -> None:
+    """Refuse an --out on a disk with less than :data:`MIN_FREE_BYTES` free, before any work."""
+    import shutil
+
+    folder = Path(out).absolute()
+    while not folder.is_dir() and folder != folder.parent:
+        folder = folder.parent
+    try:
+        free = shutil.disk_usage(folder).free
+    except OSError:  # not measurable here: the writers will say if the disk is full
+        return
+    if free < MIN_FREE_BYTES:
+        raise UsageError(
+            f"--out {out}: its disk has only {free / 1024:.0f} kB free, less than the "
+            f"{MIN_FREE_BYTES >> 20} MB the workbench asks for before it starts; free space "
+            "there or choose a folder on another disk"
+        )
+
+
+def _file_error_sentence(args: argparse.Namespace, err: OSError) -> str:
+    """Say which file the system refused, whether it was being read or written, and why.
+
+    Outputs are written by :mod:`workbench.fileutil`, which names its files itself; what
+    reaches here is mostly an input (a --config, a --laws file) or the making of an output
+    folder, so an error is blamed on --out only when the disk refused a write or a folder
+    of the output could not be made.
+    """
+    reason = _SYSTEM_REASONS.get(err.errno or 0) or (err.strerror or str(err)).lower()
+    out = getattr(args, "out", None)
+    if not err.filename:
+        where = f"under --out {out}" if out else "a file"
+        return f"could not read or write {where} ({reason}); check the paths and free space"
+    name = _written_name(err.filename)
+    # A file being made: the disk refused it, or it lies under --out and is not there yet
+    # (a folder of the output); an existing file, even under --out, was an input.
+    writing = err.errno in _WRITE_REFUSALS or (
+        out is not None and _lies_under(name, out) and not os.path.lexists(name)
+    )
+    if writing and err.errno != errno.ENOENT:
+        return (
+            f"could not write {name} ({reason}); free space there or choose a folder you can "
+            "write to with --out"
+        )
+    return f"could not read {name} ({reason}); check the path"
+
+
+#: What the system says only about writing: a full disk or quota, a read-only file system.
+_WRITE_REFUSALS = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC), errno.EROFS, errno.EFBIG}
+
+#: The system's reasons in the words of the sentences (its own text names no file).
+_SYSTEM_REASONS = {
+    errno.ELOOP: "it is a loop of symbolic links that point at each other",
+    errno.ENOENT: "it does not exist",
+    errno.ENOSPC: "the disk is full",
+    errno.EROFS: "the file system is read-only",
+    errno.EACCES: "permission denied",
+    errno.ENOTDIR: "a part of the path before it is a file, not a folder",
+}
+
+
+def _lies_under(name: str | os.PathLike[str], out: str | os.PathLike[str]) -> bool:
+    path, folder = Path(name).absolute(), Path(out).absolute()
+    return path == folder or folder in path.parents
 
 
 def _report_error(args: argparse.Namespace, message: str) -> None:

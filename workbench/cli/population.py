@@ -8,6 +8,9 @@ from typing import Any
 
 from workbench.cli.common import (
     EXIT_RECORDS_FAILED,
+    IDENTIFY_BASE_BYTES,
+    IDENTIFY_BYTES_PER_SAMPLE,
+    MEMORY_BUDGET_GB,
     add_allow_negative_force,
     add_allow_outside_paths,
     add_no_limits,
@@ -71,6 +74,12 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------
 # batch
 # ---------------------------------------------------------------------------------------------
+#: Longest record a batch identifies, in file lines (a line per sample, nearly): the samples
+#: whose identification ``workbench identify`` estimates within the memory budget. Checked
+#: per record before it is read, so one runaway record fails alone (failures.csv).
+BATCH_RECORD_LINES = int((MEMORY_BUDGET_GB * 1e9 - IDENTIFY_BASE_BYTES) / IDENTIFY_BYTES_PER_SAMPLE)
+
+
 def _cmd_batch(args: argparse.Namespace) -> int:
     from workbench.population.batch import run_batch
 
@@ -86,6 +95,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         progress=not args.json,
         allow_negative_force=args.allow_negative_force,
         allow_outside_paths=args.allow_outside_paths,
+        max_rows=None if args.no_limits else BATCH_RECORD_LINES,
+        budget=f"{MEMORY_BUDGET_GB:g} GB of memory",
     )
     obj = summary.to_json()
     lines = [
@@ -220,6 +231,7 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     add_rigid_floor_flag(p)
     add_allow_negative_force(p)
     add_allow_outside_paths(p)
+    add_no_limits(p)
     p.set_defaults(handler=_cmd_batch)
 
     p = sub.add_parser(

@@ -35,8 +35,8 @@ def parse_effect(text: str) -> Any:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from workbench.records.export import write_mot
-    from workbench.records.io import save_record
+    from workbench.records.export import mot_texts
+    from workbench.records.io import record_texts
 
     _resolve_gait(args)
     _check_simulate_args(args)
@@ -86,14 +86,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     record = sim.record.replace(metadata={**sim.record.metadata, "truth": truth})
     truth_path = out.with_name(out.stem + ".truth.json")
     if out.suffix.lower() == ".csv":
-        record_path, sidecar_path = save_record(record, out)
+        files = record_texts(record, out)
     else:
         sidecar = {"mass_kg": record.mass_kg, "pacing_hz": record.pacing_hz, "truth": truth}
-        record_path = write_mot(record, out, sidecar=sidecar)
-        sidecar_path = out.with_suffix(".json")
-    from workbench.fileutil import atomic_write_json
+        files = mot_texts(record, out, sidecar=sidecar)
+    record_path, sidecar_path = out, out.with_suffix(".json")
+    from workbench.fileutil import atomic_write_texts
 
-    atomic_write_json(truth_path, truth)
+    # The record, its sidecar and the truth together or not at all: a full disk must not
+    # leave a sidecar or a truth without its record.
+    files[truth_path] = json.dumps(truth, indent=2, allow_nan=False) + "\n"
+    atomic_write_texts(files)
     result = {
         "record": str(record_path),
         "sidecar": str(sidecar_path),

@@ -27,7 +27,7 @@ from workbench.datasets.catalogue import (
     names,
     synthetic_paths,
 )
-from workbench.errors import UsageError
+from workbench.errors import InputError, UsageError
 from workbench.records.io import load_record
 from workbench.records.record import Record
 
@@ -41,6 +41,7 @@ __all__ = [
     "load",
     "named",
     "names",
+    "require_record",
     "settings",
     "synthetic_paths",
 ]
@@ -91,6 +92,29 @@ def named(argument: object) -> str | None:
     if not isinstance(text, str) or Path(text).exists() or dataset_path(text) is None:
         return None
     return text
+
+
+def require_record(argument: str | os.PathLike[str]) -> None:
+    """Refuse a record argument that is neither a file nor an embedded record's name.
+
+    A bare word (no folder, no extension) that is no file is most likely a mistyped
+    embedded name, so the sentence lists the names; a path keeps the loader's own
+    "does not exist" sentence, which names the file.
+
+    Raises
+    ------
+    InputError
+        For a bare word that is no file and no embedded record.
+    """
+    path = Path(os.fspath(argument))
+    if path.exists() or named(argument) is not None or path.suffix or len(path.parts) != 1:
+        return
+    raise InputError(
+        str(argument),
+        "record",
+        "there is no file and no embedded record of that name",
+        f"give a record file, or one of the embedded records: {', '.join(names())}",
+    )
 
 
 def settings(name: str, **overrides: Any) -> Any:

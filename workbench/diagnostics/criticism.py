@@ -159,6 +159,7 @@ from workbench.models.effects import (
 )
 from workbench.models.smd import SURFACE_MODELS, SMDModel
 from workbench.records.record import Record
+from workbench.wording import p_value as p_text
 
 __all__ = [
     "BLOCK_STEPS",
@@ -463,8 +464,8 @@ def diagnose(
         p_value = _p_value(t, cv.dof)
         evidence = (
             f"{head}{stat_part}; adding it removes {100 * pooled:.1f} % "
-            f"(+- {100 * se:.1f} %) of the held-out squared error (one-sided p {p_value:.2g} "
-            f"over {data.n_steps} steps)"
+            f"(+- {100 * se:.1f} %) of the held-out squared error (one-sided p "
+            f"{p_text(p_value, 2)} over {data.n_steps} steps)"
         )
         results.append(
             _Draft(

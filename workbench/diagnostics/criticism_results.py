@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.diagnostics.criticism_data import CriticismData
+from workbench.wording import p_value
 
 __all__ = ["Candidate", "Comparison", "Diagnosis", "ScoreRow"]
 
@@ -166,6 +167,11 @@ class Diagnosis:
         baseline = {**self.baseline, **one_step.to_dict()}
         return dataclasses.replace(self, baseline=baseline, one_step=one_step)
 
+    @property
+    def candidates_by_score(self) -> tuple[Candidate, ...]:
+        """The candidates for reading: highest score first, those the record cannot test last."""
+        return tuple(sorted(self.candidates, key=lambda c: (not c.testable, -c.score)))
+
     def to_json(self) -> dict[str, Any]:
         """Return the JSON object of ``workbench diagnose``."""
         return {
@@ -182,7 +188,7 @@ class Diagnosis:
         lines = [
             f"Model criticism of {self.data.source}: {b['model']}",
             f"baseline held-out RMSE {b['heldout_rmse_n']:.3g} N, fit {b['fit_percent']:.1f} %, "
-            f"Ljung-Box p {b['ljung_box_p']:.3g} ({b['folds']} folds, {b['steps']} steps, "
+            f"Ljung-Box p {p_value(b['ljung_box_p'])} ({b['folds']} folds, {b['steps']} steps, "
             f"{b['harmonics']} harmonics)",
             "",
         ]
@@ -195,7 +201,7 @@ class Diagnosis:
                 f"{100 * c.separable_fraction:.1f} %",
                 c.headline,
             ]
-            for c in self.candidates
+            for c in self.candidates_by_score
         ]
         header = ["effect", "score", "se", "significant", "separable", "reason"]
         lines += _table(header, rows) if rows else ["(no candidates)"]
@@ -248,7 +254,7 @@ class Comparison(Sequence[ScoreRow]):
                 r.model,
                 f"{r.heldout_rmse_n:.3f}",
                 f"{r.fit_percent:.1f}",
-                f"{r.ljung_box_p:.3g}",
+                p_value(r.ljung_box_p),
                 f"{r.score:.3f}",
                 ""
                 if i == 0

@@ -259,10 +259,12 @@ class CrosscheckResult:
                 + ("; ".join(s.flags) if s.flags else "")
             )
         diag = self.diagnostics()
+        rhat = "n/a" if diag["rhat_max"] is None else f"{diag['rhat_max']:.3f}"
+        ess = "n/a" if diag["ess_bulk_min"] is None else f"{diag['ess_bulk_min']:.0f}"
         lines += [
             "",
             self.verdict(),
-            f"MCMC: R-hat max {diag['rhat_max']}, bulk ESS min {diag['ess_bulk_min']}, "
+            f"MCMC: R-hat max {rhat}, bulk ESS min {ess}, "
             f"{diag['converged_steps']} of {len(self.steps)} steps converged",
         ]
         return "\n".join(lines)
@@ -294,12 +296,45 @@ class CrosscheckResult:
         return r.mean[:2].copy(), r.cov[:2, :2].copy()
 
     def to_netcdf(self, path: str | Path) -> Path:
-        """Write the InferenceData to netCDF (atomically)."""
-        from workbench.fileutil import atomic_path
+        """Write the InferenceData to netCDF (atomically; see :func:`_netcdf_bytes`)."""
+        from workbench.fileutil import atomic_path, atomic_write_bytes
 
         if self.inference_data is None:
             raise UsageError("this cross-check kept no InferenceData (keep_inference_data=False)")
         path = Path(path)
-        with atomic_path(path) as tmp:
+        data = _netcdf_bytes(self.inference_data)
+        if data is not None:
+            atomic_write_bytes(path, data)
+            return path
+        with atomic_path(path) as tmp:  # an xarray without DataTree: HDF5 writes the disk
             self.inference_data.to_netcdf(str(tmp))
         return path
+
+
+def _netcdf_bytes(idata: Any) -> bytes | None:
+    """Return the bytes of ``idata.to_netcdf`` built in memory (None without xarray.DataTree).
+
+    HDF5 that meets a full disk mid-write prints its error stack, and the process may then
+    crash when the half-written file is closed; built in memory, the file reaches the disk
+    as bytes through the atomic writer, which turns a full disk into one sentence naming the
+    file. Same layout as ArviZ's own writer: the root attributes, then one group per
+    InferenceData group, numbers compressed with zlib.
+    """
+    import xarray as xr
+
+    if not hasattr(xr, "DataTree"):
+        return None
+    groups = list(idata._groups_all)  # ArviZ's order, warm-up groups included
+    tree = xr.DataTree.from_dict(
+        {"/": xr.Dataset(attrs=dict(idata._attrs or {}))}
+        | {f"/{group}": getattr(idata, group) for group in groups}
+    )
+    encoding = {
+        f"/{group}": {
+            name: {"zlib": True}
+            for name, values in getattr(idata, group).variables.items()
+            if values.dtype.kind in "biufc"
+        }
+        for group in groups
+    }
+    return bytes(tree.to_netcdf(None, engine="h5netcdf", encoding=encoding))

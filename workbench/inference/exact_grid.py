@@ -178,7 +178,11 @@ def _region_frame(
         evals, v = np.linalg.eigh(0.5 * (cov + cov.T))
     sd_axis = np.sqrt(np.maximum(evals, 1e-300))
     u = (grid.nodes[high] - mean) @ v
-    margin = np.sum(np.abs(v.T @ edges), axis=1)
+    # Two old cells of margin: the new lattice has other cells and another alignment, so a
+    # node just past the old high region can be high on it; with one cell the refinement
+    # chased such nodes from side to side on a posterior piled against a face (a leak on one
+    # side, then on the other) and stopped uncovered, depending on the last bit of rounding.
+    margin = 2.0 * np.sum(np.abs(v.T @ edges), axis=1)
     lo_u, hi_u = u.min(axis=0) - margin, u.max(axis=0) + margin
     if leaks.size:
         ul = (leaks - mean) @ v

@@ -57,6 +57,7 @@ from workbench.records.preprocess import COMResponse, preprocess
 from workbench.records.record import Record
 from workbench.records.steps import Steps
 from workbench.records.surface import surface_motion
+from workbench.wording import parameters_in_words, verb
 
 __all__ = ["compile_problem", "identify", "identify_problem"]
 
@@ -435,7 +436,8 @@ def downgrade_untrustworthy(result: IdentificationResult) -> IdentificationResul
         return result
     report = dict(result.identifiability)
     why = (
-        f"{' and '.join(bound)} sit at the edge of the prior box"
+        f"{parameters_in_words(bound)} {verb(len(bound), 'sits', 'sit')} at the edge of the "
+        "prior box"
         if bound
         else "the particle cloud collapsed"
     )

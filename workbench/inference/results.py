@@ -7,7 +7,15 @@ frequency, damping ratio, BLFs -- with posterior standard deviations and 95 % in
 it carries its own diagnostics: residuals, a Ljung-Box test of their serial correlation,
 particle degeneracy and frozen-parameter flags, and the identifiability report.
 
+A quantity the identifiability report grades not identified (C, K, and what rests on them)
+is withheld from every view -- ``params``, ``conf_int()``, ``summary()``, the JSON -- and its
+numbers are kept, named as the posterior given the prior box, for diagnosis.
+
 Plotting lives in :mod:`workbench.reporting`; this module only computes.
+
+Why this module is long: it is the one object every method returns, and all its views
+(statsmodels-like accessors, summary, JSON, netCDF, arviz) read the same grades here; split
+across modules, one view could print what another withholds.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ from workbench.inference.problem import IdentificationProblem
 from workbench.inference.weighted import _moments, weighted_quantile
 from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2
+from workbench.wording import count, p_value, parameters_in_words, verb
 
 if TYPE_CHECKING:
     import arviz
@@ -38,6 +47,20 @@ FloatArray = NDArray[np.float64]
 
 #: Keys of the scalar estimates, in report order (docs/contracts.md names).
 SCALAR_KEYS = ("stiffness_n_per_m", "damping_ns_per_m", "natural_frequency_hz", "damping_ratio")
+
+#: What each scalar is computed from: it is identified only when all of these are. The BLFs
+#: and the effects' parameters are the force given C and K, so they rest on both.
+RESTS_ON = {
+    "stiffness_n_per_m": ("stiffness",),
+    "damping_ns_per_m": ("damping",),
+    "natural_frequency_hz": ("stiffness",),
+    "damping_ratio": ("damping", "stiffness"),
+}
+FORCE_RESTS_ON = ("damping", "stiffness")
+
+#: The JSON key (and Python method) under which the numbers of quantities graded not
+#: identified are kept: they are the posterior given the prior box, not estimates.
+CONDITIONAL_KEY = "conditional_on_prior_box"
 
 #: A filter whose median ESS fraction falls below this is reported as degenerate: its
 #: weights stayed collapsed for most of the record. A single dip (the first informative
@@ -156,35 +179,117 @@ class IdentificationResult:
             out[k] = (float(lo), float(hi))
         return out
 
-    @property
-    def params(self) -> pd.Series:
-        """Posterior means: K, C, f_n, zeta, BLF1..n and the effects' parameters.
+    def _identified(self, what: str) -> bool:
+        # A result without an identifiability report was not graded: nothing is withheld.
+        return bool(self.identifiability.get(f"identified_{what}", True))
 
-        Effect parameters are named ``"effect.parameter"`` (``"gait_asymmetry.a_half_n"``).
+    def grade(self, key: str) -> str:
+        """How well the record identifies ``key`` (a name of :attr:`params`).
+
+        ``"not identified"`` when C or K that it rests on is graded not identified (K for K
+        and the natural frequency, C for C, both for the damping ratio, the BLFs and the
+        effects' parameters, which are the force given C and K); otherwise the worse level of
+        those it rests on (``"well identified"``, ``"weakly identified"``) or
+        ``"not assessed"``.
         """
+        rests = RESTS_ON.get(key, FORCE_RESTS_ON)
+        if not all(self._identified(w) for w in rests):
+            return "not identified"
+        levels = [self.identifiability.get(f"level_{w}") for w in rests]
+        if any(lv is None for lv in levels):
+            return "not assessed"
+        return "weakly identified" if "weakly identified" in levels else "well identified"
+
+    @property
+    def force_identified(self) -> bool:
+        """Whether C and K are both identified, so the BLFs and effects are estimates."""
+        return all(self._identified(w) for w in FORCE_RESTS_ON)
+
+    @property
+    def not_identified(self) -> list[str]:
+        """Names of :attr:`params` graded not identified (their numbers are no estimates)."""
+        return [k for k in self._all_params().index if self.grade(k) == "not identified"]
+
+    def prior_range(self, key: str) -> tuple[float, float]:
+        """Range the prior box allows for K, C, the natural frequency or the damping ratio."""
+        (c_lo, c_hi), (k_lo, k_hi) = (
+            self.problem.prior.damping_ns_per_m,
+            self.problem.prior.stiffness_n_per_m,
+        )
+        m = self.mass_kg
+        ranges = {
+            "stiffness_n_per_m": (k_lo, k_hi),
+            "damping_ns_per_m": (c_lo, c_hi),
+            "natural_frequency_hz": (
+                float(np.sqrt(k_lo / m) / (2 * np.pi)),
+                float(np.sqrt(k_hi / m) / (2 * np.pi)),
+            ),
+            # The box's corners: least damping on the stiffest walker and the reverse.
+            "damping_ratio": (
+                float(c_lo / (2 * np.sqrt(k_hi * m))),
+                float(c_hi / (2 * np.sqrt(max(k_lo, 1e-12) * m))),
+            ),
+        }
+        return ranges[key]
+
+    def _all_params(self) -> pd.Series:
         values = dict(self.estimates)
         values.update({f"blf{i}": float(b) for i, b in enumerate(self.blf, start=1)})
         for name, post in self._effect_posterior().items():
             values[name] = post["mean"]
         return pd.Series(values, name="estimate", dtype=float)
 
-    @property
-    def bse(self) -> pd.Series:
-        """Posterior standard deviations, indexed like :attr:`params`.
-
-        For the BLFs it is the standard error of the mean over steps.
-        """
+    def _all_bse(self) -> pd.Series:
         values = dict(self.posterior_sd)
         values.update({f"blf{i}": float(b) for i, b in enumerate(self.blf_sd, start=1)})
         for name, post in self._effect_posterior().items():
             values[name] = post["sd"]
         return pd.Series(values, name="sd", dtype=float)
 
+    def _all_conf_int(self, alpha: float) -> pd.DataFrame:
+        if not (0 < alpha < 1):
+            from workbench.errors import UsageError
+
+            raise UsageError(f"conf_int: alpha must be in (0, 1), got {alpha!r}")
+        from scipy.stats import norm
+
+        rows = {k: list(v) for k, v in self.interval(1.0 - alpha).items()}
+        z = float(norm.ppf(1.0 - alpha / 2.0))
+        params, bse = self._all_params(), self._all_bse()
+        for key in params.index:
+            if key not in rows:
+                rows[key] = [params[key] - z * bse[key], params[key] + z * bse[key]]
+        frame = pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper"])
+        return frame.loc[params.index]
+
+    @property
+    def params(self) -> pd.Series:
+        """Posterior means: K, C, f_n, zeta, BLF1..n and the effects' parameters.
+
+        Effect parameters are named ``"effect.parameter"`` (``"gait_asymmetry.a_half_n"``).
+        A quantity graded not identified (:meth:`grade`) is NaN: its number is the posterior
+        given the prior box, not an estimate, and is in :meth:`conditional_on_prior_box`.
+        """
+        out = self._all_params()
+        out[self.not_identified] = np.nan
+        return out
+
+    @property
+    def bse(self) -> pd.Series:
+        """Posterior standard deviations, indexed like :attr:`params` (NaN where it is).
+
+        For the BLFs it is the standard error of the mean over steps.
+        """
+        out = self._all_bse()
+        out[self.not_identified] = np.nan
+        return out
+
     def conf_int(self, alpha: float = 0.05) -> pd.DataFrame:
         """Posterior intervals at level ``1 - alpha``, indexed like :attr:`params`.
 
         Equal-tailed quantiles of the posterior draws for K, C, f_n and zeta; mean plus or
         minus the normal quantile times the standard error for the BLFs and the effects.
+        Rows graded not identified are NaN (see :meth:`conditional_on_prior_box`).
 
         Parameters
         ----------
@@ -196,20 +301,34 @@ class IdentificationResult:
         pandas.DataFrame
             Columns ``lower`` and ``upper``.
         """
-        if not (0 < alpha < 1):
-            from workbench.errors import UsageError
+        out = self._all_conf_int(alpha)
+        out.loc[self.not_identified] = np.nan
+        return out
 
-            raise UsageError(f"conf_int: alpha must be in (0, 1), got {alpha!r}")
-        from scipy.stats import norm
+    def conditional_on_prior_box(self, alpha: float = 0.05) -> pd.DataFrame:
+        """Return the numbers withheld from :attr:`params`: the posterior given the prior box.
 
-        rows = {k: list(v) for k, v in self.interval(1.0 - alpha).items()}
-        z = float(norm.ppf(1.0 - alpha / 2.0))
-        params, bse = self.params, self.bse
-        for key in params.index:
-            if key not in rows:
-                rows[key] = [params[key] - z * bse[key], params[key] + z * bse[key]]
-        frame = pd.DataFrame.from_dict(rows, orient="index", columns=["lower", "upper"])
-        return frame.loc[params.index]
+        For each quantity graded not identified, its posterior mean, sd and interval at level
+        ``1 - alpha``. They describe the prior box as much as the record (a posterior piled
+        at the box's edge, or one a misfitting force model moves by many sd), so they are no
+        estimates; they are kept to diagnose the fit. Empty when everything is identified.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns ``estimate``, ``sd``, ``lower``, ``upper``.
+        """
+        keys = self.not_identified
+        ci = self._all_conf_int(alpha).loc[keys]
+        return pd.DataFrame(
+            {
+                "estimate": self._all_params()[keys],
+                "sd": self._all_bse()[keys],
+                "lower": ci["lower"],
+                "upper": ci["upper"],
+            },
+            index=pd.Index(keys),
+        )
 
     def _effect_posterior(self) -> dict[str, dict[str, float]]:
         out: dict[str, dict[str, float]] = {}
@@ -402,7 +521,7 @@ class IdentificationResult:
         out = []
         if self.frozen_parameters:
             out.append(
-                f"{' and '.join(self.frozen_parameters)} froze: the particles hold at most "
+                f"{parameters_in_words(self.frozen_parameters)} froze: the particles hold at most "
                 f"{FROZEN_UNIQUE_VALUES} distinct values at the end, so the reported sd is not "
                 "a posterior sd; use more particles, jitter, or method rbpf/exact."
             )
@@ -417,7 +536,7 @@ class IdentificationResult:
             and self.static_parameters
         ):
             out.append(
-                f"all particles descend from {anc} initial particle(s): the filter lost its "
+                f"all particles descend from {count(anc, 'initial particle')}: the filter lost its "
                 "diversity, so the reported spread understates the uncertainty."
             )
         if self.degenerate:
@@ -428,9 +547,9 @@ class IdentificationResult:
         bound = self.parameters_at_prior_bound
         if bound:
             out.append(
-                f"{' and '.join(bound)} reach the edge of the prior box: the data push the "
-                "value outside the range the prior allows, so it is not an estimate and its "
-                "sd is not an uncertainty (check the model fit and the noise setting)."
+                f"{parameters_in_words(bound)} {verb(len(bound), 'reaches', 'reach')} the edge of "
+                "the prior box: the data push the value outside the range the prior allows, so it "
+                "is no estimate and its sd no uncertainty (check the model fit and noise setting)."
             )
         sentence = self.identifiability.get("sentence")
         level = self.identifiability.get("level")
@@ -446,12 +565,29 @@ class IdentificationResult:
             "pacing_hz": round(self.problem.pacing_hz, 5),
             "method": self.method,
         }
-        out.update({k: float(est[k]) for k in SCALAR_KEYS})
-        out["blf"] = [float(x) for x in self.blf]
-        out["posterior_sd"] = {k: float(sd[k]) for k in SCALAR_KEYS}
+        # What is graded not identified is null where estimates go; its numbers are kept
+        # under CONDITIONAL_KEY, named for what they are (the posterior given the prior box).
+        hidden = set(self.not_identified)
+        force_hidden = not self.force_identified
+        conditional: dict[str, Any] = {}
+        out.update({k: None if k in hidden else float(est[k]) for k in SCALAR_KEYS})
+        blf = [float(x) for x in self.blf]
         # One piece has no step-to-step spread: null, not NaN, which strict JSON lacks.
-        out["posterior_sd"]["blf"] = [float(x) if np.isfinite(x) else None for x in self.blf_sd]
-        out["interval_95"] = {k: list(ci[k]) for k in SCALAR_KEYS}
+        blf_sd = [float(x) if np.isfinite(x) else None for x in self.blf_sd]
+        out["blf"] = None if force_hidden else blf
+        out["posterior_sd"] = {k: None if k in hidden else float(sd[k]) for k in SCALAR_KEYS}
+        out["posterior_sd"]["blf"] = None if force_hidden else blf_sd
+        out["interval_95"] = {k: None if k in hidden else list(ci[k]) for k in SCALAR_KEYS}
+        for k in SCALAR_KEYS:
+            if k in hidden:
+                conditional[k] = {
+                    "estimate": float(est[k]),
+                    "posterior_sd": float(sd[k]),
+                    "interval_95": list(ci[k]),
+                    "prior_range": list(self.prior_range(k)),
+                }
+        if force_hidden:
+            conditional["blf"] = {"estimate": blf, "posterior_sd": blf_sd}
         out["identifiability"] = self.identifiability
         out["steps"] = int(self.problem.n_pieces)
         out["harmonics"] = int(self.problem.harmonics)
@@ -470,19 +606,46 @@ class IdentificationResult:
         }
         out["warnings"] = self.warnings
         out["settings"] = self.settings
-        for key in ("surface", "effects"):
-            if key in self.extra:
-                out[key] = self.extra[key]
+        if "surface" in self.extra:
+            out["surface"] = self._surface_json(hidden)
+        if "effects" in self.extra:
+            out["effects"] = None if force_hidden else self.extra["effects"]
+            if force_hidden:
+                conditional["effects"] = self.extra["effects"]
+        out[CONDITIONAL_KEY] = conditional
         return out
 
+    def _surface_json(self, hidden: set[str]) -> dict[str, Any]:
+        """Return the surface report without its copy of numbers that are not identified.
+
+        When C and K came from the deck's transmissibility, its ``transmissibility`` block
+        is that same posterior; graded not identified, its numbers go the way of the
+        result's (null, kept under ``conditional_on_prior_box``).
+        """
+        surface = dict(self.extra["surface"])
+        frf = surface.get("transmissibility")
+        if not hidden or surface.get("c_and_k_from") != "transmissibility" or not frf:
+            return surface
+        frf = dict(frf)
+        for block in ("estimates", "posterior_sd", "interval_95"):
+            if isinstance(frf.get(block), dict):
+                frf[block] = {k: None if k in hidden else v for k, v in frf[block].items()}
+        surface["transmissibility"] = frf
+        return surface
+
     def summary(self) -> str:
-        """Return a text table of the estimates with posterior sd and 95 % intervals."""
+        """Return a text table of the estimates with posterior sd and 95 % intervals.
+
+        A quantity graded not identified shows no number: the row says so and gives the range
+        the prior box allows, named as such. Weakly identified ones keep their numbers with
+        the grade after them.
+        """
         est, sd, ci = self.estimates, self.posterior_sd, self.interval()
         p = self.problem
         lines = [
             f"SMD identification ({self.method}) of {p.source}",
-            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, {p.n_pieces} pieces "
-            f"({p.time_basis} basis, n = {p.harmonics}), noise {self.noise.get('label', '')}",
+            f"mass {self.mass_kg:.1f} kg, pacing {p.pacing_hz:.3f} Hz, {count(p.n_pieces, 'piece')}"
+            f" ({p.time_basis} basis, n = {p.harmonics}), noise {self.noise.get('label', '')}",
             "",
             f"{'parameter':<24}{'estimate':>12}{'sd':>12}{'95 % interval':>26}",
         ]
@@ -494,22 +657,44 @@ class IdentificationResult:
         }
         for key in SCALAR_KEYS:
             label, f = fmt[key]
+            grade = self.grade(key)
+            if grade == "not identified":
+                lo, hi = self.prior_range(key)
+                lines.append(
+                    f"{label:<24}{'not identified':>24}   prior range {f.format(lo)} to "
+                    f"{f.format(hi)}"
+                )
+                continue
             lo, hi = ci[key]
             lines.append(
                 f"{label:<24}{f.format(est[key]):>12}{f.format(sd[key]):>12}"
                 f"{'[' + f.format(lo) + ', ' + f.format(hi) + ']':>26}"
+                + ("   weakly identified" if grade == "weakly identified" else "")
             )
-        for i, (b, s) in enumerate(zip(self.blf[:5], self.blf_sd[:5], strict=True), start=1):
-            lines.append(f"{'BLF' + str(i):<24}{b:>12.3f}{s:>12.3f}")
+        if not self.force_identified:
+            lines.append(
+                f"{'BLFs':<24}{'not identified':>24}   the force given C and K, so conditional "
+                "on them"
+            )
+        else:
+            for i, (b, s) in enumerate(zip(self.blf[:5], self.blf_sd[:5], strict=True), start=1):
+                lines.append(f"{'BLF' + str(i):<24}{b:>12.3f}{s:>12.3f}")
         lb = self.test_serial_correlation()
+        sentence = self.identifiability.get("sentence", "not assessed")  # not again as a warning
         lines += [
             "",
-            f"identifiability: {self.identifiability.get('sentence', 'not assessed')}",
+            f"identifiability: {sentence}",
             *([f"surface: {self.extra['surface']['sentence']}"] if "surface" in self.extra else []),
             f"log-likelihood {self.loglik:.2f}; Ljung-Box p of GRF residuals "
-            f"{float(lb['lb_pvalue'].iloc[0]):.3g} at lag {int(lb.index[0])}",
+            f"{p_value(float(lb['lb_pvalue'].iloc[0]))} at lag {int(lb.index[0])}",
         ]
-        lines += [f"warning: {w}" for w in self.warnings]
+        if self.not_identified:
+            lines.append(
+                "Quantities not identified show no number: theirs are the posterior given the "
+                "prior box, not estimates, and are kept for diagnosis under "
+                f"{CONDITIONAL_KEY} (JSON and Python)."
+            )
+        lines += [f"warning: {w}" for w in self.warnings if w != sentence]
         return "\n".join(lines)
 
     def to_inference_data(self, n_draws: int | None = None) -> arviz.InferenceData:

@@ -26,6 +26,14 @@ Resume: records with a ``done`` file are skipped; failed records are tried again
 is cheap, and the file may have been fixed in between). Leftover temporary files of a killed
 run are ignored and removed.
 
+Lock: a run holds an exclusive lock on ``OUT/.batch.lock`` (:func:`batch_lock`) for its whole
+life, so a second run on the same folder is refused in one sentence, and the leftover
+temporary files are removed only while holding it (they cannot be a live run's).
+
+Paths: every file names a record as the manifest does, from the manifest's folder, and
+``batch.json`` names the manifest from the output folder, so the same batch started from
+another folder, or with the manifest's path typed otherwise, writes the same bytes.
+
 Execution: in this process for one worker; a local process pool (``spawn`` start method, so
 no state leaks from the parent) for more; a Dask distributed cluster when a scheduler
 address is given (``dask[distributed]``, the ``dask`` extra). The parent writes every
@@ -41,6 +49,7 @@ estimate, as ``workbench identify`` does.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -49,7 +58,7 @@ import os
 import re
 import time
 import warnings
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -57,10 +66,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from workbench.errors import InputError, UsageError, WorkbenchError
+from workbench.errors import InputError, OutputError, UsageError, WorkbenchError
 from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json
 from workbench.inference.settings import IdentifySettings
+from workbench.records.text_table import FILE_MISSING, file_problem
 
 __all__ = [
     "FAILURE_COLUMNS",
@@ -123,6 +133,14 @@ class BatchTask:
         What a sensitivity design point changes beyond the settings
         (:class:`~workbench.sensitivity.design.Overrides`): applied through the problem
         hooks of :func:`~workbench.inference.identify.identify`.
+    max_rows : int or None
+        Longest record, in file lines, identified; a longer one fails before it is read
+        (None: no limit).
+    budget : str
+        What ``max_rows`` comes from, in words, for the failure's sentence.
+    folder : str
+        The manifest's folder as given (``file`` starts with it); messages name the record
+        from the manifest's folder instead, so they do not depend on the current folder.
     """
 
     key: str
@@ -135,6 +153,9 @@ class BatchTask:
     settings: dict[str, Any] = field(default_factory=dict)
     allow_negative_force: bool = False
     overrides: Any = None
+    max_rows: int | None = None
+    budget: str = ""
+    folder: str = ""
 
 
 @dataclass
@@ -289,15 +310,7 @@ def run_task(task: BatchTask) -> dict[str, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            if not Path(task.file).exists():
-                # The loader's own message would send the user to the current folder.
-                raise InputError(
-                    task.path,
-                    "whole file",
-                    "the record file does not exist",
-                    "check the manifest's path column (relative paths start from the "
-                    "manifest's folder)",
-                )
+            _check_record_file(task)
             record = load_record(
                 task.file,
                 mass_kg=task.mass_kg,
@@ -319,12 +332,143 @@ def run_task(task: BatchTask) -> dict[str, Any]:
             out["row"] = result_row(result, task.path, record.subject, task.seed)
             out["status"] = "done"
         except WorkbenchError as err:
-            out.update(status="failed", reason=str(err))
+            out.update(status="failed", reason=_as_in_manifest(str(err), task))
         except Exception as err:  # one bad record must not stop the batch
-            out.update(status="failed", reason=f"internal error ({type(err).__name__}: {err})")
-    out["warnings"] = sorted({str(w.message) for w in caught})
+            reason = f"internal error ({type(err).__name__}: {err})"
+            out.update(status="failed", reason=_as_in_manifest(reason, task))
+    out["warnings"] = sorted({_as_in_manifest(str(w.message), task) for w in caught})
     out["elapsed_s"] = round(time.perf_counter() - start, 3)
     return out
+
+
+#: The lock file of a batch folder (:func:`batch_lock`).
+LOCK_NAME = ".batch.lock"
+
+
+@contextlib.contextmanager
+def batch_lock(out: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the batch folder ``out`` (created if needed) while in the block.
+
+    The lock is the system's (``flock``) on ``out/.batch.lock``, so it is released when the
+    run ends in any way, a kill -9 included, and a stale lock file locks nothing. On systems
+    without ``fcntl`` (Windows) no lock is taken.
+
+    Raises
+    ------
+    UsageError
+        When another run holds the folder.
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not on POSIX
+        yield
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / LOCK_NAME
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as err:
+        raise OutputError(path, err) from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise UsageError(
+                f"the output folder {out} is in use by another batch that is still running; "
+                "wait until it ends, or choose another folder"
+            ) from None
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _manifest_from(out: Path, manifest: str | os.PathLike[str]) -> str:
+    """Return the manifest's path from the output folder (the same from any current folder)."""
+    try:
+        return Path(os.path.relpath(Path(manifest).absolute(), out.absolute())).as_posix()
+    except ValueError:  # another drive (Windows)
+        return Path(manifest).absolute().as_posix()
+
+
+def _as_in_manifest(text: str, task: BatchTask) -> str:
+    """Name the record's files in ``text`` as the manifest does, from the manifest's folder.
+
+    The loader names the file it opened, which starts with the manifest's folder as typed on
+    the command line (``../study/``, an absolute path ...); the batch's files must not depend
+    on where it was started from.
+    """
+    folder = task.folder
+    if not folder or folder == "." or Path(task.path).is_absolute():
+        return text
+    for sep in sorted({os.sep, "/"}):
+        # Only where a path starts (after a space, a quote or a bracket), so that a
+        # folder of the same name deeper in a path is kept.
+        prefix = re.escape(folder.rstrip(sep) + sep)
+        text = re.sub(rf"(?<![^\s'\"(]){prefix}", "", text)
+    return text
+
+
+def _check_record_file(task: BatchTask) -> None:
+    """Refuse a record that cannot be read, or is too long to identify, before reading it.
+
+    A pipe would hang the worker and ``/dev/zero`` would fill its memory; a record of
+    millions of rows would take the worker's memory and hours. Its rows are counted by
+    streaming the file (nothing held), and the identification's memory is estimated from
+    them as ``workbench identify`` estimates it from the samples.
+    """
+    problem = file_problem(task.file)
+    if problem == FILE_MISSING:
+        # The loader's own message would send the user to the current folder.
+        raise InputError(
+            task.path,
+            "whole file",
+            "the record file does not exist",
+            "check the manifest's path column (relative paths start from the manifest's folder)",
+        )
+    if problem is not None:
+        raise InputError(
+            task.path, "whole file", problem, "list a record file saved on disk in the manifest"
+        )
+    if task.max_rows is None:
+        return
+    rows = _count_lines(task.file, stop_after=task.max_rows)
+    if rows > task.max_rows:
+        raise InputError(
+            task.path,
+            "whole file",
+            f"the record has more than {task.max_rows:,} lines, more than the batch "
+            f"identifies within its per-record budget of {task.budget}",
+            "split it into shorter records, or run the batch with --no-limits",
+        )
+
+
+def _count_lines(path: str, *, stop_after: int) -> int:
+    """Count the lines of a file in 1 MiB chunks, stopping once past ``stop_after``."""
+    lines = 0
+    with open(path, "rb") as handle:
+        while chunk := handle.read(1 << 20):
+            lines += chunk.count(b"\n")
+            if lines > stop_after:
+                break
+    return lines
+
+
+def _file_seed(base_seed: int, path: str, file: Path) -> int:
+    """:func:`record_seed` of a record file, read in chunks; only regular files are read."""
+    if file_problem(file) is not None:
+        return record_seed(base_seed, path, None)
+    h = hashlib.sha256()
+    h.update(str(int(base_seed)).encode())
+    h.update(b"\0")
+    h.update(path.encode("utf-8"))
+    h.update(b"\0")
+    try:
+        with open(file, "rb") as handle:
+            while chunk := handle.read(1 << 20):
+                h.update(chunk)
+    except OSError:
+        return record_seed(base_seed, path, None)
+    return int.from_bytes(h.digest()[:4], "little")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -367,6 +511,8 @@ def run_batch(
     allow_negative_force: bool = False,
     allow_outside_paths: bool = False,
     overrides: Any = None,
+    max_rows: int | None = None,
+    budget: str = "",
 ) -> BatchSummary:
     """Identify every record of a manifest (see the module docstring for the files).
 
@@ -400,6 +546,12 @@ def run_batch(
         A sensitivity design point's changes beyond the settings
         (:class:`~workbench.sensitivity.design.Overrides`), for every record; stored with the
         settings, so ``resume`` refuses to mix them.
+    max_rows : int, optional
+        Per-record budget: a record file of more lines fails (its row in ``failures.csv``)
+        before it is read; None for no limit.
+    budget : str, optional
+        Where ``max_rows`` comes from, in words (``"2 GB of memory"``), quoted in the
+        failure's sentence.
 
     Returns
     -------
@@ -424,119 +576,122 @@ def run_batch(
     settings_json = dict(task_settings)
     if overrides is not None:
         settings_json["overrides"] = dataclasses.asdict(overrides)
-    meta = {"manifest": str(manifest), "settings": settings_json}
-    if meta_path.exists() or (rec_dir.exists() and any(rec_dir.glob("*.json"))):
-        if not resume:
-            raise UsageError(
-                f"the output folder {out} already holds a batch; pass 'resume' to continue it, "
-                "or choose an empty folder",
-                parameter="resume",
-            )
-        old = _read_json(meta_path)
-        # Compare as JSON reads it back (tuples become lists, for example).
-        stored_form = json.loads(json.dumps(_clean_json(settings_json)))
-        if old is not None and old.get("settings") != stored_form:
-            raise UsageError(
-                f"'resume': the batch in {out} was run with other identification settings; "
-                "use the same settings, or a new output folder",
-                parameter="resume",
-            )
-    rec_dir.mkdir(parents=True, exist_ok=True)
-    time_dir.mkdir(exist_ok=True)
-    for folder in (rec_dir, time_dir):
-        for stale in folder.glob(".*.tmp"):  # a killed run's half-written file
-            stale.unlink(missing_ok=True)
-    atomic_write_json(meta_path, _clean_json(meta))
+    meta = {"manifest": _manifest_from(out, manifest), "settings": settings_json}
+    # Held for the whole run: a second run on the folder (with --resume, or a fresh one
+    # while the first has written nothing yet) is refused instead of mixing files, and the
+    # temporary files removed below cannot be a live run's.
+    with batch_lock(out):
+        if meta_path.exists() or (rec_dir.exists() and any(rec_dir.glob("*.json"))):
+            if not resume:
+                raise UsageError(
+                    f"the output folder {out} already holds a batch; pass 'resume' to continue it, "
+                    "or choose an empty folder",
+                    parameter="resume",
+                )
+            old = _read_json(meta_path)
+            # Compare as JSON reads it back (tuples become lists, for example).
+            stored_form = json.loads(json.dumps(_clean_json(settings_json)))
+            if old is not None and old.get("settings") != stored_form:
+                raise UsageError(
+                    f"'resume': the batch in {out} was run with other identification settings; "
+                    "use the same settings, or a new output folder",
+                    parameter="resume",
+                )
+        rec_dir.mkdir(parents=True, exist_ok=True)
+        time_dir.mkdir(exist_ok=True)
+        for folder in (rec_dir, time_dir):
+            for stale in folder.glob(".*.tmp"):  # a killed run's half-written file
+                stale.unlink(missing_ok=True)
+        atomic_write_json(meta_path, _clean_json(meta))
 
-    manifest_dir = Path(manifest).parent
-    tasks: list[BatchTask] = []
-    skipped = 0
-    keys: dict[str, str] = {}
-    for e in entries:
+        manifest_dir = Path(manifest).parent
+        tasks: list[BatchTask] = []
+        skipped = 0
+        keys: dict[str, str] = {}
+        for e in entries:
+            try:
+                rel = e.path.relative_to(manifest_dir).as_posix()
+            except ValueError:
+                rel = e.path.as_posix()
+            key = _key(rel)
+            keys[rel] = key
+            if resume:
+                prev = _read_json(rec_dir / f"{key}.json")
+                if prev is not None and prev.get("status") == "done":
+                    skipped += 1
+                    continue
+            tasks.append(
+                BatchTask(
+                    key=key,
+                    path=rel,
+                    file=str(e.path),
+                    mass_kg=e.mass_kg,
+                    pacing_hz=e.pacing_hz,
+                    subject=e.subject,
+                    seed=_file_seed(settings.seed, rel, e.path),
+                    settings=task_settings,
+                    allow_negative_force=allow_negative_force,
+                    overrides=overrides,
+                    max_rows=max_rows,
+                    budget=budget,
+                    folder=str(manifest_dir),
+                )
+            )
+
+        results: Iterable[dict[str, Any]] = run_tasks(
+            run_task,
+            tasks,
+            workers=min(int(workers), max(len(tasks), 1)),
+            scheduler=scheduler,
+            keys=[f"workbench-batch-{t.key}" for t in tasks],
+        )
+        done = 0
+        bar = tqdm(total=len(tasks), desc="batch", unit="record", disable=not progress)
         try:
-            rel = e.path.relative_to(manifest_dir).as_posix()
-        except ValueError:
-            rel = e.path.as_posix()
-        key = _key(rel)
-        keys[rel] = key
-        if resume:
-            prev = _read_json(rec_dir / f"{key}.json")
-            if prev is not None and prev.get("status") == "done":
-                skipped += 1
+            for res in results:
+                timing = {"path": res["path"], "status": res["status"]}
+                timing["elapsed_s"] = res.pop("elapsed_s")
+                atomic_write_json(rec_dir / f"{res['key']}.json", _clean_json(res))
+                atomic_write_json(time_dir / f"{res['key']}.json", _clean_json(timing))
+                done += res["status"] == "done"
+                bar.update(1)
+                if on_record is not None:
+                    on_record(res)
+        finally:
+            bar.close()
+
+        rows: list[dict[str, Any]] = []
+        failures: list[dict[str, str]] = []
+        timings: list[dict[str, Any]] = []
+        for rel in sorted(keys):
+            stored = _read_json(rec_dir / f"{keys[rel]}.json")
+            if stored is None:
+                failures.append({"path": rel, "reason": "no result was written (interrupted?)"})
                 continue
-        try:
-            content: bytes | None = e.path.read_bytes()
-        except OSError:
-            content = None
-        tasks.append(
-            BatchTask(
-                key=key,
-                path=rel,
-                file=str(e.path),
-                mass_kg=e.mass_kg,
-                pacing_hz=e.pacing_hz,
-                subject=e.subject,
-                seed=record_seed(settings.seed, rel, content),
-                settings=task_settings,
-                allow_negative_force=allow_negative_force,
-                overrides=overrides,
+            if stored.get("status") == "done":
+                rows.append(stored["row"])
+            else:
+                failures.append({"path": rel, "reason": str(stored.get("reason", "unknown"))})
+            timing = _read_json(time_dir / f"{keys[rel]}.json") or {}
+            timings.append(
+                {
+                    "path": rel,
+                    "status": stored.get("status"),
+                    # A batch of an earlier version kept the time in the record's file.
+                    "elapsed_s": timing.get("elapsed_s", stored.get("elapsed_s", math.nan)),
+                }
             )
+        table = pd.DataFrame(rows, columns=list(RESULT_COLUMNS))
+        _write_csv(out / "results.csv", table)
+        _write_csv(out / "failures.csv", pd.DataFrame(failures, columns=list(FAILURE_COLUMNS)))
+        _write_csv(out / "timings.csv", pd.DataFrame(timings, columns=list(TIMING_COLUMNS)))
+        return BatchSummary(
+            done=done,
+            failed=len(failures),
+            skipped=skipped,
+            results_csv=out / "results.csv",
+            failures_csv=out / "failures.csv",
+            timings_csv=out / "timings.csv",
+            elapsed_s=time.perf_counter() - t0,
+            failures=failures,
         )
-
-    results: Iterable[dict[str, Any]] = run_tasks(
-        run_task,
-        tasks,
-        workers=min(int(workers), max(len(tasks), 1)),
-        scheduler=scheduler,
-        keys=[f"workbench-batch-{t.key}" for t in tasks],
-    )
-    done = 0
-    bar = tqdm(total=len(tasks), desc="batch", unit="record", disable=not progress)
-    try:
-        for res in results:
-            timing = {"path": res["path"], "status": res["status"]}
-            timing["elapsed_s"] = res.pop("elapsed_s")
-            atomic_write_json(rec_dir / f"{res['key']}.json", _clean_json(res))
-            atomic_write_json(time_dir / f"{res['key']}.json", _clean_json(timing))
-            done += res["status"] == "done"
-            bar.update(1)
-            if on_record is not None:
-                on_record(res)
-    finally:
-        bar.close()
-
-    rows: list[dict[str, Any]] = []
-    failures: list[dict[str, str]] = []
-    timings: list[dict[str, Any]] = []
-    for rel in sorted(keys):
-        stored = _read_json(rec_dir / f"{keys[rel]}.json")
-        if stored is None:
-            failures.append({"path": rel, "reason": "no result was written (interrupted?)"})
-            continue
-        if stored.get("status") == "done":
-            rows.append(stored["row"])
-        else:
-            failures.append({"path": rel, "reason": str(stored.get("reason", "unknown"))})
-        timing = _read_json(time_dir / f"{keys[rel]}.json") or {}
-        timings.append(
-            {
-                "path": rel,
-                "status": stored.get("status"),
-                # A batch of an earlier version kept the time in the record's file.
-                "elapsed_s": timing.get("elapsed_s", stored.get("elapsed_s", math.nan)),
-            }
-        )
-    table = pd.DataFrame(rows, columns=list(RESULT_COLUMNS))
-    _write_csv(out / "results.csv", table)
-    _write_csv(out / "failures.csv", pd.DataFrame(failures, columns=list(FAILURE_COLUMNS)))
-    _write_csv(out / "timings.csv", pd.DataFrame(timings, columns=list(TIMING_COLUMNS)))
-    return BatchSummary(
-        done=done,
-        failed=len(failures),
-        skipped=skipped,
-        results_csv=out / "results.csv",
-        failures_csv=out / "failures.csv",
-        timings_csv=out / "timings.csv",
-        elapsed_s=time.perf_counter() - t0,
-        failures=failures,
-    )

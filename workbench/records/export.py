@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import UsageError
-from workbench.fileutil import atomic_write_text
+from workbench.fileutil import atomic_write_texts
 from workbench.records.record import Record
 
-__all__ = ["write_mot"]
+__all__ = ["mot_texts", "write_mot"]
 
 _COMPONENTS = ("vx", "vy", "vz", "px", "py", "pz")
 
@@ -29,6 +29,32 @@ def write_mot(
     record: Record, path: str | os.PathLike[str], *, sidecar: dict[str, Any] | None = None
 ) -> Path:
     """Write a record as an OpenSim ``.mot`` file (and optionally a JSON sidecar).
+
+    Both files are written, or neither (:func:`mot_texts`,
+    :func:`workbench.fileutil.atomic_write_texts`).
+
+    Parameters
+    ----------
+    record : Record
+        The record.
+    path : path-like
+        Target path ending in ``.mot``.
+    sidecar : dict, optional
+        Metadata written to the same path with ``.json`` (mass, truth, ...).
+
+    Returns
+    -------
+    Path
+        The ``.mot`` path.
+    """
+    atomic_write_texts(mot_texts(record, path, sidecar=sidecar))
+    return Path(path)
+
+
+def mot_texts(
+    record: Record, path: str | os.PathLike[str], *, sidecar: dict[str, Any] | None = None
+) -> dict[Path, str]:
+    """Return the files :func:`write_mot` writes: the sidecar (if any), then the ``.mot``.
 
     Parameters
     ----------
@@ -41,8 +67,8 @@ def write_mot(
 
     Returns
     -------
-    Path
-        The ``.mot`` path.
+    dict
+        Path -> text, in the order the files are moved into place.
     """
     path = Path(path)
     if path.suffix.lower() != ".mot":
@@ -71,6 +97,8 @@ def write_mot(
         "\t".join(names),
     ]
     body = "\n".join("\t".join(repr(float(x)) for x in row) for row in table)
+    files = {}
     if sidecar is not None:
-        atomic_write_text(path.with_suffix(".json"), json.dumps(sidecar, indent=2) + "\n")
-    return atomic_write_text(path, "\n".join(header) + "\n" + body + "\n")
+        files[path.with_suffix(".json")] = json.dumps(sidecar, indent=2) + "\n"
+    files[path] = "\n".join(header) + "\n" + body + "\n"
+    return files

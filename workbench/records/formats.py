@@ -363,27 +363,40 @@ def _read_insole(p: Path, source: str) -> _Table:
     return _Table(arrays, metadata)
 
 
+def _plate_sign(vertical: FloatArray) -> float:
+    """+1 or -1: the sign that makes a platform's vertical force the force on the person.
+
+    Platforms report the force the person exerts on the plate (pointing down) in some labs
+    and the reaction (pointing up) in others, and a platform whose corners are listed the
+    other way round has its axes turned over. The person pushes down, so the force on the
+    person points up at the platform's largest load: its sign there decides.
+    """
+    if vertical.size == 0 or not np.any(vertical):
+        return 1.0
+    peak = vertical[int(np.argmax(np.abs(vertical)))]
+    return -1.0 if peak < 0.0 else 1.0
+
+
 def _read_c3d(p: Path, source: str) -> _Table:
+    """Read the force platforms of a C3D file (docs/contracts.md, "C3D").
+
+    The vertical GRF is the global z component of every platform's force (ezc3d turns each
+    platform's force into the laboratory's frame with the platform's corners), each platform
+    turned to the force on the person (:func:`_plate_sign`), summed, on the analog clock.
+    """
     try:
-        import ezc3d  # optional extra, imported only when a C3D file is read
+        import ezc3d  # noqa: F401 - optional extra, imported only when a C3D file is read
     except ImportError:
         raise UsageError(
             f"reading the C3D file {source} needs the optional package ezc3d; install it with "
             "pip install 'workbench[c3d]'"
         ) from None
-    try:
-        c3d = ezc3d.c3d(str(p), extract_forceplat_data=True)
-        platforms = list(c3d["data"]["platform"])
-        analog_rate = float(c3d["header"]["analogs"]["frame_rate"])
-        point_rate = float(c3d["header"]["points"]["frame_rate"])
-        first_frame = int(c3d["header"]["points"]["first_frame"])
-    except Exception as exc:  # ezc3d raises plain RuntimeErrors for damaged files
-        raise InputError(
-            source,
-            "whole file",
-            f"ezc3d could not read the force platforms ({type(exc).__name__})",
-            "check that this is a C3D file with force platform data",
-        ) from None
+    from workbench.records.c3d_file import read_force_platforms
+
+    read = read_force_platforms(str(p), source)
+    platforms: list[FloatArray] = read["forces"]
+    analog_rate, point_rate = read["analog_rate"], read["point_rate"]
+    first_frame = read["first_frame"]
     if not platforms:
         raise InputError(
             source,
@@ -395,10 +408,19 @@ def _read_c3d(p: Path, source: str) -> _Table:
         raise InputError(
             source, "header", f"the analog rate {analog_rate!r} Hz is not valid", "repair the file"
         )
-    vertical: list[FloatArray] = []
-    for k, platform in enumerate(platforms, start=1):
-        force = np.asarray(platform["force"], dtype=np.float64)
-        unit = str(platform.get("unit_force", "N")).strip()
+    if not (math.isfinite(point_rate) and point_rate > 0):
+        raise InputError(
+            source, "header", f"the point rate {point_rate!r} Hz is not valid", "repair the file"
+        )
+    forces: list[FloatArray] = []
+    units: list[str] = []
+    for k, (force, stated, labelled) in enumerate(
+        zip(platforms, read["channel_units"], read["unit_force"], strict=True), start=1
+    ):
+        # The Fz channel's own unit when it names a force unit; else ezc3d's label.
+        known = stated is not None and _FORCE_UNIT_NAMES.get(stated.lower()) is not None
+        unit = stated if known else labelled.strip()
+        units.append(unit)
         factor = FORCE_UNITS.get(_FORCE_UNIT_NAMES.get(unit.lower(), ""), None)
         if factor is None:
             raise InputError(
@@ -414,8 +436,8 @@ def _read_c3d(p: Path, source: str) -> _Table:
                 f"the force data have shape {force.shape}, not 3 x samples",
                 "check the force platform parameters of the file",
             )
-        vertical.append(force[2] * factor)
-    lengths = {v.size for v in vertical}
+        forces.append(force[:3] * factor)
+    lengths = {f.shape[1] for f in forces}
     if len(lengths) != 1:
         raise InputError(
             source,
@@ -423,19 +445,39 @@ def _read_c3d(p: Path, source: str) -> _Table:
             f"the platforms have different numbers of samples ({sorted(lengths)})",
             "check the analog channels of the file",
         )
+    # The body's weight is carried by the vertical axis: z must carry more force than x or y
+    # (a file in a y-up frame would otherwise give a horizontal force as the GRF).
+    carried = np.sum([np.mean(np.abs(f), axis=1) for f in forces], axis=0)
+    if np.all(np.isfinite(carried)) and carried[2] < np.max(carried):
+        axis = "xyz"[int(np.argmax(carried))]
+        raise InputError(
+            source,
+            "force platforms",
+            f"the platforms' z axis carries less force than their {axis} axis, so z is not "
+            "vertical in this file's frame (the workbench reads the laboratory's z as vertical)",
+            "export the trial with the laboratory's z axis pointing up",
+        )
+    signs = [_plate_sign(f[2]) for f in forces]
+    vertical = [sign * f[2] for sign, f in zip(signs, forces, strict=True)]
     n = vertical[0].size
-    # Analog samples run at analog_rate from the first point frame: one common time base.
+    # Analog samples run at analog_rate from the first point frame (ezc3d counts frames from
+    # 0): one common time base, frame 0 at 0 s.
     time_s = first_frame / point_rate + np.arange(n, dtype=np.float64) / analog_rate
     total = np.sum(vertical, axis=0)
     warnings: list[str] = []
-    sign = 1.0
-    if n and float(np.mean(total)) < 0.0:
-        sign = -1.0
-        warnings.append(
-            "The C3D platforms report the force on the plate (negative upwards), so its sign "
-            "was flipped to the force on the person."
+    flipped = [k for k, sign in enumerate(signs, start=1) if sign < 0]
+    if flipped:
+        which = (
+            "The C3D platforms report"
+            if len(flipped) == len(signs)
+            else f"C3D platform{'s' if len(flipped) > 1 else ''} "
+            f"{', '.join(str(k) for k in flipped)} of {len(signs)} report"
         )
-    arrays: dict[str, FloatArray] = {"time_s": time_s, "grf_n": sign * total}
+        warnings.append(
+            f"{which} the force on the plate (negative upwards), so its sign was flipped to "
+            "the force on the person."
+        )
+    arrays: dict[str, FloatArray] = {"time_s": time_s, "grf_n": total}
     column_labels = {"time_s": "analog time base", "grf_n": "sum of platform Fz"}
     metadata: dict[str, Any] = {
         "c3d": {
@@ -443,12 +485,16 @@ def _read_c3d(p: Path, source: str) -> _Table:
             "analog_rate_hz": analog_rate,
             "point_rate_hz": point_rate,
             "first_frame": first_frame,
-            "vertical_sign": sign,
+            "vertical_axis": "z",
+            "force_units": units,
+            "vertical_sign": signs[0] if len(set(signs)) == 1 else None,
+            "vertical_signs": signs,
+            "body_mass_kg": read["body_mass_kg"],
         }
     }
     if len(vertical) == 2:
-        arrays["grf_left_n"] = sign * vertical[0]
-        arrays["grf_right_n"] = sign * vertical[1]
+        arrays["grf_left_n"] = vertical[0]
+        arrays["grf_right_n"] = vertical[1]
         column_labels["grf_left_n"] = "platform 1 Fz"
         column_labels["grf_right_n"] = "platform 2 Fz"
         metadata["side_assignment"] = (

@@ -30,10 +30,16 @@ Formats (docs/contracts.md)
     total left and right foot force [N] in columns 18 and 19 (1-based); GRF = 18 + 19.
 ``c3d``
     Needs the optional extra ``ezc3d`` (``pip install workbench[c3d]``). The vertical force is
-    the z component (ezc3d assumes z up) of every force platform, summed, on the analog time
-    base. Force platforms report the force the person exerts on the plate in some labs and
-    the reaction in others, so a negative mean is flipped and the flip recorded in
-    ``metadata["warnings"]``.
+    the laboratory's z component of every force platform (ezc3d turns each platform's force
+    into the laboratory frame with its corners; a file whose z axis carries less force than
+    x or y is refused), each platform turned to the force on the person (force platforms
+    report the force the person exerts on the plate in some labs and the reaction in others:
+    a platform whose largest load is negative is flipped and the flip recorded in
+    ``metadata["warnings"]``), summed, on the analog clock from the first point frame. The
+    mass is ``--mass``, else the sidecar's, else the file's ``PROCESSING:Bodymass``. The
+    force unit is the one ``ANALOG:UNITS`` states for a platform's Fz channel (platform types
+    2 and 4), else ezc3d's (``POINT:FORCE_UNITS``, N when absent); ``--force-unit`` converts
+    on top of it, for a file whose stated unit is wrong.
 
 Places in error messages are file line numbers (1-based, every line counted, including
 header, comment and blank lines), written ``line N``.
@@ -59,7 +65,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError
-from workbench.fileutil import atomic_write_text
+from workbench.fileutil import atomic_write_texts
 from workbench.records.formats import (
     _EXTENSIONS,
     _FORCE_UNIT_NAMES,
@@ -104,6 +110,7 @@ __all__ = [
     "detect_format",
     "load_manifest",
     "load_record",
+    "record_texts",
     "save_record",
 ]
 
@@ -279,6 +286,9 @@ def load_record(
     mass_source = f'"mass_kg" in {sidecar_path.name}' if sidecar_path and mass is not None else None
     if mass_arg is not None:
         mass, mass_source = mass_arg, "given as --mass or mass_kg"
+    c3d_mass = metadata.get("c3d", {}).get("body_mass_kg") if fmt == "c3d" else None
+    if mass is None and c3d_mass is not None:
+        mass, mass_source = c3d_mass, "PROCESSING:Bodymass in the C3D file"
     if mass is None:
         embedded = _embedded_entry(p)
         if embedded is not None:
@@ -319,18 +329,7 @@ def save_record(
     *,
     extra_metadata: Mapping[str, Any] | None = None,
 ) -> tuple[Path, Path]:
-    """Write a record as CSV plus JSON sidecar, each file atomically.
-
-    Only the columns the record has are written (``time``, ``grf`` and whichever of
-    ``grf_left``, ``grf_right``, ``ground_acc`` are present), every value in its shortest
-    exact decimal form, so ``load_record(save_record(r, p)[0])`` gives identical arrays. The
-    sidecar holds ``mass_kg``, ``pacing_hz``, ``subject``, ``notes`` (when set), the record's
-    other metadata except the keys that describe how its original file was read (format,
-    column names, line numbers, mass source ...), then ``extra_metadata``.
-
-    Each file is written to a temporary file in the same folder and moved into place with
-    :func:`os.replace`, so a reader never sees a half-written file; the sidecar is replaced
-    first, so an existing CSV always has its sidecar.
+    """Write a record as CSV plus JSON sidecar, both or neither (:func:`record_texts`).
 
     Parameters
     ----------
@@ -346,6 +345,54 @@ def save_record(
     -------
     tuple of Path
         ``(csv_path, json_path)``.
+
+    Raises
+    ------
+    UsageError
+        As :func:`record_texts`.
+    OutputError
+        When a file cannot be written (a full disk); neither file is then changed.
+    """
+    files = record_texts(record, path, extra_metadata=extra_metadata)
+    json_path, csv_path = atomic_write_texts(files)
+    return csv_path, json_path
+
+
+def record_texts(
+    record: Record,
+    path: str | os.PathLike[str],
+    *,
+    extra_metadata: Mapping[str, Any] | None = None,
+) -> dict[Path, str]:
+    """Return the files :func:`save_record` writes: the JSON sidecar, then the CSV.
+
+    Only the columns the record has are written (``time``, ``grf`` and whichever of
+    ``grf_left``, ``grf_right``, ``ground_acc`` are present), every value in its shortest
+    exact decimal form, so ``load_record(save_record(r, p)[0])`` gives identical arrays. The
+    sidecar holds ``mass_kg``, ``pacing_hz``, ``subject``, ``notes`` (when set), the record's
+    other metadata except the keys that describe how its original file was read (format,
+    column names, line numbers, mass source ...), then ``extra_metadata``.
+
+    Written with :func:`workbench.fileutil.atomic_write_texts`, each file goes to a
+    temporary file in the same folder and both are moved into place with :func:`os.replace`
+    only once both are on disk, so a reader never sees a half-written file or a sidecar
+    without its data (a full disk leaves neither); the sidecar is replaced first, so an
+    existing CSV always has its sidecar.
+
+    Parameters
+    ----------
+    record : Record
+        The record to write.
+    path : str or path-like
+        The CSV path (must end in ``.csv``); the sidecar is the same path with ``.json``.
+        Missing folders are created.
+    extra_metadata : mapping, optional
+        More JSON-serialisable keys for the sidecar (e.g. ``{"truth": {...}}``).
+
+    Returns
+    -------
+    dict
+        ``{json_path: text, csv_path: text}``, in the order they are moved into place.
 
     Raises
     ------
@@ -397,10 +444,7 @@ def save_record(
     rows = (",".join(map(repr, row)) for row in zip(*columns, strict=True))
     csv_text = ",".join(names) + "\n" + "".join(f"{row}\n" for row in rows)
 
-    csv_path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(json_path, json_text)
-    atomic_write_text(csv_path, csv_text)
-    return csv_path, json_path
+    return {json_path: json_text, csv_path: csv_text}
 
 
 def _number_argument(value: Any, name: str) -> float | None:

@@ -10,6 +10,7 @@ particular file was read and so are never copied into a new sidecar.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -18,8 +19,11 @@ import numpy as np
 
 from workbench.errors import InputError, UsageError
 from workbench.records.text_table import (
+    _NOT_REGULAR_FIX,
+    FILE_MISSING,
     _read_bytes,
     _show,
+    file_problem,
 )
 
 # Metadata that describe how one particular file was read; save_record does not copy them
@@ -47,7 +51,16 @@ _SIDECAR_FIELDS = ("mass_kg", "pacing_hz", "subject", "notes")
 
 def _read_sidecar(p: Path) -> tuple[dict[str, Any], Path | None]:
     side = p.with_suffix(".json")
-    if side == p or not side.is_file():
+    if side == p or not os.path.lexists(side) or side.is_dir():
+        return {}, None
+    problem = file_problem(side)
+    if problem is not None and problem != FILE_MISSING:
+        # A pipe or a device where the sidecar belongs: ignoring it would drop the mass
+        # without a word, reading it would hang.
+        raise InputError(
+            side, "whole file", f"the sidecar of {p.name}: {problem}", _NOT_REGULAR_FIX
+        )
+    if problem == FILE_MISSING:  # a dangling link: no sidecar, as before
         return {}, None
     source = str(side)
     raw = _read_bytes(side, source)

@@ -12,7 +12,10 @@ numbers (``line N``).
 from __future__ import annotations
 
 import csv
+import errno
+import os
 import re
+import stat
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,22 +36,96 @@ class _Table:
     warnings: list[str] = field(default_factory=list)
 
 
+#: What a path is when it is not a regular file: each would hang (a FIFO waits for a writer)
+#: or never end (``/dev/zero``) if it were read as a record.
+_FILE_KINDS = (
+    (stat.S_ISDIR, "this is a folder, not a file"),
+    (stat.S_ISFIFO, "this is a named pipe (FIFO), not a regular file"),
+    (stat.S_ISCHR, "this is a character device (such as /dev/zero), not a regular file"),
+    (stat.S_ISBLK, "this is a block device, not a regular file"),
+    (stat.S_ISSOCK, "this is a socket, not a regular file"),
+)
+
+#: :func:`file_problem`'s words for a path where nothing is.
+FILE_MISSING = "the file does not exist"
+
+#: :func:`file_problem`'s words for a symbolic link that leads back to itself.
+LINK_LOOP = "the path is a loop of symbolic links that point at each other"
+
+#: :func:`file_problem`'s sentences for the paths whose reading would hang or never end:
+#: pipes, devices, sockets and symbolic link loops (not folders or missing files).
+SPECIAL_FILES = frozenset(
+    [*(problem for _, problem in _FILE_KINDS[1:]), "this is not a regular file", LINK_LOOP]
+)
+
+#: What to do about a path that is not a regular file.
+_NOT_REGULAR_FIX = "give a file saved on disk"
+
+
+def file_problem(p: str | os.PathLike[str]) -> str | None:
+    """Say why ``p`` cannot be read as a data file, or return None if it can.
+
+    Only the path's status is asked (``os.stat``, following symbolic links), nothing is
+    opened, so a named pipe or a device is refused before anything waits on it or reads it
+    without end.
+
+    Parameters
+    ----------
+    p : path-like
+        The file.
+
+    Returns
+    -------
+    str or None
+        The problem in plain words, without a trailing full stop: ``"the file does not
+        exist"``, a symbolic link loop, a folder, a pipe, a device, a socket, or the
+        system's reason it cannot be looked at.
+    """
+    try:
+        mode = os.stat(p).st_mode
+    except FileNotFoundError:
+        return FILE_MISSING
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return LINK_LOOP
+        if exc.errno == errno.ENOTDIR:
+            return "a part of the path before the file name is a file, not a folder"
+        return f"the file cannot be looked at ({exc.strerror or type(exc).__name__})"
+    except ValueError:  # an embedded NUL byte
+        return "the path contains a NUL character"
+    if stat.S_ISREG(mode):
+        return None
+    for is_kind, problem in _FILE_KINDS:
+        if is_kind(mode):
+            return problem
+    return "this is not a regular file"
+
+
 def _require_file(p: Path, source: str) -> None:
-    if not p.exists():
-        raise InputError(
-            source,
-            "whole file",
-            "the file does not exist",
-            "check the path (relative paths start from the current folder)",
-        )
-    if p.is_dir():
-        raise InputError(source, "whole file", "this is a folder, not a file", "give a record file")
+    problem = file_problem(p)
+    if problem is None:
+        return
+    if problem == FILE_MISSING:
+        fix = "check the path (relative paths start from the current folder)"
+    elif problem.startswith("this is a folder"):
+        fix = "give a record file"
+    elif problem == LINK_LOOP:
+        fix = "point the link at the file itself"
+    elif problem.startswith("the file cannot be looked at"):
+        fix = "check its permissions and those of its folders"
+    else:
+        fix = _NOT_REGULAR_FIX
+    raise InputError(source, "whole file", problem, fix)
 
 
 def _read_bytes(p: Path, source: str) -> bytes:
     _require_file(p, source)
     try:
-        return p.read_bytes()
+        # Non-blocking, so that a file swapped for a pipe after the check cannot hang the
+        # open; the check is then repeated on what was actually opened. O_BINARY: Windows
+        # would otherwise translate line ends in the bytes read (neither flag exists on
+        # every platform).
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
     except OSError as exc:
         raise InputError(
             source,
@@ -56,6 +133,18 @@ def _read_bytes(p: Path, source: str) -> bytes:
             f"the file cannot be read ({exc.strerror or type(exc).__name__})",
             "check its permissions",
         ) from None
+    with os.fdopen(fd, "rb") as handle:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise InputError(source, "whole file", "this is not a regular file", _NOT_REGULAR_FIX)
+        try:
+            return handle.read()
+        except OSError as exc:
+            raise InputError(
+                source,
+                "whole file",
+                f"the file cannot be read ({exc.strerror or type(exc).__name__})",
+                "check its permissions",
+            ) from None
 
 
 def _empty_file(source: str) -> InputError:

@@ -14,6 +14,7 @@ from scipy import signal
 
 from workbench.fileutil import atomic_path
 from workbench.records.inspection import Inspection
+from workbench.wording import count
 
 __all__ = [
     "com_response_figure",
@@ -52,7 +53,7 @@ def grf_footfalls_figure(insp: Inspection) -> Figure:
     weight = rec.weight_n
     for ax in (ax_all, ax_zoom):
         ax.plot(rec.time_s, rec.grf_n, lw=0.6, color="C0", label="total vertical GRF")
-        ax.axhline(weight, color="k", lw=0.8, ls="--", label=f"M g = {weight:.0f} N")
+        ax.axhline(weight, color="k", lw=0.8, ls="--", label=f"$M g$ = {weight:.0f} N")
         ax.set_ylabel("GRF [N]")
     idx = np.asarray(insp.steps.boundaries)
     ax_all.plot(rec.time_s[idx], rec.grf_n[idx], "v", ms=3, color="C3", label="step boundary")
@@ -62,9 +63,10 @@ def grf_footfalls_figure(insp: Inspection) -> Figure:
     for tb in rec.time_s[idx][in_zoom]:
         ax_zoom.axvline(tb, color="C3", lw=0.6, alpha=0.6)
     ax_zoom.set_xlim(lo, hi)
+    ax_all.set_xlabel("time [s]")
     ax_zoom.set_xlabel("time [s]")
     ax_all.set_title(
-        f"{rec.name}: {insp.steps.n_steps} steps, static balance {insp.static_balance:.3f}"
+        f"{rec.name}: {count(insp.steps.n_steps, 'step')}, static balance {insp.static_balance:.3f}"
     )
     ax_all.legend(loc="upper right", fontsize=8, ncols=3)
     ax_zoom.set_title(f"zoom {lo:.1f}-{hi:.1f} s (step boundaries: peaks of COM acceleration)")
@@ -79,9 +81,9 @@ def com_response_figure(insp: Inspection) -> Figure:
     fig = Figure(figsize=(10, 6.5), layout="constrained")
     axes = fig.subplots(3, 1, sharex=True)
     series = [
-        (com.acc_m_s2, "u'' [m/s²]"),
-        (com.vel_m_s, "u' [m/s]"),
-        (1e3 * np.asarray(com.disp_m), "u [mm]"),
+        (com.acc_m_s2, "COM acceleration $u''$ [m/s²]"),
+        (com.vel_m_s, "velocity $u'$ [m/s]"),
+        (1e3 * np.asarray(com.disp_m), "displacement $u$ [mm]"),
     ]
     bound_t = insp.record.time_s[np.asarray(insp.steps.boundaries)]
     for ax, (y, label) in zip(axes, series, strict=True):
@@ -109,18 +111,24 @@ def spectrum_figure(insp: Inspection, *, harmonics: int = 6) -> Figure:
     keep = (freq > 0) & (freq <= fmax)
     ax.semilogy(freq[keep], psd[keep], lw=0.9, color="C0")
     for i in range(1, harmonics + 1):
-        ax.axvline(i * fp, color="C3", lw=0.8, alpha=0.8, label="i f_p" if i == 1 else None)
+        ax.axvline(
+            i * fp,
+            color="C3",
+            lw=0.8,
+            alpha=0.8,
+            label=r"harmonics $i\,f_p$" if i == 1 else None,
+        )
         ax.axvline(
             (i - 0.5) * fp,
             color="C2",
             lw=0.8,
             ls=":",
             alpha=0.8,
-            label="odd multiples of f_p/2" if i == 1 else None,
+            label=r"odd multiples of $f_p/2$" if i == 1 else None,
         )
     ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("PSD of u'' [(m/s²)²/Hz]")
-    ax.set_title(f"{insp.record.name}: spectrum, f_p = {fp:.3f} Hz")
+    ax.set_ylabel("PSD of $u''$ [(m/s²)²/Hz]")
+    ax.set_title(f"{insp.record.name}: spectrum, pacing $f_p$ = {fp:.3f} Hz")
     ax.legend(fontsize=8)
     return fig
 

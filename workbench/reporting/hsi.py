@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from workbench.hsi.metrics import SETRA_LIMITS_M_S2, running_rms
+from workbench.wording import count
 
 __all__ = [
     "crossing_summary",
@@ -220,7 +221,7 @@ def write_hsi_outputs(
         {m: h.acceleration_m_s2[0, 0] for m, h in hist.items()},
         spec.dt_s,
         limits_m_s2=spec.comfort_limits_m_s2,
-        title=f"crossing 0: {len(frame)} pedestrian(s), x = {x_at:g} m",
+        title=f"crossing 0: {count(len(frame), 'pedestrian')}, x = {x_at:g} m",
     )
     files.append(save_figure(fig, folder / "crossing_0.png"))
     files.append(

@@ -54,8 +54,13 @@ def convergence_figure(result: IdentificationResult, truth: dict | None = None) 
             ax.plot(
                 piece_end_t, result.piece_mean[:, j], ".", ms=3, color="C1", label="after each step"
             )
-        ax.axhline(est[key], color="k", lw=0.8, label=f"estimate {est[key]:.4g}")
-        ax.axhspan(*ci[key], color="k", alpha=0.08, label="95 % interval")
+        if result.grade(key) == "not identified":
+            # Drawn to diagnose the run, not read off: the legend names no number.
+            ax.axhline(est[key], color="k", lw=0.8, label="posterior mean (not identified)")
+            ax.axhspan(*ci[key], color="k", alpha=0.08, label="95 % given the prior box")
+        else:
+            ax.axhline(est[key], color="k", lw=0.8, label=f"estimate {est[key]:.4g}")
+            ax.axhspan(*ci[key], color="k", alpha=0.08, label="95 % interval")
         if truth and key in truth:
             ax.axhline(truth[key], color="C3", lw=1.0, ls="--", label=f"truth {truth[key]:.4g}")
         lo, hi = (
@@ -71,23 +76,37 @@ def convergence_figure(result: IdentificationResult, truth: dict | None = None) 
     return fig
 
 
-def draw_force_window(ax: Any, result: IdentificationResult, window_s: float) -> None:
-    """Draw the identified biomechanical force and M u'' over a window mid-record (fig. 9)."""
+def draw_force_window(
+    ax: Any, result: IdentificationResult, window_s: float, truth: dict | None = None
+) -> None:
+    """Draw the identified biomechanical force over a window mid-record (fig. 9).
+
+    Against the true force when ``truth`` is a simulated walk's (the record's
+    ``metadata["truth"]``); otherwise against M u'', the GRF the record measures less the
+    body weight (which the identified force should follow only on a rigid floor, off by
+    the spring's and damper's share).
+    """
+    from workbench.synth.step_force import force_from_truth
+
     p = result.problem
     force = result.biomechanical_force_n()
     t = p.time_s
     mid = t[0] + 0.5 * (t[-1] - t[0])
     keep = np.abs(t - mid) <= window_s / 2
-    ax.plot(t[keep], force[keep], lw=1.0, label="identified F_bio")
-    grf = result.mass_kg * p.absolute_y[keep, 2]
-    ax.plot(t[keep], grf, lw=0.8, alpha=0.7, label="M u'' (measured)")
+    true_force = None if truth is None else force_from_truth(truth, t[keep])
+    if true_force is not None:
+        ax.plot(t[keep], true_force, lw=2.0, color="0.6", label=r"true $F_\mathrm{bio}$")
+    ax.plot(t[keep], force[keep], lw=1.0, color="C0", label=r"identified $F_\mathrm{bio}$")
+    if true_force is None:
+        grf = result.mass_kg * p.absolute_y[keep, 2]
+        ax.plot(t[keep], grf, lw=0.8, alpha=0.7, color="C1", label=r"$M\,u''$ (measured)")
     for s in p.piece_starts[:-1]:
         if keep[s]:
             ax.axvline(t[s], color="C3", lw=0.5, alpha=0.5)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("force [N]")
     ax.set_title("Reconstructed biomechanical force (step boundaries in red)")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="best")
 
 
 def force_figure(result: IdentificationResult, *, window_s: float = 6.0) -> Figure:
@@ -105,8 +124,8 @@ def force_figure(result: IdentificationResult, *, window_s: float = 6.0) -> Figu
         color="C0",
         label="mean over steps ± step-to-step sd",
     )
-    ax_f.set_xlabel("harmonic i (frequency i f_p)")
-    ax_f.set_ylabel("BLF_i")
+    ax_f.set_xlabel(r"harmonic $i$ (frequency $i\,f_p$)")
+    ax_f.set_ylabel(r"load factor BLF$_i$")
     ax_f.set_xticks(harmonics)
     ax_f.set_title("Fourier amplitudes of the biomechanical force as load factors")
     ax_f.legend(fontsize=8)
@@ -160,12 +179,29 @@ def identification_section(
         ("natural_frequency_hz", "natural frequency [Hz]"),
         ("damping_ratio", "damping ratio"),
     ):
-        row = [label, f"{est[k]:.4g}", f"{sd[k]:.3g}", f"{ci[k][0]:.4g} - {ci[k][1]:.4g}"]
+        grade = result.grade(k)
+        if grade == "not identified":
+            lo, hi = result.prior_range(k)
+            # Four significant digits, written out: 44220, not 4.422e+04.
+            lo, hi = (float(f"{x:.4g}") for x in (lo, hi))
+            row = [label, "not identified", "", f"prior range {lo:g} - {hi:g}"]
+        else:
+            weak = " (weakly identified)" if grade == "weakly identified" else ""
+            row = [
+                label,
+                f"{est[k]:.4g}{weak}",
+                f"{sd[k]:.3g}",
+                f"{ci[k][0]:.4g} - {ci[k][1]:.4g}",
+            ]
         if truth is not None:
             row.append(f"{truth[k]:.4g}" if k in truth else "")
         rows.append(row)
     for i, (b, s) in enumerate(zip(result.blf[:3], result.blf_sd[:3], strict=True), start=1):
-        row = [f"BLF{i}", f"{b:.3f}", f"{s:.3f}", ""]
+        # The BLFs are the force given C and K: conditional on them when they are not identified.
+        if result.force_identified:
+            row = [f"BLF{i}", f"{b:.3f}", f"{s:.3f}", ""]
+        else:
+            row = [f"BLF{i}", "not identified", "", "conditional on C and K"]
         if truth is not None:
             row.append("")
         rows.append(row)
@@ -177,7 +213,9 @@ def identification_section(
         f"Identifiability: {result.identifiability.get('sentence', 'not assessed')} "
         f"Noise: {result.noise.get('label', '')}."
     )
-    sec.bullets([f"Warning: {w}" for w in result.warnings])
+    # The identifiability sentence is among the warnings too; the paragraph above said it.
+    shown = result.identifiability.get("sentence")
+    sec.bullets([f"Warning: {w}" for w in result.warnings if w != shown])
     for suffix, fig, caption in (
         ("convergence", convergence_figure(result, truth), "Convergence of C and K"),
         ("force", force_figure(result), "Biomechanical force and its Fourier amplitudes"),

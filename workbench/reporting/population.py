@@ -37,6 +37,7 @@ from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, PopulationF
 from workbench.population.laws import PopulationLaws
 from workbench.reporting.document import Report, Section, Table
 from workbench.reporting.figures import save_figure
+from workbench.wording import count, p_value
 
 __all__ = ["SEED_TABLE2", "population_report", "run_population_demo", "table2_rows"]
 
@@ -65,6 +66,17 @@ LABELS = {
     "blf2": "BLF2",
     "blf3": "BLF3",
 }
+#: Figure words (mathtext) and unit of the quantities whose label is not their key in capitals.
+AXIS_NAMES = {
+    "natural_frequency_hz": ("natural frequency $f_n$", "Hz"),
+    "damping_ratio": (r"damping ratio $\zeta$", ""),
+}
+
+
+def _axis_label(key: str, prefix: str = "", *, inverse: bool = False) -> str:
+    """Write ``prefix name [unit]`` (``[1/unit]`` for a density; a pure number has none)."""
+    name, unit = AXIS_NAMES.get(key, (key.upper(), ""))
+    return f"{prefix}{name}" + (f" [{'1/' * inverse}{unit}]" if unit else "")
 
 
 def _law_text(law: dict[str, Any], digits: int = 4) -> str:
@@ -180,7 +192,7 @@ def _write_table_csv(table: Table, path: Path) -> Path:
 def laws_figure(fit: PopulationFit, reference: PopulationLaws | None = None) -> Figure:
     """Parameters against pacing with the fitted laws and bands (seed figs. 11-12)."""
     ref = reference or PopulationLaws()
-    fig = Figure(figsize=(13, 4))
+    fig = Figure(figsize=(13, 4.6), layout="constrained")
     axes = fig.subplots(1, 3)
     used = fit.used
     subjects = used["subject"].astype(str) if "subject" in used else pd.Series([""] * len(used))
@@ -194,12 +206,12 @@ def laws_figure(fit: PopulationFit, reference: PopulationLaws | None = None) -> 
         ref_law = getattr(ref, key)
         name = "Young (assumed)" if key == "blf1" else "seed's law"
         ax.plot(b.pacing_hz, ref_law.mean(b.pacing_hz), "k--", lw=1.2, label=name)
-        ax.set_xlabel("pacing frequency f_p [Hz]")
-        ax.set_ylabel(LABELS[key])
+        ax.set_xlabel("pacing frequency $f_p$ [Hz]")
+        ax.set_ylabel(_axis_label(key))
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, loc="upper left")
+    legend = {t: h for a in axes for h, t in zip(*a.get_legend_handles_labels(), strict=True)}
+    fig.legend(legend.values(), legend.keys(), loc="outside lower center", ncols=5, fontsize=8)
     fig.suptitle("Identified parameters against pacing (colour: participant)")
-    fig.tight_layout()
     return fig
 
 
@@ -228,40 +240,44 @@ def participant_figure(fit: PopulationFit) -> Figure | None:
         )
         b = fit.bands[fit.bands.law == key]
         ax.plot(b.pacing_hz, b["mean"], color="C1", lw=1.5, label="population law")
-        ax.set_xlabel("pacing frequency f_p [Hz]")
-        ax.set_ylabel(LABELS[key])
+        ax.set_xlabel("pacing frequency $f_p$ [Hz]")
+        ax.set_ylabel(_axis_label(key))
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
-    fig.suptitle(f"Participant {who}: {len(rows)} records (bars: 95 % posterior bands)")
+    fig.suptitle(f"Participant {who}: {count(len(rows), 'record')} (bars: 95 % posterior bands)")
     fig.tight_layout()
     return fig
 
 
 def residuals_figure(fit: PopulationFit) -> Figure:
     """Residual histograms with the fitted normal, and normal QQ plots (seed fig. 13)."""
-    fig = Figure(figsize=(13, 7))
+    fig = Figure(figsize=(13, 7.5), layout="constrained")
     axes = fig.subplots(2, 3)
     for j, key in enumerate(LAW_COLUMNS):
         r = fit.used[f"{key}_residual"].to_numpy(float)
         res = fit.population_json["laws"][key]["residuals"]
-        ax = axes[0, j]
-        ax.hist(r, bins="auto", density=True, color="C0", alpha=0.6)
+        ax, qq = axes[:, j]
+        name, unit = AXIS_NAMES.get(key, (key.upper(), ""))
+        ax.hist(r, bins="auto", density=True, color="C0", alpha=0.6, label="residuals")
         x = np.linspace(r.min(), r.max(), 200)
-        ax.plot(x, stats.norm.pdf(x, res["normal_mean"], res["normal_sd"]), "C3", lw=2)
+        pdf = stats.norm.pdf(x, res["normal_mean"], res["normal_sd"])
+        ax.plot(x, pdf, "C3", lw=2, label="fitted normal")
         ax.set_title(
-            f"{LABELS[key]}: N({res['normal_mean']:.2g}, {res['normal_sd']:.3g}^2)\n"
-            f"Shapiro p {res['shapiro_p']:.2g}, AD p {res['anderson_darling_p']:.2g}",
+            f"{name}: residual sd {res['normal_sd']:.3g} {unit}\n"
+            f"normality: Shapiro-Wilk p {p_value(res['shapiro_p'], 2)}, "
+            f"Anderson-Darling p {p_value(res['anderson_darling_p'], 2)}",
             fontsize=9,
         )
-        ax.set_xlabel("model error")
-        qq = axes[1, j]
+        ax.set_xlabel(_axis_label(key, "residual of "))
+        ax.set_ylabel(_axis_label(key, "density of ", inverse=True))
+        ax.locator_params(axis="x", nbins=5)  # the default crowded the ticks of narrow panels
         (osm, osr), (slope, inter, _) = stats.probplot(r, dist="norm")
         qq.plot(osm, osr, ".", ms=3)
         qq.plot(osm, slope * np.asarray(osm) + inter, "C3")
-        qq.set_xlabel("normal quantile")
-        qq.set_ylabel("ordered residual")
+        qq.set_xlabel("standard normal quantile")
+        qq.set_ylabel(_axis_label(key, "ordered residual of "))
         qq.grid(alpha=0.3)
-    fig.tight_layout()
+    axes[0, 0].legend(fontsize=8)
     return fig
 
 
@@ -289,7 +305,7 @@ def blf_figure(fit: PopulationFit) -> Figure:
             lw=1.2,
             label="GEV",
         )
-        ax.set_xlabel(LABELS[key])
+        ax.set_xlabel(_axis_label(key))
         ax.set_ylabel("density")
         ax.legend(fontsize=8)
     fig.tight_layout()

@@ -43,6 +43,25 @@ _LABELS = {
 }
 
 
+#: Figure words and unit of each output (mathtext symbols).
+_AXIS = {
+    "natural_frequency_hz": ("natural frequency $f_n$", "Hz"),
+    "damping_ratio": (r"damping ratio $\zeta$", ""),
+    "blf1": ("BLF1", ""),
+    "blf2": ("BLF2", ""),
+    "blf3": ("BLF3", ""),
+    "stiffness_n_per_m": ("stiffness $K$", "N/m"),
+    "damping_ns_per_m": ("damping $C$", "N s/m"),
+}
+
+
+def _axis_text(output: str, template: str = "{name}") -> str:
+    """``template`` with the output's words, then its unit in brackets when it has one."""
+    name, unit = _AXIS.get(output, (output, ""))
+    text = template.format(name=name)
+    return f"{text} [{unit}]" if unit else text
+
+
 def _setting_of(point: str) -> str:
     return " + ".join(item.partition("=")[0] for item in point.split("; "))
 
@@ -76,7 +95,7 @@ def tornado_figure(study: SensitivityStudy, output: str, record: str | None = No
         if np.isfinite(hw):
             cur["hw"] = max(cur["hw"], hw)
     order = sorted(rows, key=lambda n: rows[n]["hi"] - rows[n]["lo"])
-    fig = Figure(figsize=(7.5, 0.45 * max(len(order), 2) + 1.4))
+    fig = Figure(figsize=(7.5, 0.45 * max(len(order), 2) + 1.8), layout="constrained")
     ax = fig.add_subplot()
     y = np.arange(len(order))
     for i, n in enumerate(order):
@@ -87,11 +106,12 @@ def tornado_figure(study: SensitivityStudy, output: str, record: str | None = No
                 label="95 % Monte Carlo half-width (replicates)" if i == 0 else None)  # fmt: skip
     ax.axvline(0.0, color="k", lw=0.8)
     ax.set_yticks(y, order)
-    ax.set_xlabel(f"change of {_LABELS.get(output, output)} from the baseline")
-    ax.set_title(f"{record}: {_LABELS.get(output, output)}")
+    ax.set_xlabel(_axis_text(output, "change of {name} from the baseline"))
+    ax.set_ylabel("setting varied")
+    ax.set_title(f"{record}: {_axis_text(output)}")
     if order:
-        ax.legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
+        # Below the axes: inside, the legend covered the longest bars.
+        fig.legend(loc="outside lower center", ncols=2, fontsize=8)
     return fig
 
 
@@ -120,8 +140,8 @@ def heatmap_figure(
     for i, j in itertools.product(range(len(l1)), range(len(l2))):
         if np.isfinite(grid[i, j]):
             ax.text(j, i, f"{grid[i, j]:.3g}", ha="center", va="center", color="w", fontsize=8)
-    fig.colorbar(im, ax=ax, label=_LABELS.get(output, output))
-    ax.set_title(f"{record}: mean {_LABELS.get(output, output)}")
+    fig.colorbar(im, ax=ax, label=_axis_text(output))
+    ax.set_title(f"{record}: mean {_axis_text(output)}")
     fig.tight_layout()
     return fig
 

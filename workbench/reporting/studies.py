@@ -422,7 +422,7 @@ def segment_summary_figure(
     ax_b.legend(fontsize=8)
     for ax in (ax_f, ax_z, ax_b):
         ax.set_xlabel("pacing [Hz]")
-    ax_f.set_title("f_n, 95 % interval (open: not identified)", fontsize=9)
+    ax_f.set_title("natural frequency $f_n$, 95 % interval (open: not identified)", fontsize=9)
     ax_z.set_title("damping ratio, 95 % interval", fontsize=9)
     ax_b.set_title("BLF1-3 (mean over steps, 95 % band)", fontsize=9)
     return fig

@@ -75,3 +75,31 @@ class _StepPhaseForce:
         return c[..., 0] + np.sum(
             c[..., 1::2] * np.cos(i_theta) + c[..., 2::2] * np.sin(i_theta), axis=-1
         )
+
+
+def force_from_truth(truth: dict[str, Any], time_s: ArrayLike) -> FloatArray | None:
+    """Return the true biomechanical force at ``time_s`` from a simulated walk's truth.
+
+    The truth of :func:`~workbench.synth.simulate_walking` keeps every step's start,
+    duration and coefficients (at the step's middle); the force between them is the same
+    cubic spline in step phase the simulator drew. The truth does not keep the knots just
+    outside the record, so the first and last half-steps may differ slightly from the
+    simulated force; inside, the spline's end conditions die out within a few steps.
+
+    Returns None when the truth is not of a step-phase walk (another generator, a
+    measured record), so that callers can fall back to what the record measures.
+    """
+    try:
+        if truth.get("time_basis") != "step_phase":
+            return None
+        starts = np.asarray(truth["step_start_s"], dtype=np.float64)
+        durations = np.asarray(truth["step_duration_s"], dtype=np.float64)
+        coef = np.asarray(truth["step_coefficients"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        return None
+    if starts.ndim != 1 or starts.size < 2 or coef.ndim != 2 or coef.shape[0] != starts.size:
+        return None
+    edges = np.append(starts, starts[-1] + durations[-1])
+    knots = 2.0 * np.pi * (np.arange(starts.size, dtype=np.float64) + 0.5)
+    force = _StepPhaseForce(edges, knots, coef, varies=starts.size >= 4)
+    return np.asarray(force(np.asarray(time_s, dtype=np.float64)), dtype=np.float64)
