@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from workbench.cli import main
-from workbench.population.batch import LOCK_NAME, batch_lock
+from workbench.population.batch_folder import LOCK_NAME, batch_lock
 
 fcntl = pytest.importorskip("fcntl")  # the lock is the system's flock
 

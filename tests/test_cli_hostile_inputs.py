@@ -293,11 +293,11 @@ def test_ordinary_counts_pass_the_count_checks():
 def test_every_one_record_command_checks_the_record_size(
     command, extra, computation, tmp_path, capsys, monkeypatch
 ):
-    from workbench.cli import common as cli_common
+    from workbench.cli import budgets as cli_budgets
 
     # As identify's guard (test_work_guards): the budget lowered so that 400 samples are over.
-    monkeypatch.setattr(cli_common, "IDENTIFY_BASE_BYTES", 0.0)
-    monkeypatch.setattr(cli_common, "MEMORY_BUDGET_GB", 0.001)
+    monkeypatch.setattr(cli_budgets, "IDENTIFY_BASE_BYTES", 0.0)
+    monkeypatch.setattr(cli_budgets, "MEMORY_BUDGET_GB", 0.001)
     monkeypatch.setattr(computation, never)
     rec = tmp_path / "walk.csv"
     t = np.arange(400) / 200.0
@@ -425,9 +425,9 @@ def test_a_folder_given_as_an_input_file_is_named_as_such(argv, tmp_path, capsys
 
 
 def test_crosscheck_time_is_estimated_from_the_steps_and_walkers(capsys, monkeypatch):
-    from workbench.cli import common as cli_common
+    from workbench.cli import budgets as cli_budgets
 
-    monkeypatch.setattr(cli_common, "TIME_BUDGET_MIN", 0.1)  # 6 s
+    monkeypatch.setattr(cli_budgets, "TIME_BUDGET_MIN", 0.1)  # 6 s
     monkeypatch.setattr("workbench.inference.identify.identify", never)
     # Two steps (about 235 samples) with 4 x 32 walkers: about 4.5 s, under; 2 x 1000: 70 s.
     argv = ["crosscheck", "seed_individual", "--max-steps", "2"]

@@ -14,7 +14,7 @@ import pytest
 
 from workbench.cli import main
 from workbench.errors import InputError
-from workbench.population.batch import _file_seed, record_seed
+from workbench.population.batch_folder import file_seed, record_seed
 from workbench.records.io import load_manifest, load_record
 
 needs_fifo = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no named pipes here")
@@ -116,9 +116,9 @@ def test_the_streamed_seed_equals_the_seed_of_the_bytes(tmp_path):
     # numbers: the same seed as hashing the whole content at once, over a chunk boundary.
     data = bytes(range(256)) * 5000  # 1.28 MB, more than one 1 MiB chunk
     (tmp_path / "r.csv").write_bytes(data)
-    assert _file_seed(7, "r.csv", tmp_path / "r.csv") == record_seed(7, "r.csv", data)
-    assert _file_seed(7, "gone.csv", tmp_path / "gone.csv") == record_seed(7, "gone.csv", None)
-    assert _file_seed(7, "r.csv", tmp_path / "r.csv") != _file_seed(8, "r.csv", tmp_path / "r.csv")
+    assert file_seed(7, "r.csv", tmp_path / "r.csv") == record_seed(7, "r.csv", data)
+    assert file_seed(7, "gone.csv", tmp_path / "gone.csv") == record_seed(7, "gone.csv", None)
+    assert file_seed(7, "r.csv", tmp_path / "r.csv") != file_seed(8, "r.csv", tmp_path / "r.csv")
 
 
 def test_the_documented_per_record_budget_is_the_one_applied():

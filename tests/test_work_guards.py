@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from workbench.cli import common as cli_common
+from workbench.cli import budgets as cli_budgets
 from workbench.cli import main
 from workbench.errors import UsageError, check_seed
 from workbench.inference.settings import IdentifySettings
@@ -64,7 +64,7 @@ def test_identify_on_a_ten_million_sample_record_is_estimated_over_the_budget():
 
 # -- each guard on a small input, the budget lowered; --no-limits lifts it ---------------------
 def test_sample_guard_and_no_limits(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cli_common, "MEMORY_BUDGET_GB", 0.1)  # below the interpreter's share
+    monkeypatch.setattr(cli_budgets, "MEMORY_BUDGET_GB", 0.1)  # below the interpreter's share
     out = tmp_path / "p.csv"
     err = refused(["sample", "--n", "5", "--out", out], capsys)
     assert "sample --n 5 needs about 0.14 GB of memory, over the 0.1 GB budget" in err
@@ -75,7 +75,7 @@ def test_sample_guard_and_no_limits(tmp_path, capsys, monkeypatch):
 
 
 def test_hsi_memory_guard_grows_with_the_stream(capsys, monkeypatch):
-    monkeypatch.setattr(cli_common, "MEMORY_BUDGET_GB", 0.3)
+    monkeypatch.setattr(cli_budgets, "MEMORY_BUDGET_GB", 0.3)
     small = ["hsi", "--crowd", "stream", "--duration", "2", "--crossings", "1", "--json"]
     # 0.5 P/m^2 fits in 0.3 GB; 20 P/m^2 (a 4000-unknown eigen-analysis) does not.
     code, _, err = run_cli([*small, "--density", "0.5"], capsys)
@@ -86,7 +86,7 @@ def test_hsi_memory_guard_grows_with_the_stream(capsys, monkeypatch):
 
 
 def test_hsi_time_guard_grows_with_the_modes_and_no_limits_lifts_it(capsys, monkeypatch):
-    monkeypatch.setattr(cli_common, "TIME_BUDGET_MIN", 1e-4)  # 6 ms
+    monkeypatch.setattr(cli_budgets, "TIME_BUDGET_MIN", 1e-4)  # 6 ms
     argv = ["hsi", "--crossings", "1", "--span", "5", "--json"]
     code, _, err = run_cli([*argv, "--modes", "1"], capsys)  # 1 mode: about 0.3 ms
     assert code == 0, err
@@ -97,8 +97,8 @@ def test_hsi_time_guard_grows_with_the_modes_and_no_limits_lifts_it(capsys, monk
 
 
 def test_identify_guard_uses_the_record_length(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cli_common, "IDENTIFY_BASE_BYTES", 0.0)
-    monkeypatch.setattr(cli_common, "MEMORY_BUDGET_GB", 0.001)  # 1 MB: under 200 samples
+    monkeypatch.setattr(cli_budgets, "IDENTIFY_BASE_BYTES", 0.0)
+    monkeypatch.setattr(cli_budgets, "MEMORY_BUDGET_GB", 0.001)  # 1 MB: under 200 samples
     rec = tmp_path / "walk.csv"
     t = np.arange(400) / 200.0
     rec.write_text("time,grf\n" + "".join(f"{x:.3f},{700 + 100 * np.sin(11 * x):.3f}\n" for x in t))
@@ -115,9 +115,9 @@ def test_long_work_that_goes_ahead_says_so_from_its_start(capsys):
     import argparse
 
     args = argparse.Namespace(no_limits=False, json=False)
-    cli_common.check_budget(args, "hsi with 5 mode(s)", "fix", memory_gb=0.2, minutes=3)
+    cli_budgets.check_budget(args, "hsi with 5 mode(s)", "fix", memory_gb=0.2, minutes=3)
     assert capsys.readouterr().err == "workbench: hsi with 5 mode(s): about 3 min estimated\n"
-    cli_common.check_budget(args, "quick", "fix", minutes=0.5)
+    cli_budgets.check_budget(args, "quick", "fix", minutes=0.5)
     assert capsys.readouterr().err == ""
 
 

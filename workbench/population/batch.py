@@ -49,7 +49,6 @@ estimate, as ``workbench identify`` does.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import hashlib
 import json
@@ -58,19 +57,25 @@ import os
 import re
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
-from workbench.errors import InputError, OutputError, UsageError, WorkbenchError
+from workbench.errors import UsageError, WorkbenchError
 from workbench.executor import run_tasks
-from workbench.fileutil import atomic_path, atomic_write_json
+from workbench.fileutil import atomic_path, atomic_write_json, strict_json
 from workbench.inference.settings import IdentifySettings
-from workbench.records.text_table import FILE_MISSING, file_problem
+from workbench.population.batch_folder import (
+    as_in_manifest,
+    batch_lock,
+    check_record_file,
+    file_seed,
+    manifest_from_folder,
+    record_seed,
+)
 
 __all__ = [
     "FAILURE_COLUMNS",
@@ -190,32 +195,6 @@ class BatchSummary:
         }
 
 
-def record_seed(base_seed: int, path: str, content: bytes | None) -> int:
-    """Seed of one record: SHA-256 of the batch seed, the manifest path and the file bytes.
-
-    Parameters
-    ----------
-    base_seed : int
-        The batch seed (``--seed``).
-    path : str
-        The record's path as written in the manifest.
-    content : bytes or None
-        The file's bytes (None when it cannot be read; the record then fails anyway).
-
-    Returns
-    -------
-    int
-        A seed in ``[0, 2**32)``.
-    """
-    h = hashlib.sha256()
-    h.update(str(int(base_seed)).encode())
-    h.update(b"\0")
-    h.update(path.encode("utf-8"))
-    h.update(b"\0")
-    h.update(content if content is not None else b"<unreadable>")
-    return int.from_bytes(h.digest()[:4], "little")
-
-
 def _key(path: str) -> str:
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(path).stem)[:60] or "record"
     return f"{stem}-{hashlib.sha1(path.encode('utf-8')).hexdigest()[:10]}"
@@ -310,7 +289,7 @@ def run_task(task: BatchTask) -> dict[str, Any]:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            _check_record_file(task)
+            check_record_file(task.path, task.file, task.max_rows, task.budget)
             record = load_record(
                 task.file,
                 mass_kg=task.mass_kg,
@@ -332,143 +311,15 @@ def run_task(task: BatchTask) -> dict[str, Any]:
             out["row"] = result_row(result, task.path, record.subject, task.seed)
             out["status"] = "done"
         except WorkbenchError as err:
-            out.update(status="failed", reason=_as_in_manifest(str(err), task))
+            out.update(status="failed", reason=as_in_manifest(str(err), task.folder, task.path))
         except Exception as err:  # one bad record must not stop the batch
             reason = f"internal error ({type(err).__name__}: {err})"
-            out.update(status="failed", reason=_as_in_manifest(reason, task))
-    out["warnings"] = sorted({_as_in_manifest(str(w.message), task) for w in caught})
+            out.update(status="failed", reason=as_in_manifest(reason, task.folder, task.path))
+    out["warnings"] = sorted(
+        {as_in_manifest(str(w.message), task.folder, task.path) for w in caught}
+    )
     out["elapsed_s"] = round(time.perf_counter() - start, 3)
     return out
-
-
-#: The lock file of a batch folder (:func:`batch_lock`).
-LOCK_NAME = ".batch.lock"
-
-
-@contextlib.contextmanager
-def batch_lock(out: Path) -> Iterator[None]:
-    """Hold an exclusive lock on the batch folder ``out`` (created if needed) while in the block.
-
-    The lock is the system's (``flock``) on ``out/.batch.lock``, so it is released when the
-    run ends in any way, a kill -9 included, and a stale lock file locks nothing. On systems
-    without ``fcntl`` (Windows) no lock is taken.
-
-    Raises
-    ------
-    UsageError
-        When another run holds the folder.
-    """
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - not on POSIX
-        yield
-        return
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / LOCK_NAME
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as err:
-        raise OutputError(path, err) from None
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise UsageError(
-                f"the output folder {out} is in use by another batch that is still running; "
-                "wait until it ends, or choose another folder"
-            ) from None
-        yield
-    finally:
-        os.close(fd)  # releases the lock
-
-
-def _manifest_from(out: Path, manifest: str | os.PathLike[str]) -> str:
-    """Return the manifest's path from the output folder (the same from any current folder)."""
-    try:
-        return Path(os.path.relpath(Path(manifest).absolute(), out.absolute())).as_posix()
-    except ValueError:  # another drive (Windows)
-        return Path(manifest).absolute().as_posix()
-
-
-def _as_in_manifest(text: str, task: BatchTask) -> str:
-    """Name the record's files in ``text`` as the manifest does, from the manifest's folder.
-
-    The loader names the file it opened, which starts with the manifest's folder as typed on
-    the command line (``../study/``, an absolute path ...); the batch's files must not depend
-    on where it was started from.
-    """
-    folder = task.folder
-    if not folder or folder == "." or Path(task.path).is_absolute():
-        return text
-    for sep in sorted({os.sep, "/"}):
-        # Only where a path starts (after a space, a quote or a bracket), so that a
-        # folder of the same name deeper in a path is kept.
-        prefix = re.escape(folder.rstrip(sep) + sep)
-        text = re.sub(rf"(?<![^\s'\"(]){prefix}", "", text)
-    return text
-
-
-def _check_record_file(task: BatchTask) -> None:
-    """Refuse a record that cannot be read, or is too long to identify, before reading it.
-
-    A pipe would hang the worker and ``/dev/zero`` would fill its memory; a record of
-    millions of rows would take the worker's memory and hours. Its rows are counted by
-    streaming the file (nothing held), and the identification's memory is estimated from
-    them as ``workbench identify`` estimates it from the samples.
-    """
-    problem = file_problem(task.file)
-    if problem == FILE_MISSING:
-        # The loader's own message would send the user to the current folder.
-        raise InputError(
-            task.path,
-            "whole file",
-            "the record file does not exist",
-            "check the manifest's path column (relative paths start from the manifest's folder)",
-        )
-    if problem is not None:
-        raise InputError(
-            task.path, "whole file", problem, "list a record file saved on disk in the manifest"
-        )
-    if task.max_rows is None:
-        return
-    rows = _count_lines(task.file, stop_after=task.max_rows)
-    if rows > task.max_rows:
-        raise InputError(
-            task.path,
-            "whole file",
-            f"the record has more than {task.max_rows:,} lines, more than the batch "
-            f"identifies within its per-record budget of {task.budget}",
-            "split it into shorter records, or run the batch with --no-limits",
-        )
-
-
-def _count_lines(path: str, *, stop_after: int) -> int:
-    """Count the lines of a file in 1 MiB chunks, stopping once past ``stop_after``."""
-    lines = 0
-    with open(path, "rb") as handle:
-        while chunk := handle.read(1 << 20):
-            lines += chunk.count(b"\n")
-            if lines > stop_after:
-                break
-    return lines
-
-
-def _file_seed(base_seed: int, path: str, file: Path) -> int:
-    """:func:`record_seed` of a record file, read in chunks; only regular files are read."""
-    if file_problem(file) is not None:
-        return record_seed(base_seed, path, None)
-    h = hashlib.sha256()
-    h.update(str(int(base_seed)).encode())
-    h.update(b"\0")
-    h.update(path.encode("utf-8"))
-    h.update(b"\0")
-    try:
-        with open(file, "rb") as handle:
-            while chunk := handle.read(1 << 20):
-                h.update(chunk)
-    except OSError:
-        return record_seed(base_seed, path, None)
-    return int.from_bytes(h.digest()[:4], "little")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -478,19 +329,6 @@ def _read_json(p: Path) -> dict[str, Any] | None:
     except (OSError, json.JSONDecodeError, UnicodeDecodeError):
         return None
     return obj if isinstance(obj, dict) else None
-
-
-def _clean_json(obj: Any) -> Any:
-    """Return ``obj`` as strict JSON holds it: non-finite floats None, numpy scalars numbers."""
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {str(k): _clean_json(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_clean_json(v) for v in obj]
-    return obj
 
 
 def _write_csv(path: Path, frame: pd.DataFrame) -> None:
@@ -576,7 +414,7 @@ def run_batch(
     settings_json = dict(task_settings)
     if overrides is not None:
         settings_json["overrides"] = dataclasses.asdict(overrides)
-    meta = {"manifest": _manifest_from(out, manifest), "settings": settings_json}
+    meta = {"manifest": manifest_from_folder(out, manifest), "settings": settings_json}
     # Held for the whole run: a second run on the folder (with --resume, or a fresh one
     # while the first has written nothing yet) is refused instead of mixing files, and the
     # temporary files removed below cannot be a live run's.
@@ -590,7 +428,7 @@ def run_batch(
                 )
             old = _read_json(meta_path)
             # Compare as JSON reads it back (tuples become lists, for example).
-            stored_form = json.loads(json.dumps(_clean_json(settings_json)))
+            stored_form = json.loads(json.dumps(strict_json(settings_json)))
             if old is not None and old.get("settings") != stored_form:
                 raise UsageError(
                     f"'resume': the batch in {out} was run with other identification settings; "
@@ -602,7 +440,7 @@ def run_batch(
         for folder in (rec_dir, time_dir):
             for stale in folder.glob(".*.tmp"):  # a killed run's half-written file
                 stale.unlink(missing_ok=True)
-        atomic_write_json(meta_path, _clean_json(meta))
+        atomic_write_json(meta_path, strict_json(meta))
 
         manifest_dir = Path(manifest).parent
         tasks: list[BatchTask] = []
@@ -628,7 +466,7 @@ def run_batch(
                     mass_kg=e.mass_kg,
                     pacing_hz=e.pacing_hz,
                     subject=e.subject,
-                    seed=_file_seed(settings.seed, rel, e.path),
+                    seed=file_seed(settings.seed, rel, e.path),
                     settings=task_settings,
                     allow_negative_force=allow_negative_force,
                     overrides=overrides,
@@ -651,8 +489,8 @@ def run_batch(
             for res in results:
                 timing = {"path": res["path"], "status": res["status"]}
                 timing["elapsed_s"] = res.pop("elapsed_s")
-                atomic_write_json(rec_dir / f"{res['key']}.json", _clean_json(res))
-                atomic_write_json(time_dir / f"{res['key']}.json", _clean_json(timing))
+                atomic_write_json(rec_dir / f"{res['key']}.json", strict_json(res))
+                atomic_write_json(time_dir / f"{res['key']}.json", strict_json(timing))
                 done += res["status"] == "done"
                 bar.update(1)
                 if on_record is not None:

@@ -60,7 +60,7 @@ import pandas as pd
 
 from workbench.errors import InputError, UsageError
 from workbench.executor import run_tasks
-from workbench.fileutil import atomic_path, atomic_write_json
+from workbench.fileutil import atomic_path, atomic_write_json, strict_json
 from workbench.inference.settings import IdentifySettings
 from workbench.population.laws import PopulationLaws
 from workbench.population.recovery_design import (
@@ -310,7 +310,7 @@ def run_recovery(
     """
     from tqdm import tqdm
 
-    from workbench.population.batch import _clean_json, run_batch
+    from workbench.population.batch import run_batch
     from workbench.population.files import read_results
 
     settings = settings or IdentifySettings()
@@ -403,7 +403,7 @@ def run_recovery(
     result = RecoveryResult(
         design.truth, design, settings, recovered, verdict, records, out.resolve(), sensitivity
     )
-    atomic_write_json(out / "recovery.json", _clean_json(result.to_json()))
+    atomic_write_json(out / "recovery.json", strict_json(result.to_json()))
     return result
 
 
