@@ -274,3 +274,31 @@ def test_a_device_or_pipe_as_out_is_refused_not_replaced(tmp_path, capsys):
     ]
     assert stat.S_ISFIFO(os.lstat(pipe).st_mode)
     assert _leftovers(tmp_path) == ["sim.csv"]
+
+
+@pytest.mark.parametrize("as_json", [True, False])
+def test_a_result_whose_files_cannot_be_written_is_still_printed(
+    as_json, tmp_path, monkeypatch, capsys
+):
+    # The identification ran; only its --out files fail. The result must reach the user
+    # (one JSON object carrying the error too, or the text summary), then exit 2.
+    from workbench.inference.results import IdentificationResult
+
+    def full(self, path):
+        raise OutputError(path, OSError(errno.ENOSPC, "No space left on device"))
+
+    monkeypatch.setattr(IdentificationResult, "to_netcdf", full)
+    out = tmp_path / "out"
+    argv = ["identify", "seed_numerical_example", "--allow-negative-force", "--out", str(out)]
+    code = main([*argv, "--json"] if as_json else argv)
+    captured = capsys.readouterr()
+    assert code == 2
+    assert "the disk is full" in captured.err
+    if as_json:
+        payload = json.loads(captured.out)  # exactly one JSON object on stdout
+        assert "the disk is full" in payload["error"]
+        assert "stiffness_n_per_m" in payload and "identifiability" in payload
+        assert "netcdf" not in payload and "report" not in payload
+    else:
+        assert "SMD identification" in captured.out
+        assert "report:" not in captured.out

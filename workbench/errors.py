@@ -99,6 +99,9 @@ class OutputError(WorkbenchError):
 
     def __init__(self, target: str | PathLike[str], error: OSError | str) -> None:
         self.target = str(target)
+        #: Set when the command printed its result before this error (the command line
+        #: then prints no second JSON object for the error).
+        self.result_printed = False
         self.errno = error.errno if isinstance(error, OSError) else None
         if isinstance(error, str):
             reason, fix = error, "give another file name"

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +18,7 @@ from workbench.cli.common import (
     check_budget,
     check_particles,
     check_record_size,
-    emit,
+    emit_after_writing,
     load,
     positive_int,
     record_options,
@@ -149,24 +150,28 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     )
     ident = identify(insp, settings=settings, progress=False)
     if "surface_route" in ident.extra:
-        out = _route_check(args, ident, settings.seed, record.name)
+        out, write = _route_check(args, ident, settings.seed, record.name)
         out["record"] = record.name
         for warning in out["warnings"]:
             print(f"workbench: warning: {warning}", file=sys.stderr)
-        emit(args, out, _route_text(out))
+        emit_after_writing(args, out, _route_text, write)
         return 0
-    out = _step_check(args, ident, settings.seed, record.name)
+    out, write = _step_check(args, ident, settings.seed, record.name)
     out["record"] = record.name
     out["surface"] = settings.model.surface
     out["checks"] = "per-step filter"
     out["checked"] = _what_is_checked(record, settings.model.surface)
     floor = None if record.ground_acc_m_s2 is not None else "rigid floor, no surface measured"
-    emit(args, out, _text(out, floor))
+    emit_after_writing(args, out, lambda obj: _text(obj, floor), write)
     return 0
 
 
-def _step_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> dict[str, Any]:
-    """Check the filter's per-step posterior against per-step MCMC; return the JSON."""
+#: A check's JSON and the writer of its ``--out`` files (None without ``--out``).
+_Checked = tuple[dict[str, Any], Callable[[dict[str, Any]], None] | None]
+
+
+def _step_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> _Checked:
+    """Check the filter's per-step posterior against per-step MCMC: the JSON and its writer."""
     from workbench.inference.crosscheck import crosscheck, with_mcmc_identifiability
 
     problem = ident.problem
@@ -188,14 +193,18 @@ def _step_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> d
     out["mass_kg"] = problem.mass_kg
     out["identifiability"] = ident.identifiability
     out["noise"] = ident.noise
-    if args.out:
+    if not args.out:
+        return out, None
+
+    def write(obj: dict[str, Any]) -> None:
         from workbench.reporting.crosscheck import crosscheck_figures
 
         out_dir = Path(args.out)
         key = safe_key(name)
-        out["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_crosscheck_{result.method}.nc"))
-        out["figures"] = [str(p) for p in crosscheck_figures(result, problem, out_dir, key)]
-    return out
+        obj["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_crosscheck_{result.method}.nc"))
+        obj["figures"] = [str(p) for p in crosscheck_figures(result, problem, out_dir, key)]
+
+    return out, write
 
 
 #: The options of the per-step filter check, with their defaults: on the transmissibility
@@ -211,8 +220,8 @@ _FILTER_OPTIONS = {
 }
 
 
-def _route_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> dict[str, Any]:
-    """Check identify's transmissibility posterior against MCMC on its likelihood."""
+def _route_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> _Checked:
+    """Check identify's transmissibility posterior against MCMC on its likelihood: JSON, writer."""
     from workbench.fileutil import atomic_path
     from workbench.inference.crosscheck_surface import ROUTE_CHECKED, crosscheck_surface_route
 
@@ -246,12 +255,16 @@ def _route_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> 
         "noise": ident.noise,
         "warnings": warnings,
     }
-    if args.out:
+    if not args.out:
+        return out, None
+
+    def write(obj: dict[str, Any]) -> None:
         path = Path(args.out) / f"{safe_key(name)}_crosscheck_transmissibility.nc"
         with atomic_path(path) as tmp:
             check.mcmc.inference_data.to_netcdf(str(tmp))
-        out["netcdf"] = str(path)
-    return out
+        obj["netcdf"] = str(path)
+
+    return out, write
 
 
 def _percent(share: float) -> str:

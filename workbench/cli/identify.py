@@ -10,7 +10,7 @@ from workbench.cli.common import (
     add_no_limits,
     add_rigid_floor_flag,
     check_record_size,
-    emit,
+    emit_after_writing,
     identify_settings,
     load,
     positive_int,
@@ -61,17 +61,22 @@ def _cmd_identify(args: argparse.Namespace) -> int:
             "steps_checked": len(check.steps),
             "seconds": round(check.seconds, 3),
         }
-    if args.out:
+
+    def write(obj: dict[str, Any]) -> None:
         from workbench.reporting.document import Report
         from workbench.reporting.identification import identification_section
 
         out_dir = Path(args.out)
         key = safe_key(record.name)
-        out["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_{result.method}.nc"))
+        obj["netcdf"] = str(result.to_netcdf(out_dir / f"{key}_{result.method}.nc"))
         report = Report(f"Identification of {record.name}")
         report.add(identification_section(result, out_dir, key))
-        out["report"] = str(report.write(out_dir))
-    emit(args, out, result.summary() + (f"\nreport: {out['report']}" if args.out else ""))
+        obj["report"] = str(report.write(out_dir))
+
+    def text(obj: dict[str, Any]) -> str:
+        return result.summary() + (f"\nreport: {obj['report']}" if "report" in obj else "")
+
+    emit_after_writing(args, out, text, write if args.out else None)
     return 0
 
 

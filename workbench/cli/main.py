@@ -184,7 +184,8 @@ def _run(args: argparse.Namespace, handler: Handler) -> int:
         _report_error(args, err.naming(FLAG_FOR_PARAMETER))
         return err.exit_code
     except WorkbenchError as err:
-        _report_error(args, str(err))
+        # A result printed before its files failed already carries the error in its JSON.
+        _report_error(args, str(err), as_json=not getattr(err, "result_printed", False))
         return err.exit_code
     except OSError as err:
         _report_error(args, _file_error_sentence(args, err))
@@ -333,9 +334,9 @@ def _lies_under(name: str | os.PathLike[str], out: str | os.PathLike[str]) -> bo
     return path == folder or folder in path.parents
 
 
-def _report_error(args: argparse.Namespace, message: str) -> None:
+def _report_error(args: argparse.Namespace, message: str, *, as_json: bool = True) -> None:
     print(f"workbench: error: {message}", file=sys.stderr)
-    if getattr(args, "json", False):
+    if as_json and getattr(args, "json", False):
         print(json.dumps({"error": message}))
 
 
