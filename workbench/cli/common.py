@@ -17,7 +17,6 @@ import os
 import re
 import sys
 import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -32,7 +31,7 @@ from workbench.cli.budgets import (
     check_particles,
     check_record_size,
 )
-from workbench.fileutil import strict_json
+from workbench.cli.output import emit, emit_after_writing
 
 __all__ = [
     "CURRENT_ARGV",
@@ -324,58 +323,6 @@ def warn_accepted_negative_force(record: Any) -> None:
     for warning in record.metadata.get("warnings", []):
         if NEGATIVE_FORCE_ACCEPTED in str(warning):
             print(f"workbench: warning: {warning}", file=sys.stderr)
-
-
-def emit_after_writing(
-    args: argparse.Namespace,
-    obj: dict[str, Any],
-    text: Callable[[dict[str, Any]], str],
-    write: Callable[[dict[str, Any]], None] | None,
-) -> None:
-    """Write the command's files, then print its result; an unwritten result is still printed.
-
-    A result that took minutes must not be lost to a full disk or a folder turned read-only:
-    when ``write`` fails, the result is printed as it stands (under ``--json`` with the
-    error's sentence under ``"error"``, so stdout keeps one JSON object) before the error
-    ends the command with its status.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-    obj : dict
-        The JSON result; ``write`` adds the names of the files it wrote.
-    text : callable
-        The human summary of a JSON result.
-    write : callable or None
-        Writes the files (``--out``); None when there are none to write.
-    """
-    from workbench.errors import OutputError
-
-    try:
-        if write is not None:
-            write(obj)
-    except OutputError as err:
-        emit(args, {**obj, "error": str(err)} if getattr(args, "json", False) else obj, text(obj))
-        err.result_printed = True
-        raise
-    emit(args, obj, text(obj))
-
-
-def emit(args: argparse.Namespace, obj: dict[str, Any], text: str) -> None:
-    """Print the command's result: ``obj`` as strict JSON under ``--json``, else ``text``.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-    obj : dict
-        The JSON result; a non-finite number is printed as null (a bare NaN is not JSON).
-    text : str
-        The human summary.
-    """
-    if getattr(args, "json", False):
-        print(json.dumps(strict_json(obj), indent=2, allow_nan=False))
-    else:
-        print(text)
 
 
 def safe_key(name: str) -> str:
