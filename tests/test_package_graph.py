@@ -28,7 +28,7 @@ DESIGN = ROOT / "docs" / "design.md"
 
 
 @dataclass(frozen=True)
-class Exception_:
+class Sanctioned:
     """An upward import the design allows, named with its reason."""
 
     unit: str  # the importing unit
@@ -41,7 +41,7 @@ class Exception_:
 #: layer, lazily, so the numerical core imports and runs without matplotlib (docs/design.md,
 #: "Where plotting lives").
 SANCTIONED = (
-    Exception_(
+    Sanctioned(
         unit="inference",
         function="plot_diagnostics",
         target="workbench.reporting.identification",
