@@ -145,8 +145,8 @@ def test_synthetic_study_recovers_generating_laws(tmp_path):
 def test_records_identified_through_a_deck_are_counted_and_reported(tmp_path):
     from types import SimpleNamespace
 
-    from workbench.population.batch import c_and_k_source
     from workbench.reporting.population import population_report
+    from workbench.result_rows import c_and_k_source
 
     kinds = ["deck transmissibility"] * 30 + ["time history, rigid floor"] * 20
     table = _table(50, seed=4, c_and_k_from=kinds)

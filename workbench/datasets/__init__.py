@@ -17,7 +17,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from workbench.datasets.catalogue import (
+from workbench.errors import InputError, UsageError
+from workbench.records.embedded import (
     EMBEDDED,
     EmbeddedRecord,
     benchmark_paths,
@@ -27,7 +28,6 @@ from workbench.datasets.catalogue import (
     names,
     synthetic_paths,
 )
-from workbench.errors import InputError, UsageError
 from workbench.records.io import load_record
 from workbench.records.record import Record
 

@@ -8,6 +8,7 @@ discrete state-space form of the SMD given (C, K) is the Kalman filter's
 - :mod:`~workbench.models.force`: :class:`FourierForce` and step-phase helpers.
 - :mod:`~workbench.models.smd`: :class:`SMDModel` (``SMDModel(...) + CubicStiffness()``).
 - :mod:`~workbench.models.effects`: the effect mechanism, registry and catalogue.
+- :mod:`~workbench.models.seed_laws`: the seed's population means (Table 2), as data.
 """
 
 from workbench.models.conversions import (

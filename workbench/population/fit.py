@@ -254,7 +254,7 @@ def fit_population(
     Parameters
     ----------
     results : pandas.DataFrame
-        Batch results (columns as :data:`workbench.population.batch.RESULT_COLUMNS`).
+        Batch results (columns as :data:`workbench.result_rows.RESULT_COLUMNS`).
     keep_not_identified : bool, default False
         Keep records whose C or K is flagged not identified (default: exclude them).
     source : str

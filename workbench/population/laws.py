@@ -43,6 +43,11 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError
+from workbench.models.seed_laws import (
+    SEED_DAMPING_RATIO,
+    SEED_NATURAL_FREQUENCY_HZ,
+    SEED_PACING_RANGE_HZ,
+)
 
 __all__ = [
     "DEFAULT_ASSUMPTIONS",
@@ -57,15 +62,6 @@ __all__ = [
     "StepLengthLaw",
     "read_laws",
 ]
-
-#: Pacing range [Hz] of the seed's population study (its fixed metronome cases).
-SEED_PACING_RANGE_HZ = (1.5, 2.25)
-#: The seed's population law of the natural frequency (Table 2):
-#: ``f_n = 0.3049 f_p + 1.3670`` [Hz] as (slope, intercept).
-SEED_NATURAL_FREQUENCY_HZ = (0.3049, 1.3670)
-#: The seed's population law of the damping ratio (Table 2): ``zeta = -0.2116 f_p + 0.8737``
-#: as (slope, intercept).
-SEED_DAMPING_RATIO = (-0.2116, 0.8737)
 
 
 @dataclass(frozen=True)

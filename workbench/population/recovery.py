@@ -74,6 +74,7 @@ from workbench.population.recovery_design import (
     simulate_recovery_record,
     truth_laws,
 )
+from workbench.population.recovery_text import recovery_text
 
 __all__ = [
     "FLOORS",
@@ -257,8 +258,6 @@ class RecoveryResult:
 
     def summary(self) -> str:
         """Return truth, recovered laws and verdicts as text."""
-        from workbench.reporting.recovery import recovery_text
-
         return recovery_text(self.to_json())
 
 

@@ -66,6 +66,7 @@ from typing import Any
 
 from workbench.errors import InputError, UsageError
 from workbench.fileutil import atomic_write_texts
+from workbench.records.embedded import EMBEDDED, EmbeddedRecord, embedded_path
 from workbench.records.formats import (
     _EXTENSIONS,
     _FORCE_UNIT_NAMES,
@@ -200,7 +201,7 @@ def load_record(
         The format; detected by :func:`detect_format` if not given.
     mass_kg : float, optional
         Body mass [kg]; overrides ``mass_kg`` in the JSON sidecar. For the embedded real
-        records the mass from :data:`workbench.datasets.EMBEDDED` is used if none is given.
+        records the mass from :data:`workbench.records.embedded.EMBEDDED` is used if none is given.
     pacing_hz : float, optional
         Stated pacing (step) frequency [Hz]; overrides the sidecar.
     subject : str, optional
@@ -455,9 +456,7 @@ def _number_argument(value: Any, name: str) -> float | None:
     return float(value)
 
 
-def _embedded_entry(p: Path) -> Any:
-    from workbench.datasets.catalogue import EMBEDDED, embedded_path
-
+def _embedded_entry(p: Path) -> EmbeddedRecord | None:
     try:
         resolved = p.resolve()
         for key, entry in EMBEDDED.items():

@@ -2,10 +2,12 @@
 
 A recovery run (:func:`workbench.population.recovery.run_recovery`, ``workbench recovery``)
 simulates walkers with a known law and fits the laws back. This module words its results:
-:func:`recovery_text` for the terminal, :func:`recovery_section` for a report (the truth,
-each fit with its 95 % intervals and verdicts, the records used and not identified, the
-sensitivity of the slopes to the settings) and :func:`recovery_conclusions`, the sentences
-with which the Table-2 report states what its own laws can and cannot be read as.
+:func:`recovery_text` for the terminal (it lives with the result, in
+:mod:`workbench.population.recovery_text`, and is re-exported here), :func:`recovery_section`
+for a report (the truth, each fit with its 95 % intervals and verdicts, the records used
+and not identified, the sensitivity of the slopes to the settings) and
+:func:`recovery_conclusions`, the sentences with which the Table-2 report states what its
+own laws can and cannot be read as.
 """
 
 from __future__ import annotations
@@ -15,12 +17,16 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError
+from workbench.population.recovery_text import (
+    FIT_LABELS,
+    LAW_NAMES,
+    interval_text,
+    recovery_text,
+    settings_text,
+)
 from workbench.reporting.document import Section, Table
 
 __all__ = ["read_recovery", "recovery_conclusions", "recovery_section", "recovery_text"]
-
-NAMES = {"natural_frequency_hz": "f_n", "damping_ratio": "zeta"}
-FITS = {"pipeline": "pipeline", "flags_ignored": "flags ignored", "sample": "records' truth"}
 
 
 def read_recovery(path: str | Path) -> dict[str, Any]:
@@ -68,7 +74,7 @@ def _check_truth(obj: dict[str, Any], file: Path) -> None:
     import math
 
     laws = obj["truth"].get("laws") if isinstance(obj["truth"], dict) else None
-    for law in NAMES:
+    for law in LAW_NAMES:
         for par in ("slope", "intercept"):
             value = laws.get(law, {}).get(par) if isinstance(laws, dict) else None
             number = isinstance(value, int | float) and not isinstance(value, bool)
@@ -80,57 +86,6 @@ def _check_truth(obj: dict[str, Any], file: Path) -> None:
                     "judged against it",
                     "run the recovery again (it writes the truth it simulated)",
                 )
-
-
-def _settings_text(obj: dict[str, Any]) -> str:
-    s = obj.get("settings", {})
-    return f"method {s.get('method', '?')}, observation noise {s.get('obs_noise', '?')}"
-
-
-def _interval(fit: dict[str, Any], law: str, par: str) -> str:
-    fl = fit["laws"][law]
-    lo, hi = fl[f"{par}_ci"]
-    return f"{fl[par]:.4g} [{lo:.4g}, {hi:.4g}]"
-
-
-def recovery_text(obj: dict[str, Any]) -> str:
-    """Format a ``recovery.json`` object as text (truth, each fit, verdicts, sensitivity)."""
-    truth, rec = obj["truth"], obj["records"]
-    lines = [
-        f"recovery of {truth['source']} on a {truth['floor']} floor; {_settings_text(obj)}",
-        f"records: {rec['simulated']} simulated, {rec['processed']} identified without error "
-        f"({rec['not_identified']} of them flagged C or K not identified), {rec['failed']} "
-        "failed",
-    ]
-    for law, name in NAMES.items():
-        tl = truth["laws"][law]
-        lines.append(f"{name}: truth slope {tl['slope']:.4g}, intercept {tl['intercept']:.4g}")
-        for which, label in FITS.items():
-            fit = obj["recovered"].get(which, {})
-            if "laws" not in fit:
-                lines.append(f"  {label:15s} not fitted: {fit.get('error', '')}")
-                continue
-            verdicts = obj["verdict"].get(which, {}).get(law, {})
-            parts = [
-                f"{par} {_interval(fit, law, par)} {verdicts.get(par, '')}".rstrip()
-                for par in ("slope", "intercept")
-            ]
-            lines.append(f"  {label:15s} n={fit['laws'][law]['n']:<4d} " + "; ".join(parts))
-    for row in obj.get("sensitivity", []):
-        change = row["slope_change"]
-        parts = []
-        for law, name in NAMES.items():
-            if law in change:
-                c = change[law]
-                lo, hi = c["change_ci"]
-                moves = "moves it" if c["moves"] else "does not move it"
-                parts.append(f"{name} slope {c['change']:+.3g} [{lo:.3g}, {hi:.3g}] ({moves})")
-        lines.append(
-            f"sensitivity {row['point']}: "
-            + ("; ".join(parts) or f"{change['records']} records in common, too few")
-            + (f", over {change['records']} {change['over']}" if parts else "")
-        )
-    return "\n".join(lines)
 
 
 def recovery_section(runs: list[dict[str, Any]]) -> Section:
@@ -149,26 +104,25 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
     rows = []
     for obj in runs:
         truth, rec = obj["truth"], obj["records"]
-        for which, label in FITS.items():
+        for which, label in FIT_LABELS.items():
             fit = obj["recovered"].get(which, {})
             # The records' truth is not a pipeline fit: its law's own count stands for it.
             law_n = fit.get("laws", {}).get("natural_frequency_hz", {}).get("n", 0)
             used_n = fit.get("records_used", law_n)
             cells = [
                 f"{truth['source'].split(' (')[0]}, {truth['floor']}",
-                _settings_text(obj),
+                settings_text(obj),
                 label,
                 f"{used_n} / {rec['simulated']} ({rec['not_identified']} not identified)",
             ]
-            for law in NAMES:
+            for law in LAW_NAMES:
                 tl = truth["laws"][law]
                 if "laws" not in fit:
                     cells.append(f"truth {tl['slope']:.4g}; not fitted")
                     continue
                 v = obj["verdict"].get(which, {}).get(law, {})
-                cells.append(
-                    f"truth {tl['slope']:.4g}; {_interval(fit, law, 'slope')} {v.get('slope', '')}"
-                )
+                slope = interval_text(fit, law, "slope")
+                cells.append(f"truth {tl['slope']:.4g}; {slope} {v.get('slope', '')}")
             rows.append(cells)
     sec.table(
         Table(
@@ -179,7 +133,7 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
     )
     sens = [
         [f"{obj['truth']['source'].split(' (')[0]}, {obj['truth']['floor']}", row["point"]]
-        + [_change_text(row["slope_change"].get(law)) for law in NAMES]
+        + [_change_text(row["slope_change"].get(law)) for law in LAW_NAMES]
         for obj in runs
         for row in obj.get("sensitivity", [])
     ]
@@ -218,10 +172,10 @@ def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]
     out = []
     for obj in runs:
         truth = obj["truth"]
-        where = f"on {truth['floor']} floors with {_settings_text(obj)}"
+        where = f"on {truth['floor']} floors with {settings_text(obj)}"
         name = truth["source"].split(" (")[0]
         fit = obj["recovered"].get("pipeline", {})
-        for law, short in NAMES.items():
+        for law, short in LAW_NAMES.items():
             mine = fitted_laws.get(law)
             own = f" (this report: slope {mine['slope']:.4g})" if mine else ""
             true_slope = truth["laws"][law]["slope"]
@@ -235,7 +189,7 @@ def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]
                 )
                 continue
             verdict = obj["verdict"]["pipeline"][law]["slope"]
-            got = _interval(fit, law, "slope")
+            got = interval_text(fit, law, "slope")
             if verdict == "manufactured":
                 out.append(
                     f"The pacing dependence of {short} is not a finding {where}: walkers whose "

@@ -4,8 +4,8 @@ Execution goes through the study executor (:mod:`workbench.executor`): in
 this process for one worker, a local process pool (``spawn`` start method) for more, a Dask
 distributed cluster when a scheduler address is given. A design point changes more than an
 :class:`IdentifySettings` names (prior box, random walks of C and K, per-channel observation
-noise), so the study submits its own picklable tasks, and reuses the batch's
-:func:`~workbench.population.batch.result_row` for the row.
+noise), so the study submits its own picklable tasks; each result becomes a row by
+:func:`~workbench.result_rows.result_row`, as in a batch.
 
 Determinism: each run's seed is :func:`~workbench.sensitivity.design.point_seed` of the
 study seed, the record, the point and the replicate, and the rows are sorted by those keys
@@ -24,6 +24,7 @@ from workbench.errors import UsageError, WorkbenchError
 from workbench.executor import run_tasks as run_engine_tasks
 from workbench.inference.settings import IdentifySettings
 from workbench.records.record import Record
+from workbench.result_rows import result_row
 from workbench.sensitivity.design import DesignPoint, Overrides, point_seed
 
 __all__ = ["OUTPUTS", "SensitivityTask", "make_tasks", "run_task", "run_tasks"]
@@ -90,7 +91,6 @@ def make_tasks(
 def run_task(task: SensitivityTask) -> dict[str, Any]:
     """Identify one record at one design point; a failure is returned, not raised."""
     from workbench.inference.identify import identify
-    from workbench.population.batch import result_row
 
     start = time.perf_counter()
     out: dict[str, Any] = {

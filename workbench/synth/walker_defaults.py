@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from workbench.population.laws import SEED_DAMPING_RATIO, SEED_NATURAL_FREQUENCY_HZ
+from workbench.models.seed_laws import SEED_DAMPING_RATIO, SEED_NATURAL_FREQUENCY_HZ
 
 __all__ = [
     "DEFAULT_PHASES_RAD",
@@ -21,7 +21,7 @@ __all__ = [
 ]
 
 #: Seed population law (Table 2): ``f_n = 0.3049 f_p + 1.3670`` as (slope, intercept); defined
-#: once, in :mod:`workbench.population.laws`.
+#: once, in :mod:`workbench.models.seed_laws`.
 POPULATION_NATURAL_FREQUENCY_HZ = SEED_NATURAL_FREQUENCY_HZ
 #: Seed population law (Table 2): ``zeta = -0.2116 f_p + 0.8737`` as (slope, intercept).
 POPULATION_DAMPING_RATIO = SEED_DAMPING_RATIO

@@ -1,8 +1,10 @@
 """The catalogue of embedded records: where each file is and what is known about it.
 
-See ``README.md`` in this folder for provenance and licences; keep that attribution in any
-copy. Body masses of the real records are not in their files and are given here. This
-module imports nothing of the workbench, so the record loaders can consult it.
+The files live in ``workbench/datasets/``; see ``README.md`` there for provenance and
+licences, and keep that attribution in any copy. Body masses of the real records are not in
+their files and are given here, below the loaders, so that
+:func:`~workbench.records.io.load_record` gives an embedded file its mass however it is
+named. :mod:`workbench.datasets` loads the records by name and re-exports these names.
 """
 
 from __future__ import annotations
@@ -10,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+
+from workbench.errors import UsageError
 
 __all__ = [
     "EMBEDDED",
@@ -59,7 +63,9 @@ EMBEDDED: dict[str, EmbeddedRecord] = {
 
 
 def _root() -> Path:
-    return Path(str(resources.files("workbench.datasets")))
+    # The data folder of the package, found without importing workbench.datasets (a layer
+    # above this one).
+    return Path(str(resources.files("workbench"))) / "datasets"
 
 
 def embedded_path(key: str) -> Path:
@@ -67,8 +73,6 @@ def embedded_path(key: str) -> Path:
     try:
         return _root() / EMBEDDED[key].filename
     except KeyError:
-        from workbench.errors import UsageError
-
         raise UsageError(
             f"unknown embedded record {key!r}; choose one of {', '.join(EMBEDDED)}"
         ) from None

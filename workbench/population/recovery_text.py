@@ -1,0 +1,70 @@
+"""A recovery run as text: what ``RecoveryResult.summary()`` and ``workbench recovery`` print.
+
+The words live with the result (as an identification's ``summary()`` does), below the
+reporting layer, which builds its report section (:mod:`workbench.reporting.recovery`) from
+the same names and numbers.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["FIT_LABELS", "LAW_NAMES", "interval_text", "recovery_text", "settings_text"]
+
+#: Short names of the judged laws.
+LAW_NAMES = {"natural_frequency_hz": "f_n", "damping_ratio": "zeta"}
+#: Labels of the three fits of a recovery.
+FIT_LABELS = {"pipeline": "pipeline", "flags_ignored": "flags ignored", "sample": "records' truth"}
+
+
+def settings_text(obj: dict[str, Any]) -> str:
+    """Name a recovery's method and observation noise (from its ``settings``)."""
+    s = obj.get("settings", {})
+    return f"method {s.get('method', '?')}, observation noise {s.get('obs_noise', '?')}"
+
+
+def interval_text(fit: dict[str, Any], law: str, par: str) -> str:
+    """Write a fitted law parameter with its 95 % interval: ``value [low, high]``."""
+    fl = fit["laws"][law]
+    lo, hi = fl[f"{par}_ci"]
+    return f"{fl[par]:.4g} [{lo:.4g}, {hi:.4g}]"
+
+
+def recovery_text(obj: dict[str, Any]) -> str:
+    """Format a ``recovery.json`` object as text (truth, each fit, verdicts, sensitivity)."""
+    truth, rec = obj["truth"], obj["records"]
+    lines = [
+        f"recovery of {truth['source']} on a {truth['floor']} floor; {settings_text(obj)}",
+        f"records: {rec['simulated']} simulated, {rec['processed']} identified without error "
+        f"({rec['not_identified']} of them flagged C or K not identified), {rec['failed']} "
+        "failed",
+    ]
+    for law, name in LAW_NAMES.items():
+        tl = truth["laws"][law]
+        lines.append(f"{name}: truth slope {tl['slope']:.4g}, intercept {tl['intercept']:.4g}")
+        for which, label in FIT_LABELS.items():
+            fit = obj["recovered"].get(which, {})
+            if "laws" not in fit:
+                lines.append(f"  {label:15s} not fitted: {fit.get('error', '')}")
+                continue
+            verdicts = obj["verdict"].get(which, {}).get(law, {})
+            parts = [
+                f"{par} {interval_text(fit, law, par)} {verdicts.get(par, '')}".rstrip()
+                for par in ("slope", "intercept")
+            ]
+            lines.append(f"  {label:15s} n={fit['laws'][law]['n']:<4d} " + "; ".join(parts))
+    for row in obj.get("sensitivity", []):
+        change = row["slope_change"]
+        parts = []
+        for law, name in LAW_NAMES.items():
+            if law in change:
+                c = change[law]
+                lo, hi = c["change_ci"]
+                moves = "moves it" if c["moves"] else "does not move it"
+                parts.append(f"{name} slope {c['change']:+.3g} [{lo:.3g}, {hi:.3g}] ({moves})")
+        lines.append(
+            f"sensitivity {row['point']}: "
+            + ("; ".join(parts) or f"{change['records']} records in common, too few")
+            + (f", over {change['records']} {change['over']}" if parts else "")
+        )
+    return "\n".join(lines)
