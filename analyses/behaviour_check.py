@@ -176,7 +176,9 @@ class Comparison:
     max_rel: float = 0.0
     max_rel_key: str = ""
     printed: list[str] = field(default_factory=list)  # last printed digit flips accepted
+    floored: list[str] = field(default_factory=list)  # near zero, under the absolute floor
     exact: bool = True
+    leaves: int = 0  # numbers, strings and nulls compared
 
     @property
     def status(self) -> str:
@@ -239,9 +241,11 @@ def _compare_numbers(a: float, b: float, key: str, out: Comparison, rtol: float,
     diff = abs(fa - fb)
     scale = max(abs(fa), abs(fb))
     rel = diff / scale if scale > 0 and math.isfinite(scale) else math.inf
-    if diff <= max(rtol * scale, atol):
+    if diff <= rtol * scale:
         if rel > out.max_rel or not out.max_rel_key:
             out.max_rel, out.max_rel_key = rel, key
+    elif diff <= atol:  # its relative difference means nothing: not the largest one
+        out.floored.append(key)
     elif _within_print(a, b):
         out.printed.append(key)
     else:
@@ -259,6 +263,7 @@ def _compare_strings(a: str, b: str, key: str, out: Comparison, rtol: float, ato
         if not sub.differences:
             out.exact = False
             out.printed.extend(sub.printed)
+            out.floored.extend(sub.floored)
             if sub.max_rel > out.max_rel:
                 out.max_rel, out.max_rel_key = sub.max_rel, sub.max_rel_key
             return
@@ -298,6 +303,8 @@ def compare_trees(
         each differing key path, in tree order).
     """
     out = Comparison() if out is None else out
+    if not isinstance(before, (dict, list)):
+        out.leaves += 1
     if isinstance(before, dict) and isinstance(after, dict):
         only_b = sorted(set(before) - set(after) - set(ignored))
         only_a = sorted(set(after) - set(before) - set(ignored))
@@ -331,14 +338,16 @@ def compare_trees(
 def describe(comparison: Comparison, limit: int = 3) -> str:
     """One line for the report: the status with its largest difference or first keys."""
     if comparison.status == "identical":
-        return "identical"
+        return f"identical ({comparison.leaves} values)"
     if comparison.status == "rounding":
         parts = []
         if comparison.max_rel_key:
             parts.append(f"max rel diff {comparison.max_rel:.1e} at {comparison.max_rel_key}")
+        if comparison.floored:
+            parts.append(f"under the absolute floor at {', '.join(comparison.floored[:limit])}")
         if comparison.printed:
             parts.append(f"last printed digit at {', '.join(comparison.printed[:limit])}")
-        return f"equal to rounding ({'; '.join(parts)})"
+        return f"equal to rounding ({'; '.join(parts)}; {comparison.leaves} values)"
     more = len(comparison.differences) - limit
     keys = "; ".join(comparison.differences[:limit]) + (f"; +{more} more" if more > 0 else "")
     return f"DIFFERENT ({keys})"
@@ -637,7 +646,7 @@ def table(outcomes: Sequence[Outcome], rev: str, commit: str) -> str:
         "|---|---|---|---|",
     ]
     for o in outcomes:
-        detail = o.detail if o.detail and o.detail != "identical" else _LABELS[o.status]
+        detail = o.detail or _LABELS[o.status]
         if o.status == "not comparable":
             detail = f"not comparable ({o.detail})"
         detail = detail.replace("|", "\\|")
