@@ -61,7 +61,8 @@ from typing import Any
 IGNORED_KEYS: dict[str, str] = {
     "elapsed_s": "wall time of a run, different from run to run",
     "wall_s": "wall time",
-    "seconds": "wall time",
+    "seconds": "wall time of crosscheck's MCMC (all steps, or one step's ensembles)",
+    "seconds_per_step": "wall time of crosscheck's MCMC per step",
     "timings": "wall times",
     "version": "the package version may be bumped by the change under test",
     "workbench_version": "the package version may be bumped by the change under test",
@@ -375,6 +376,8 @@ def _cell(value: str | None) -> Any:
 def folder_tree(folder: Path, placeholders: dict[str, str]) -> dict[str, Any]:
     """Every JSON and CSV file under ``folder`` (except ``IGNORED_FILES``) as one tree."""
     tree: dict[str, Any] = {}
+    if not folder.exists():
+        return tree
     for path in sorted(folder.rglob("*")):
         rel = path.relative_to(folder)
         if not path.is_file() or rel.parts[0] in IGNORED_FILES or rel.name.startswith("."):
@@ -568,13 +571,13 @@ def judge(case: Case, before: Run, after: Run, placeholders: dict[str, str], rto
     if before.out and after.out:
         names.update({str(before.out): "<out>", str(after.out): "<out>"})
     try:
-        tree_b = {"stdout": load_json(_neutral(before.stdout, names) or "null")}
-        tree_a = {"stdout": load_json(_neutral(after.stdout, names) or "null")}
+        tree_b = load_json(_neutral(before.stdout, names) or "null")
+        tree_a = load_json(_neutral(after.stdout, names) or "null")
     except json.JSONDecodeError as exc:
         return outcome("different", f"stdout is not JSON ({exc})")
-    if before.out and after.out:
-        tree_b["files"] = folder_tree(before.out, names) if before.out.exists() else {}
-        tree_a["files"] = folder_tree(after.out, names) if after.out.exists() else {}
+    if before.out and after.out:  # key paths: stdout.KEY and files.NAME.KEY
+        tree_b = {"stdout": tree_b, "files": folder_tree(before.out, names)}
+        tree_a = {"stdout": tree_a, "files": folder_tree(after.out, names)}
     result = compare_trees(tree_b, tree_a, rtol=rtol, atol=atol)
     detail = describe(result)
     status = result.status
