@@ -129,3 +129,20 @@ def test_near_zero_values_are_not_the_largest_relative_difference(bc):
     assert result.status == "rounding"
     assert result.floored == ["near_zero"] and result.max_rel_key == ""
     assert "under the absolute floor at near_zero" in bc.describe(result)
+
+
+def _run(bc, code, stdout="", stderr=""):
+    return bc.Run(code, stdout, stderr, 1.0, None)
+
+
+def test_judge_one_sided_failure_and_missing_flag(bc):
+    case = bc.Case("seed_individual", "identify", ("identify", "seed_individual", "--json"))
+    ok = _run(bc, 0, '{"k": 1.0}')
+    failed = _run(bc, 1, "", "Traceback ...\nValueError: boom")
+    outcome = bc.judge(case, ok, failed, {}, 1e-6, 1e-9)
+    assert outcome.status == "different" and "exit 0 -> 1" in outcome.detail
+    assert "ValueError: boom" in outcome.detail
+    missing = _run(bc, 2, "", "workbench: error: unrecognized arguments: --max-steps")
+    assert bc.judge(case, missing, ok, {}, 1e-6, 1e-9).status == "not comparable"
+    assert bc.judge(case, ok, _run(bc, None), {}, 1e-6, 1e-9).detail == "timed out (after)"
+    assert bc.judge(case, ok, _run(bc, 0, '{"k": 1.0}'), {}, 1e-6, 1e-9).status == "identical"
