@@ -765,4 +765,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM, after the temporary worktree was removed
+        sys.exit("behaviour_check: interrupted; the temporary worktree was removed")
