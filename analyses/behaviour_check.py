@@ -30,8 +30,8 @@ How it works:
    quoted. The exit status is 0 only if everything compared is identical or equal to
    rounding.
 
-Running every default case (25) takes about 10 minutes on two cores (the first command on
-each side also compiles the numba kernels of that tree).
+Running every default case (25) takes 10-15 minutes on two cores (the first command on each
+side also compiles the numba kernels of that tree).
 """
 
 from __future__ import annotations
