@@ -78,6 +78,11 @@ def _read(path: str) -> dict[str, Any]:
 
 
 def _child(conn: Any, path: str) -> None:
+    import faulthandler
+
+    # A crash of ezc3d is expected here and reported by the parent in one sentence; a fault
+    # handler inherited from the parent (pytest, python -X faulthandler) would add a dump.
+    faulthandler.disable()
     try:
         conn.send(("ok", _read(path)))
     except Exception as exc:  # ezc3d raises plain RuntimeErrors for damaged files
