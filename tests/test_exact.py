@@ -216,11 +216,17 @@ def test_half_gaussian_ridge_against_a_face(problem, axis, side, rho) -> None:
     assert post.sd[axis] == pytest.approx(sd[axis] * math.sqrt(1 - 2 / math.pi), rel=0.02)
 
 
-def test_two_separated_modes_fall_back_to_the_box(problem) -> None:
+@pytest.mark.parametrize("sd_per_width", [15.0, 30.0])
+def test_two_modes_are_both_held(problem, sd_per_width) -> None:
+    # Two equal modes 0.4 of the box apart on each axis. At width/15 they are 8.5 sd apart
+    # and the saddle between them is 9 log units down, inside the high region (20 units): one
+    # connected region, which the refined frame follows over both modes. At width/30 they are
+    # 17 sd apart, the saddle 36 units down: two high regions, so the grid falls back to the
+    # whole box and says so. Either way each mode holds half the mass.
     lo, hi = box(problem)
     width = hi - lo
     a, b = lo + 0.3 * width, lo + 0.7 * width
-    sd = width / 15
+    sd = width / sd_per_width
 
     def loglik(_p, c, k):
         x = np.column_stack([c, k])
@@ -229,9 +235,12 @@ def test_two_separated_modes_fall_back_to_the_box(problem) -> None:
         return np.logaddexp(la, lb)
 
     post = exact_posterior(problem, loglik=loglik)
-    assert any("more than one high region" in n for n in post.notes)
-    assert post.grid_kind == "prior box"
+    separated = any("more than one high region" in n for n in post.notes)
+    assert separated == (sd_per_width == 30.0), post.notes
+    assert post.grid_kind == ("prior box" if separated else "region")
+    assert post.covered
     near_a = np.sum(post.weights[np.linalg.norm((post.nodes - a) / width, axis=1) < 0.2])
+    # 0.02: the midpoint rule on about 1.7 cells per sd integrates each mode to about 1 %.
     assert near_a == pytest.approx(0.5, abs=0.02)
     np.testing.assert_allclose(post.mean, 0.5 * (a + b), rtol=1e-3)
 
