@@ -49,6 +49,11 @@ _INPUT_CACHE_SIZE = 8
 
 
 def force_input(problem: IdentificationProblem) -> ForceInput:
+    """Express the problem's force basis in the whitened coefficients (cached per problem).
+
+    Input of :func:`run_compiled`, shared by the Kalman filter and the Rao-Blackwellised
+    particle filter.
+    """
     fp = problem.force_prior
     known = problem.surface_force_n
     key = (problem.basis, fp.mean_n, fp.sd_n, known)

@@ -180,6 +180,10 @@ class Dynamics(NamedTuple):
 def sample_dynamics(
     problem: IdentificationProblem, c: FloatArray, k: FloatArray, discretisation: str
 ) -> Dynamics:
+    """Compute the per-sample constants of the filter for the (C, K) pairs ``c``, ``k``.
+
+    Used by the Kalman filter and, per particle, by the Rao-Blackwellised particle filter.
+    """
     phi, g0, g1 = transition_matrices(problem.mass_kg, c, k, problem.dt_s, discretisation)
     m = problem.mass_kg
     k_m, c_m = k / m, c / m

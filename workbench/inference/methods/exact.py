@@ -173,6 +173,11 @@ def kalman_loglik(discretisation: str = "foh") -> LogLikelihood:
 
 
 def kalman_force_moments(discretisation: str) -> ForceMoments:
+    """Give the force coefficients' posterior moments given (C, K), by the Kalman filter.
+
+    The exact method and the surface route mix these over their grid of (C, K).
+    """
+
     def moments(
         problem: IdentificationProblem, damping: FloatArray, stiffness: FloatArray
     ) -> tuple[FloatArray, FloatArray]:

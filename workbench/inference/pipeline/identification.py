@@ -167,6 +167,11 @@ def compile_problem(
 def set_noise(
     problem: IdentificationProblem, settings: IdentifySettings
 ) -> tuple[IdentificationProblem, _NoiseInfo]:
+    """Set the observation noise of ``settings`` on the problem (the noise stage).
+
+    Returns the problem and what the run reports of its noise (level, source, and how an
+    ``auto`` level was estimated).
+    """
     problem, estimate = apply_noise_setting(problem, settings.noise.obs_noise)
     detail: dict[str, Any] = {}
     if estimate is not None:
