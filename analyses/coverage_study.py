@@ -14,7 +14,7 @@ defaults except where said:
     (durations 2 %, amplitudes 5 %, phases 0.05 rad, coefficients splined through the steps),
     footfall pieces cut peak to peak, step-phase basis: realistic, and *outside* the
     per-piece Fourier model. Reported per record: the force-model check
-    (:mod:`workbench.inference.force_check`) and, for each method, whether the truth is in
+    (:mod:`workbench.inference.pipeline.force_check`) and, for each method, whether the truth is in
     the 95 % band or the identifiability report says C / K are not identified.
 ``consistent``
     The same simulator without variability (a periodic force from rest or in steady state),
@@ -39,8 +39,8 @@ from typing import Any
 import numpy as np
 
 from workbench.fileutil import atomic_write_text
-from workbench.inference.identify import identify
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.identification import identify
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import simulate_walking
 

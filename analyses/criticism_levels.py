@@ -8,7 +8,8 @@ Prints
 
 1. the seed's numerical example (75 kg, f_n 2.5 Hz, zeta 0.4, 1 kHz, 6 s) with a hidden
    cubic spring of several sizes, identified by the exact method with ``cubic_stiffness``
-   (:mod:`workbench.inference.effect_terms`): C, K and k3 with posterior sd against the truth;
+   (:mod:`workbench.inference.pipeline.effect_terms`): C, K and k3 with posterior sd against
+   the truth;
 2. simulated walks (15 s, 100 Hz) without and with a gait asymmetry (60/30 N at f_p/2),
    identified by the rbpf (16 particles, 6 harmonics, the seed's noise), with the
    posterior-predictive p-values of :mod:`workbench.diagnostics.posterior_predictive`
@@ -21,9 +22,9 @@ import numpy as np
 
 from workbench.diagnostics.posterior_predictive import posterior_predictive
 from workbench.diagnostics.predictive import one_step_from_result
-from workbench.inference.identify import identify
-from workbench.inference.methods import RBPF, Exact
-from workbench.inference.settings import NoiseSettings, Preprocessing
+from workbench.inference.methods.base import RBPF, Exact
+from workbench.inference.pipeline.identification import identify
+from workbench.inference.pipeline.settings import NoiseSettings, Preprocessing
 from workbench.models.effects import CubicStiffness, EffectContext, GaitAsymmetry
 from workbench.models.smd import SMDModel
 from workbench.synth.simulate import SEED_EXAMPLE_TERMS, simulate_smd, simulate_walking

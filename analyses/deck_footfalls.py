@@ -26,7 +26,7 @@ import sys
 import numpy as np
 
 from workbench import datasets
-from workbench.records.footfalls import _footfalls
+from workbench.records.footfalls import locate_footfalls
 from workbench.records.preprocess import preprocess
 from workbench.synth.decks import deck_walk
 
@@ -36,7 +36,7 @@ OFF_HUMP_STEP = 0.15
 
 def _phases(record, place_on_cleaned: bool) -> np.ndarray:
     com = preprocess(record)
-    times = _footfalls(
+    times = locate_footfalls(
         np.asarray(com.acc_m_s2),
         com.sample_rate_hz,
         record.pacing_hz,

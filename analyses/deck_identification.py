@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 import workbench as wb
-from workbench.inference.kalman import record_loglik
-from workbench.inference.noise import apply_noise_setting
-from workbench.inference.problem import build_problem
+from workbench.inference.core.problem import build_problem
+from workbench.inference.kalman.filter import record_loglik
+from workbench.inference.pipeline.noise import apply_noise_setting
 from workbench.models.conversions import damping_ns_per_m, stiffness_n_per_m
 from workbench.records.inspection import inspect_record
 from workbench.records.surface import surface_motion

@@ -8,7 +8,7 @@ Run: ``python analyses/deck_information.py [--out DIR] [--seeds 5]`` (about five
 One walker (70 kg, f_n 2.8 Hz, zeta 0.30, pacing 1.8 Hz, 200 Hz) walks on a narrow-band
 deck (``deck_walk`` with those overrides; the seed draws the GRF noise, the step-to-step
 variability and the deck's random phases). For every cell C and K are read from the deck's
-transmissibility (:func:`workbench.inference.surface_frf.surface_transmissibility`, the
+transmissibility (:func:`workbench.inference.surface.frf.surface_transmissibility`, the
 default route on a deck record) and the posterior sd of f_n and zeta is recorded with the
 identifiability level and whether the 95 % band holds the truth.
 
@@ -50,8 +50,8 @@ IDENTIFIED = ("well identified", "weakly identified")
 
 
 def cell(sweep: str, seed: int, **deck: float) -> dict[str, Any]:
-    from workbench.inference.problem import build_problem
-    from workbench.inference.surface_frf import surface_transmissibility
+    from workbench.inference.core.problem import build_problem
+    from workbench.inference.surface.frf import surface_transmissibility
     from workbench.records.inspection import inspect_record
     from workbench.records.surface import surface_motion
     from workbench.synth import deck_walk

@@ -29,7 +29,7 @@ PARAMETERS = ("natural_frequency_hz", "damping_ratio")
 
 
 def crosscheck(rejuvenate: str) -> None:
-    from workbench.inference.crosscheck import crosscheck as check_steps
+    from workbench.inference.crosscheck.check import crosscheck as check_steps
     from workbench.synth import deck_walk
 
     record = deck_walk(2, duration_s=30.0).record
@@ -108,8 +108,8 @@ def pf_likelihood_at_exact_mean(record: wb.Record, model: wb.SMDModel, exact) ->
     Monte Carlo spread and bias in nats, against the fraction of a nat that separates
     (C, K) one posterior sd apart.
     """
-    from workbench.inference.kalman import record_loglik
-    from workbench.inference.pf import run_pf
+    from workbench.inference.kalman.filter import record_loglik
+    from workbench.inference.methods.pf import run_pf
 
     captured = {}
 

@@ -26,8 +26,8 @@ Records (``workbench/datasets/``, see its README):
     known to be 33 % high (static balance 1.33, README), so the force is rescaled to M g
     over whole steps (``--rescale-to-mass``) unless ``--no-rescale``.
 
-Each record or segment goes through :func:`workbench.inference.identify.identify` with
-:class:`~workbench.inference.settings.IdentifySettings` built from the flags (the
+Each record or segment goes through :func:`workbench.inference.pipeline.identification.identify`
+with :class:`~workbench.inference.pipeline.settings.IdentifySettings` built from the flags (the
 workbench's defaults otherwise: rbpf, auto noise, step-phase basis, n = 10, modal prior,
 force-model check). Reported per segment: natural frequency and damping ratio with 95 %
 intervals, BLF1-3 with 95 % bands (mean over steps ± 1.96 standard errors), the
@@ -60,9 +60,9 @@ import numpy as np
 
 from workbench.datasets import EMBEDDED, embedded_path
 from workbench.fileutil import atomic_write_json
-from workbench.inference.identify import identify
-from workbench.inference.results import IdentificationResult
-from workbench.inference.settings import METHODS, IdentifySettings
+from workbench.inference.core.results import IdentificationResult
+from workbench.inference.pipeline.identification import identify
+from workbench.inference.pipeline.settings import METHODS, IdentifySettings
 from workbench.records.inspection import inspect_record
 from workbench.records.io import load_record
 from workbench.records.plateaus import PacingPlateau, find_pacing_plateaus

@@ -8,7 +8,7 @@ Usage::
         [--force-proposal regression|prior]
         [--seed 0] [--out DIR]
 
-The problem is :func:`workbench.inference.problem.seed_example_problem`: 75 kg, f_n 2.5 Hz,
+The problem is :func:`workbench.inference.core.problem.seed_example_problem`: 75 kg, f_n 2.5 Hz,
 damping ratio 0.4 (C = 942.5 N s/m, K = 18505.5 N/m), the input of seed eq. 24 on a 0.5 Hz
 basis with n = 10, 10 s at 1 kHz from rest, no high-pass, one piece, noise-free data with an
 assumed observation noise of ``--obs-noise`` times the RMS of u, u', u'' (default 0.01, as
@@ -20,16 +20,16 @@ posterior sits 6.5 % (C) and 5.7 % (K) below the truth at 10 % observation noise
 sd) and 0.6 % / 0.7 % below at 1 % (2.7 and 4.7 sd); with none it is within 0.1 % at 10 %
 and 0.2 % at 1 % (measured; ``--methods exact --state-noise 0.005``).
 
-Full-record results come from :func:`workbench.inference.identify.identify_problem` (the
-orchestration behind ``workbench identify``), so estimates, bands, diagnostics and the
+Full-record results come from :func:`workbench.inference.pipeline.identification.identify_problem`
+(the orchestration behind ``workbench identify``), so estimates, bands, diagnostics and the
 identifiability sentence are what a user of the command would get.
 
 Convergence along the record (seed figs. 2-4). What each method carries over time:
 
-- ``pf`` (:class:`~workbench.inference.outputs.ParticleFilterOutput`): C and K at every
+- ``pf`` (:class:`~workbench.inference.core.outputs.ParticleFilterOutput`): C and K at every
   sample (``mean``, ``sd``; inside the piece these use the importance-corrected weights of
   the regression proposal, which lean towards the whole piece's posterior early on, see
-  :mod:`workbench.inference.pf`; the checkpoint runs are the proper values), but the
+  :mod:`workbench.inference.methods.pf`; the checkpoint runs are the proper values), but the
   force coefficients only at piece ends -- here once, at the end. Its force coefficients at
   the checkpoints come from re-running the filter on the data up to each checkpoint with the
   same seed: the posterior given y(0..t). With the default regression proposal the force
@@ -42,8 +42,8 @@ Convergence along the record (seed figs. 2-4). What each method carries over tim
   particles on the rbpf of commit 9d6b2b2: 0.5 s of data 2 s, 2 s 40 s, 5 s 170 s, 10 s
   180-220 s); checkpoints after ``--rbpf-trace-until`` are skipped (the full record is
   always run). The whole default run took about 6 minutes on one core.
-- ``exact`` (:class:`~workbench.inference.exact.ExactPosterior`): one posterior, no trace;
-  the trace is :func:`~workbench.inference.exact.exact_posterior` on the data up to each
+- ``exact`` (:class:`~workbench.inference.methods.exact.ExactPosterior`): one posterior, no trace;
+  the trace is :func:`~workbench.inference.methods.exact.exact_posterior` on the data up to each
   checkpoint (the posterior given y(0..t), which a filter's estimate at t should match).
 
 The data up to t are the problem's first samples with the noise model unchanged (absolute
@@ -68,17 +68,17 @@ from typing import Any
 import numpy as np
 
 from workbench.fileutil import atomic_write_json
-from workbench.inference.exact import exact_posterior
-from workbench.inference.identify import identify_problem
-from workbench.inference.pf import run_pf
-from workbench.inference.problem import (
+from workbench.inference.core.problem import (
     IdentificationProblem,
     StiffnessDampingPrior,
     seed_example_problem,
 )
-from workbench.inference.rbpf import run_rbpf
-from workbench.inference.results import IdentificationResult
-from workbench.inference.settings import DEFAULT_PARTICLES, IdentifySettings
+from workbench.inference.core.results import IdentificationResult
+from workbench.inference.methods.exact import exact_posterior
+from workbench.inference.methods.pf import run_pf
+from workbench.inference.methods.rbpf import run_rbpf
+from workbench.inference.pipeline.identification import identify_problem
+from workbench.inference.pipeline.settings import DEFAULT_PARTICLES, IdentifySettings
 from workbench.records.record import G_M_S2
 from workbench.reporting.figures import save_figure
 from workbench.reporting.studies import (

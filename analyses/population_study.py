@@ -31,7 +31,7 @@ from typing import Any
 import pandas as pd
 
 from workbench.fileutil import atomic_write_json
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.population.batch import run_batch
 from workbench.population.fit import fit_population
 from workbench.population.laws import PopulationLaws

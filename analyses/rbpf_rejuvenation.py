@@ -22,7 +22,7 @@ test (70 kg at 1.8 Hz, 8 s at 100 Hz, 3 N force noise, from rest, seed 4; n = 4)
 particles, seeds 0-9, with the exact moves screened (``delayed_acceptance=True``, the
 default) and plain (``False``): the same statistics, and the mean ``z`` of the ten runs,
 against the test's own reference (its zooming grids, ``tests/test_rbpf.py``
-``_grid_posterior``, imported from the test so that the figures are the test's;
+``grid_posterior``, imported from the test so that the figures are the test's;
 ``--exact-reference`` compares with ``exact_posterior`` instead).
 """
 
@@ -43,11 +43,11 @@ pin_cores(sys.argv)
 import numpy as np  # noqa: E402
 
 import workbench as wb  # noqa: E402
-from workbench.inference.exact import exact_posterior  # noqa: E402
-from workbench.inference.identify import _Prepared, _set_noise, compile_problem  # noqa: E402
-from workbench.inference.problem import build_problem  # noqa: E402
-from workbench.inference.rbpf import run_rbpf  # noqa: E402
-from workbench.inference.settings import IdentifySettings  # noqa: E402
+from workbench.inference.core.problem import build_problem  # noqa: E402
+from workbench.inference.methods.exact import exact_posterior  # noqa: E402
+from workbench.inference.methods.rbpf import run_rbpf  # noqa: E402
+from workbench.inference.pipeline.identification import Prepared, compile_problem, set_noise  # noqa: E402
+from workbench.inference.pipeline.settings import IdentifySettings  # noqa: E402
 from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 
@@ -86,9 +86,9 @@ def _test_grid_reference(problem: Any) -> Any:
     from types import SimpleNamespace
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from tests.test_rbpf import _grid_posterior
+    from tests.test_rbpf import grid_posterior
 
-    mean, sd = _grid_posterior(problem)
+    mean, sd = grid_posterior(problem)
     return SimpleNamespace(mean=mean, sd=sd)
 
 
@@ -140,8 +140,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.surprising_step:
             problem = _surprising_step_problem()
         else:
-            prepared = _Prepared.of(_record(name), settings)
-            problem, _ = _set_noise(compile_problem(prepared, settings), settings)
+            prepared = Prepared.of(_record(name), settings)
+            problem, _ = set_noise(compile_problem(prepared, settings), settings)
         test_grid = args.surprising_step and not args.exact_reference
         exact = _test_grid_reference(problem) if test_grid else exact_posterior(problem)
         rows = {

@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.population.recovery import RecoveryDesign, run_recovery, truth_laws
 
 SETTINGS = {

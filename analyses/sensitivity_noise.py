@@ -100,7 +100,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.datasets import embedded_path
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.population.study import (
     STUDY_SETTINGS,
     StudyDesign,

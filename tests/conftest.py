@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from tests.walks import walking_problem
-from workbench.inference.problem import IdentificationProblem
+from workbench.inference.core.problem import IdentificationProblem
 
 
 @pytest.fixture(scope="session")

@@ -9,7 +9,7 @@ import pytest
 
 import workbench as wb
 from workbench.errors import UsageError, WorkbenchError
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.synth.simulate import simulate_walking
 
 MASS_KG = 70.0

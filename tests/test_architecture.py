@@ -115,8 +115,44 @@ def test_the_cycle_finder_finds_a_cycle() -> None:
 def test_no_import_cycle_in_the_package() -> None:
     edges = import_graph()
     assert len(edges) > 50  # the walk saw the package
-    assert "workbench.inference.methods" in edges["workbench.inference.identify"]
+    assert "workbench.inference.methods" in edges["workbench.inference.pipeline.identification"]
     assert cycles(edges) == []
+
+
+def test_inference_families_import_one_way() -> None:
+    """The subpackages of ``inference`` form no cycle among themselves.
+
+    Importing ``workbench.inference.kalman.filter`` first runs ``workbench.inference.kalman``
+    (its public face, which imports the family's modules): a cycle between two families
+    would be a cycle at import time even when no two modules import each other.
+    """
+    family_of = {
+        m: ".".join(m.split(".")[:3])
+        for m in import_graph()
+        if m.startswith("workbench.inference.") and m.count(".") >= 2
+    }
+    families: dict[str, set[str]] = {f: set() for f in family_of.values()}
+    for mod, targets in import_graph().items():
+        if mod in family_of:
+            for t in targets:
+                if t in family_of and family_of[t] != family_of[mod]:
+                    families[family_of[mod]].add(family_of[t])
+    assert len(families) >= 5
+    assert cycles(families) == []
+    assert "workbench.inference.core" not in families or not families["workbench.inference.core"]
+
+
+def test_each_inference_family_has_a_public_face() -> None:
+    """Every subpackage of ``inference`` says what it is and exports what others may use."""
+    import importlib
+
+    for init in sorted((PACKAGE / "inference").glob("*/__init__.py")):
+        name = f"workbench.inference.{init.parent.name}"
+        module = importlib.import_module(name)
+        assert module.__doc__ and len(module.__doc__) > 80, name
+        exported = getattr(module, "__all__", None)
+        assert exported, f"{name} has no __all__"
+        assert all(hasattr(module, n) and not n.startswith("_") for n in exported), name
 
 
 def test_models_and_records_import_no_algorithm() -> None:

@@ -19,7 +19,7 @@ import pytest
 from workbench import fileutil
 from workbench.cli import main
 from workbench.errors import OutputError
-from workbench.inference.crosscheck_results import CrosscheckResult, _netcdf_bytes
+from workbench.inference.crosscheck.results import CrosscheckResult, _netcdf_bytes
 
 
 def _fill_disk_after(monkeypatch, files_written: int) -> None:
@@ -282,7 +282,7 @@ def test_a_result_whose_files_cannot_be_written_is_still_printed(
 ):
     # The identification ran; only its --out files fail. The result must reach the user
     # (one JSON object carrying the error too, or the text summary), then exit 2.
-    from workbench.inference.results import IdentificationResult
+    from workbench.inference.core.results import IdentificationResult
 
     def full(self, path):
         raise OutputError(path, OSError(errno.ENOSPC, "No space left on device"))

@@ -215,7 +215,7 @@ def test_an_empty_output_path_is_refused(argv, tmp_path, capsys, monkeypatch):
     [
         (
             ["identify", "seed_individual", "--method", "rbpf", "--particles", "2e9"],
-            "workbench.inference.identify.identify",
+            "workbench.inference.pipeline.identification.identify",
             "--particles 2000000000 needs about 1.34e+03 GB of memory",
         ),
         (
@@ -273,7 +273,7 @@ def test_ordinary_counts_pass_the_count_checks():
     import argparse
 
     from workbench.cli.common import check_budget, check_particles
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline.settings import IdentifySettings
 
     # A pf of 100 000 particles (25 times the seed's) is well inside the memory budget.
     args = argparse.Namespace(no_limits=False, json=True)
@@ -396,7 +396,7 @@ def test_a_manifest_naming_one_record_twice_is_refused(spelling, tmp_path, capsy
     (tmp_path / "sub" / "up").symlink_to("..")  # a link back to the manifest's folder
     manifest = tmp_path / "manifest.csv"
     manifest.write_text(f"path\nr1.csv\nr2.csv\n{spelling}\n", encoding="utf-8")
-    monkeypatch.setattr("workbench.inference.identify.identify", never)
+    monkeypatch.setattr("workbench.inference.pipeline.identification.identify", never)
     err = refused(["batch", manifest, "--out", tmp_path / "out"], capsys)
     assert f"{manifest}, line 4, column 'path'" in err
     assert f"the record '{spelling}' is the file 'r1.csv' of line 2" in err
@@ -428,7 +428,7 @@ def test_crosscheck_time_is_estimated_from_the_steps_and_walkers(capsys, monkeyp
     from workbench.cli import budgets as cli_budgets
 
     monkeypatch.setattr(cli_budgets, "TIME_BUDGET_MIN", 0.1)  # 6 s
-    monkeypatch.setattr("workbench.inference.identify.identify", never)
+    monkeypatch.setattr("workbench.inference.pipeline.identification.identify", never)
     # Two steps (about 235 samples) with 4 x 32 walkers: about 4.5 s, under; 2 x 1000: 70 s.
     argv = ["crosscheck", "seed_individual", "--max-steps", "2"]
     _, _, err = run_cli(argv, capsys)

@@ -13,8 +13,8 @@ import pytest
 from tests.walks import walking_problem
 from workbench.cli import main
 from workbench.errors import UsageError
-from workbench.inference import kalman as kf
-from workbench.inference.crosscheck import (
+from workbench.inference.core.problem import IdentificationProblem
+from workbench.inference.crosscheck.check import (
     GaussianFitMove,
     StepTarget,
     _multimodal,
@@ -22,11 +22,11 @@ from workbench.inference.crosscheck import (
     default_moves,
     recompare,
 )
-from workbench.inference.mcmc import run_ensembles
-from workbench.inference.problem import IdentificationProblem
-from workbench.inference.rbpf import run_rbpf
-from workbench.inference.step_model import StepModel
-from workbench.inference.step_target import LogitFitMove
+from workbench.inference.crosscheck.mcmc import run_ensembles
+from workbench.inference.crosscheck.step_model import StepModel
+from workbench.inference.crosscheck.step_target import LogitFitMove
+from workbench.inference.kalman import filter as kf
+from workbench.inference.methods.rbpf import run_rbpf
 
 REAL = Path(__file__).resolve().parents[1] / "workbench" / "datasets" / "real"
 
@@ -330,7 +330,7 @@ def test_a_seed_filter_with_few_particles_is_flagged(synthetic_crosschecks: list
     are flagged degenerate; the floors below leave room for the binomial spread over 72
     steps and 12 runs.
     """
-    from workbench.inference.pf import run_pf
+    from workbench.inference.methods.pf import run_pf
 
     flagged, degenerate, runs_with_degenerate, total, runs = 0, 0, 0, 0, 0
     for problem, _, _, result in synthetic_crosschecks:
@@ -456,7 +456,7 @@ def test_history_grid_matches_the_full_history_posterior() -> None:
     """
     from dataclasses import replace
 
-    from workbench.inference.history_grid import HistoryGrid, box_logit
+    from workbench.inference.crosscheck.history_grid import HistoryGrid, box_logit
 
     problem, _ = _walk(12, harmonics=3, duration_s=4.5)
     problem = problem.with_noise(replace(problem.noise, state_sd=np.zeros(2)))
@@ -497,7 +497,7 @@ def test_history_grid_matches_the_full_history_posterior() -> None:
 
 def test_grid_from_the_piece_filter_equals_the_step_model_grid() -> None:
     """Nodes tabulated by the piece filter equal the step model's to rounding, chained."""
-    from workbench.inference.history_grid import HistoryGrid, box_logit
+    from workbench.inference.crosscheck.history_grid import HistoryGrid, box_logit
 
     problem, truth = _walk(12, harmonics=3, duration_s=4.5)
     problem = problem.with_noise(dataclasses.replace(problem.noise, state_sd=np.zeros(2)))
@@ -523,7 +523,7 @@ def test_compiled_grid_log_likelihood_equals_the_splines() -> None:
     At points inside the posterior, across the whole grid, on and beyond its edges and at
     the prior box's faces (the same -inf outside the grid or the box).
     """
-    from workbench.inference.history_grid import HistoryGrid, box_expit, box_logit
+    from workbench.inference.crosscheck.history_grid import HistoryGrid, box_expit, box_logit
 
     problem, truth = _walk(12, harmonics=3, duration_s=4.5)
     xm, xc = kf.initial_state(problem, 1)
@@ -587,9 +587,9 @@ def test_joint_mode_agrees_with_collapsed_and_converges() -> None:
 # -- identify grades identifiability from the MCMC posterior -------------------------------
 def test_identification_result_uses_the_mcmc_posterior() -> None:
     """API: the report's contraction and correlation are the MCMC's after the last step."""
-    from workbench.inference.crosscheck import with_mcmc_identifiability
-    from workbench.inference.identify import identify_problem
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.crosscheck.check import with_mcmc_identifiability
+    from workbench.inference.pipeline.identification import identify_problem
+    from workbench.inference.pipeline.settings import IdentifySettings
 
     problem, _ = _walk(11, harmonics=2, duration_s=3.0)
     settings = IdentifySettings().replace(

@@ -17,7 +17,7 @@ import pytest
 import workbench as wb
 from workbench.cli import main
 from workbench.cli.crosscheck import _route_text
-from workbench.inference.crosscheck_surface import crosscheck_surface_route
+from workbench.inference.crosscheck.surface import crosscheck_surface_route
 from workbench.records.io import save_record
 from workbench.synth import deck_walk
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 import workbench as wb
-from workbench.inference.crosscheck import crosscheck
+from workbench.inference.crosscheck.check import crosscheck
 from workbench.synth import deck_walk
 
 

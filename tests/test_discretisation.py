@@ -4,7 +4,7 @@ The seed's reduced state-space form given (C, K) (state ``z = (u, u', a0, a1, b1
 continuous matrix of seed eq. 18 without the C and K states, Euler step of eq. 20, or the
 matrix exponential held or exact over the interval) is written out here from the
 equations, as the library's former ``workbench.models.statespace.reduced_matrices`` built
-it; :func:`workbench.inference.kalman.transition_matrices` builds the transition of
+it; :func:`workbench.inference.kalman.filter.transition_matrices` builds the transition of
 ``(u, u')`` driven by the force ``F = b(t) theta`` sampled at the interval's ends, and is
 the library's one discretisation. For the same (M, C, K, dt) the state blocks agree, and
 the force columns are the Kalman responses times the Fourier basis: exactly so for the
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from workbench.inference.kalman import transition_matrices
+from workbench.inference.kalman.filter import transition_matrices
 from workbench.models.force import FourierForce
 
 #: (M [kg], C [N s/m], K [N/m], dt [s], pacing [Hz]): the seed, a soft and a stiff walker,

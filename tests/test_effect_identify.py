@@ -9,11 +9,11 @@ import pytest
 
 from workbench.cli import main
 from workbench.errors import UsageError
-from workbench.inference.effect_terms import effect_posterior, effect_terms, with_effects
-from workbench.inference.exact import exact_posterior
-from workbench.inference.problem import build_problem
-from workbench.inference.rbpf import run_rbpf
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.core.problem import build_problem
+from workbench.inference.methods.exact import exact_posterior
+from workbench.inference.methods.rbpf import run_rbpf
+from workbench.inference.pipeline.effect_terms import effect_posterior, effect_terms, with_effects
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.models.effects import CubicStiffness, EffectContext
 from workbench.models.smd import SMDModel
 from workbench.records.io import save_record
@@ -160,7 +160,7 @@ def test_unknown_effect_is_one_sentence(walk_csv, capsys):
 
 def test_effect_columns_of_the_catalogue(walk_csv):
     """Every catalogue effect gives named columns; state-acting ones use the observed u, u'."""
-    from workbench.inference.identify import compile_problem
+    from workbench.inference.pipeline.identification import compile_problem
     from workbench.models.effects import (
         BaseMotion,
         GaitAsymmetry,

@@ -18,8 +18,8 @@ from workbench.diagnostics.criticism import (
     prepare,
 )
 from workbench.errors import UsageError
-from workbench.inference.effect_terms import effect_terms
-from workbench.inference.problem import build_problem
+from workbench.inference.core.problem import build_problem
+from workbench.inference.pipeline.effect_terms import effect_terms
 from workbench.models import (
     CubicStiffness,
     Effect,

@@ -10,10 +10,10 @@ import pytest
 from scipy import stats
 
 from workbench.errors import UsageError
-from workbench.inference.exact import exact_posterior, find_mode
-from workbench.inference.identify import identify
-from workbench.inference.problem import SEED_STATE_FRACTION, build_problem
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.core.problem import SEED_STATE_FRACTION, build_problem
+from workbench.inference.methods.exact import exact_posterior, find_mode
+from workbench.inference.pipeline.identification import identify
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.models.conversions import natural_frequency_hz
 from workbench.records.inspection import inspect_record
 from workbench.records.record import G_M_S2
@@ -335,7 +335,7 @@ def test_find_mode_on_a_box_constrained_quadratic() -> None:
 
 # -- the real likelihood: the seed's numerical example -----------------------------------------
 def _seed_problem(obs_fraction: float, state_fraction: float = 0.0):
-    from workbench.inference.problem import seed_example_problem
+    from workbench.inference.core.problem import seed_example_problem
 
     problem, truth = seed_example_problem(obs_fraction=obs_fraction, state_fraction=state_fraction)
     return problem, np.array([truth["damping_ns_per_m"], truth["stiffness_n_per_m"]])

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from workbench.errors import UsageError
-from workbench.inference.force_check import force_model_check, with_step_drift
-from workbench.inference.problem import build_problem, seed_example_problem
+from workbench.inference.core.problem import build_problem, seed_example_problem
+from workbench.inference.pipeline.force_check import force_model_check, with_step_drift
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import simulate_walking
 
@@ -107,9 +107,9 @@ def test_bad_threshold_is_a_usage_error() -> None:
 
 def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
     """C and K are estimated jointly: when the check moves one, neither is identified."""
-    import workbench.inference.force_check as fc
-    from workbench.inference.identify import apply_force_model_check, identify
-    from workbench.inference.settings import IdentifySettings
+    import workbench.inference.pipeline.force_check as fc
+    from workbench.inference.pipeline.identification import apply_force_model_check, identify
+    from workbench.inference.pipeline.settings import IdentifySettings
 
     sim, _, _ = _walk(0, variability=True)
     settings = IdentifySettings.from_flat(

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from workbench.errors import UsageError
-from workbench.inference.identifiability import (
+from workbench.inference.core.identifiability import (
     MOSTLY_PRIOR_CONTRACTION,
     WELL_IDENTIFIED_CONTRACTION,
     force_correlation,
@@ -191,8 +191,8 @@ def test_seed_example_transient_identifies_and_steady_state_does_not() -> None:
     stop informing (C, K), the force prior pulls them. The report catches this through the
     mode on the prior box's face, which makes a parameter "mostly prior".
     """
-    from workbench.inference.exact import exact_posterior
-    from workbench.inference.problem import build_problem
+    from workbench.inference.core.problem import build_problem
+    from workbench.inference.methods.exact import exact_posterior
     from workbench.records.preprocess import preprocess
     from workbench.synth.simulate import seed_numerical_example
 

@@ -9,9 +9,9 @@ import pytest
 
 from workbench.cli import main
 from workbench.datasets import embedded_path
-from workbench.inference.identify import identify
-from workbench.inference.results import SCALAR_KEYS
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.core.results import SCALAR_KEYS
+from workbench.inference.pipeline.identification import identify
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.records.io import load_record, save_record
 from workbench.synth.simulate import simulate_walking
 
@@ -140,13 +140,13 @@ def test_bad_obs_noise_is_one_sentence(capsys, short_record, value):
 
 def test_prior_bound_posterior_is_not_called_identified(short_record):
     """A posterior squeezed against the box edge must not be reported as an estimate."""
-    from workbench.inference.problem import StiffnessDampingPrior
+    from workbench.inference.core.problem import StiffnessDampingPrior
 
     path, truth = short_record
     settings = IdentifySettings.from_flat(particles=64, obs_noise=0.02, harmonics=4, method="rbpf")
     rec = load_record(path)
-    from workbench.inference.identify import compile_problem, identify_problem
-    from workbench.inference.noise import apply_noise_setting
+    from workbench.inference.pipeline.identification import compile_problem, identify_problem
+    from workbench.inference.pipeline.noise import apply_noise_setting
     from workbench.records.inspection import inspect_record
 
     problem = compile_problem(inspect_record(rec), settings)
@@ -155,7 +155,7 @@ def test_prior_bound_posterior_is_not_called_identified(short_record):
     problem = problem.with_prior(StiffnessDampingPrior((100.0, 3000.0), (3 * k, 4 * k)))
     problem, _ = apply_noise_setting(problem, 0.02)
     res = identify_problem(problem, settings)
-    from workbench.inference.identify import downgrade_untrustworthy
+    from workbench.inference.pipeline.identification import downgrade_untrustworthy
 
     res = downgrade_untrustworthy(res)
     assert "stiffness_n_per_m" in res.parameters_at_prior_bound

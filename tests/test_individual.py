@@ -11,7 +11,7 @@ import pytest
 from workbench import datasets
 from workbench.cli.main import main
 from workbench.errors import InputError, UsageError
-from workbench.inference.prefixes import identify_on_prefixes
+from workbench.inference.pipeline.prefixes import identify_on_prefixes
 from workbench.records.io import load_record
 
 

@@ -1,4 +1,4 @@
-"""Tests of the exact likelihood given (C, K): workbench.inference.kalman."""
+"""Tests of the exact likelihood given (C, K): workbench.inference.kalman.filter."""
 
 from __future__ import annotations
 
@@ -12,10 +12,7 @@ import scipy.linalg
 from scipy.stats import multivariate_normal
 
 from workbench.errors import UsageError
-from workbench.inference import kalman as kf
-from workbench.inference import kalman_compiled
-from workbench.inference.harmonic_statistics import harmonic_statistics
-from workbench.inference.problem import (
+from workbench.inference.core.problem import (
     ForcePrior,
     IdentificationProblem,
     NoiseModel,
@@ -23,6 +20,9 @@ from workbench.inference.problem import (
     build_problem,
     seed_example_problem,
 )
+from workbench.inference.kalman import compiled as kalman_compiled
+from workbench.inference.kalman import filter as kf
+from workbench.inference.kalman.harmonic_statistics import harmonic_statistics
 from workbench.models.force import FourierForce
 from workbench.models.smd import SMDModel
 from workbench.records.preprocess import COMResponse
@@ -324,7 +324,7 @@ def test_piece_filter_chain_and_predictive_match_dense(walking_steps_problem) ->
 def test_chunked_piece_filter_equals_one_chunk(walking_steps_problem, monkeypatch) -> None:
     # The numpy loop works through a piece in chunks of samples (bounded memory); chunk
     # boundaries must not change anything, the predictive output included.
-    from workbench.inference import kalman_loop
+    from workbench.inference.kalman import loop as kalman_loop
 
     problem, c, k = walking_steps_problem
     pairs = ([c, 0.8 * c, 1.3 * c], [k, 1.1 * k, 0.7 * k])
@@ -430,7 +430,7 @@ def test_harmonic_route_equals_the_kalman_loop(
     fast = kf.record_loglik(problem, *pairs, discretisation=discretisation, return_pieces=True)
     x_mean, x_cov = fast.x_mean[:, 2], fast.x_cov[:, 2]
     piece = kf.piece_filter(problem, 3, *pairs, x_mean, x_cov, discretisation=discretisation)
-    monkeypatch.setattr(kalman_compiled, "_HARMONIC", False)
+    monkeypatch.setattr(kalman_compiled, "HARMONIC_KERNEL", False)
     slow = kf.record_loglik(problem, *pairs, discretisation=discretisation, return_pieces=True)
     ref = kf.piece_filter(problem, 3, *pairs, x_mean, x_cov, discretisation=discretisation)
     np.testing.assert_allclose(fast.piece_loglik, slow.piece_loglik, rtol=1e-10, atol=1e-7)

@@ -1,4 +1,4 @@
-"""Tests of the emcee runner: workbench.inference.mcmc.
+"""Tests of the emcee runner: workbench.inference.crosscheck.mcmc.
 
 Targets with known answers: Gaussians (mean and covariance in closed form), a bimodal
 mixture the ensembles cannot cross, and one footfall step of the real SMD model whose 2-D
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from workbench.errors import UsageError
-from workbench.inference import kalman as kf
-from workbench.inference.mcmc import RHAT_MAX, McmcResult, run_ensembles
+from workbench.inference.crosscheck.mcmc import RHAT_MAX, McmcResult, run_ensembles
+from workbench.inference.kalman import filter as kf
 
 
 # -- helpers -------------------------------------------------------------------------------
@@ -159,7 +159,7 @@ def test_lockstep_batches_give_the_samples_of_ensembles_run_one_by_one() -> None
 def test_batched_engine_gives_emcee_samples_bit_for_bit(moves: str) -> None:
     # One thread stepping all ensembles draws what emcee's own sampler draws: the same
     # samples, acceptance and evaluations as emcee in lockstep threads and one by one.
-    from workbench.inference.step_target import default_moves
+    from workbench.inference.crosscheck.step_target import default_moves
 
     spec = default_moves() if moves == "t-fit" else moves
     base = gaussian_log_prob(np.zeros(3), np.diag([1.0, 4.0, 0.25]))
@@ -191,7 +191,7 @@ def test_integrated_time_is_emcees() -> None:
     # runner meets: correlated, nearly white, and one with a walker that never moved.
     import emcee
 
-    from workbench.inference.mcmc_diagnostics import _integrated_time
+    from workbench.inference.crosscheck.mcmc_diagnostics import _integrated_time
 
     rng = np.random.default_rng(8)
     for n_t, rho in ((100, 0.9), (241, 0.5), (1000, 0.0)):

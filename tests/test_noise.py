@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from workbench.errors import UsageError
-from workbench.inference.noise import (
+from workbench.inference.core.problem import SEED_OBS_FRACTION, build_problem
+from workbench.inference.pipeline.noise import (
     apply_noise_setting,
     estimate_obs_fraction,
     noise_with_fraction,
     parse_noise_setting,
 )
-from workbench.inference.problem import SEED_OBS_FRACTION, build_problem
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import simulate_walking
 

@@ -18,7 +18,7 @@ import pytest
 import workbench as wb
 from workbench.cli import identify as identify_cli
 from workbench.cli.main import main
-from workbench.inference.results import CONDITIONAL_KEY, SCALAR_KEYS
+from workbench.inference.core.results import CONDITIONAL_KEY, SCALAR_KEYS
 from workbench.synth.simulate import simulate_walking
 
 ROW_LABELS = {

@@ -8,10 +8,8 @@ import numpy as np
 import pytest
 
 from workbench.errors import UsageError
-from workbench.inference.kalman import dense_kalman_loglik
-from workbench.inference.outputs import ParticleFilterOutput
-from workbench.inference.pf import run_pf
-from workbench.inference.problem import (
+from workbench.inference.core.outputs import ParticleFilterOutput
+from workbench.inference.core.problem import (
     SEED_STATE_FRACTION,
     ForcePrior,
     IdentificationProblem,
@@ -20,7 +18,9 @@ from workbench.inference.problem import (
     build_problem,
     seed_example_problem,
 )
-from workbench.inference.resampling import SCHEMES
+from workbench.inference.core.resampling import SCHEMES
+from workbench.inference.kalman.filter import dense_kalman_loglik
+from workbench.inference.methods.pf import run_pf
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import simulate_walking
 
@@ -318,8 +318,8 @@ def test_seed_example_blind_regeneration_degenerates_and_says_so(seed_example_bl
 
 # -- the compiled loop's building blocks ---------------------------------------------------
 def test_compiled_systematic_resampling_equals_the_pure_function():
-    from workbench.inference._pf_kernel import systematic_ancestors
-    from workbench.inference.resampling import draw_ancestors
+    from workbench.inference.core.resampling import draw_ancestors
+    from workbench.inference.methods._pf_kernel import systematic_ancestors
 
     rng = np.random.default_rng(3)
     for n in (1, 2, 7, 500):
@@ -339,7 +339,7 @@ def test_compiled_systematic_resampling_equals_the_pure_function():
 
 
 def test_compiled_normals_are_numpys_stream():
-    from workbench.inference._pf_kernel import fill_standard_normal
+    from workbench.inference.methods._pf_kernel import fill_standard_normal
 
     a = np.random.Generator(np.random.SFC64(11))
     b = np.random.Generator(np.random.SFC64(11))

@@ -118,7 +118,7 @@ def test_synthetic_study_recovers_generating_laws(tmp_path):
     plan = study_plan(design, seed=2026)
     assert len(plan) == 8 * 11
     manifest = write_study(plan, tmp_path / "study", design)
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline.settings import IdentifySettings
 
     settings = IdentifySettings.from_flat(**STUDY_SETTINGS, particles=16, force_check=False, seed=1)
     summary = run_batch(manifest, tmp_path / "batch", settings=settings, workers=2)

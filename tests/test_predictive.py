@@ -13,10 +13,10 @@ from workbench.diagnostics.predictive import (
     one_step_from_result,
     one_step_residuals,
 )
-from workbench.inference.identify import identify
-from workbench.inference.kalman import dense_kalman_loglik
-from workbench.inference.problem import build_problem
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.core.problem import build_problem
+from workbench.inference.kalman.filter import dense_kalman_loglik
+from workbench.inference.pipeline.identification import identify
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import simulate_walking
 

@@ -1,4 +1,4 @@
-"""Tests of the Rao-Blackwellised particle filter: workbench.inference.rbpf."""
+"""Tests of the Rao-Blackwellised particle filter: workbench.inference.methods.rbpf."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ import pytest
 
 from tests.walks import walking_problem
 from workbench.errors import UsageError
-from workbench.inference import kalman as kf
-from workbench.inference.outputs import ParticleFilterOutput
-from workbench.inference.problem import (
+from workbench.inference.core.outputs import ParticleFilterOutput
+from workbench.inference.core.problem import (
     IdentificationProblem,
     StiffnessDampingPrior,
     build_problem,
 )
-from workbench.inference.rbpf import _quadratic_screen, liu_west_move, run_rbpf
+from workbench.inference.kalman import filter as kf
+from workbench.inference.methods.rbpf import _quadratic_screen, liu_west_move, run_rbpf
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import simulate_walking
 
@@ -129,7 +129,7 @@ def test_exact_budget_buys_exact_moves_at_the_first_resamplings(short_problem) -
 
 
 # -- agreement with the exact posterior ----------------------------------------------------
-def _grid_posterior(problem: IdentificationProblem) -> tuple[np.ndarray, np.ndarray]:
+def grid_posterior(problem: IdentificationProblem) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and sd of (C, K) by brute force: record_loglik on zooming grids."""
     (c_lo, c_hi), (k_lo, k_hi) = problem.prior.damping_ns_per_m, problem.prior.stiffness_n_per_m
     box_lo, box_hi = np.array([c_lo, k_lo]), np.array([c_hi, k_hi])
@@ -163,7 +163,7 @@ def test_rbpf_matches_the_exact_posterior_on_a_walking_record() -> None:
     )
     insp = inspect_record(sim.record, highpass_hz=0.15)
     problem = build_problem(insp.com, insp.steps, harmonics=10)
-    mean, sd = _grid_posterior(problem)
+    mean, sd = grid_posterior(problem)
     out = run_rbpf(problem, n_particles=256, seed=0)
     z = (out.mean[-1] - mean) / sd
     assert np.all(np.abs(z) < 0.3), (out.mean[-1], out.sd[-1], mean, sd)
@@ -184,7 +184,7 @@ def test_exact_moves_follow_a_surprising_step(short_problem) -> None:
     # times the exact one with the delayed-acceptance moves and 1.21-1.50 with plain
     # Metropolis moves (the same spread; `python analyses/rbpf_rejuvenation.py
     # --surprising-step`), hence the sd bound of 1.6 below.
-    mean, sd = _grid_posterior(short_problem)
+    mean, sd = grid_posterior(short_problem)
     means = []
     for seed in range(4):
         out = run_rbpf(short_problem, n_particles=128, seed=seed)

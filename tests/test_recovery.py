@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from workbench.errors import UsageError
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.population.recovery import (
     RecoveryDesign,
     law_verdicts,

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from workbench.errors import UsageError
-from workbench.inference.resampling import SCHEMES, ess, normalise_log_weights, resample
+from workbench.inference.core.resampling import SCHEMES, ess, normalise_log_weights, resample
 
 # A fixed weight vector with a spread of sizes, a zero weight and an exactly-integer
 # expected count (n w = 2 for the 0.2 weight with n = 10), so every code path is exercised.

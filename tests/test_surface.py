@@ -12,9 +12,9 @@ import pytest
 import workbench as wb
 from workbench.cli import main
 from workbench.errors import UsageError
-from workbench.inference import kalman as kf
-from workbench.inference.problem import ForcePrior, build_problem
-from workbench.inference.surface_frf import deck_spectra, surface_transmissibility
+from workbench.inference.core.problem import ForcePrior, build_problem
+from workbench.inference.kalman import filter as kf
+from workbench.inference.surface.frf import deck_spectra, surface_transmissibility
 from workbench.records.inspection import inspect_record
 from workbench.records.io import save_record
 from workbench.records.preprocess import preprocess
@@ -274,7 +274,7 @@ def test_the_default_reads_c_and_k_from_the_transmissibility():
 def test_the_advice_on_more_vibration_follows_the_deck_information_scaling():
     """The sentence's advice assumes sd(f_n) ~ 1 / RMS; a deck four times stronger on the
     same walk (seeds 0-2, stated in advance) cuts the sd about fourfold."""
-    from workbench.inference.surface_information import enough_vibration
+    from workbench.inference.surface.information import enough_vibration
 
     walker = {
         "mass_kg": 70.0,
@@ -417,7 +417,7 @@ def test_the_crosscheck_checks_the_joint_filter_on_a_deck_record_when_asked(tmp_
 
 def test_the_surface_sentence_says_when_its_share_cannot_be_measured():
     """A flat likelihood has no local sd, so no share; the sentence says so in words."""
-    from workbench.inference.surface_information import _sentence
+    from workbench.inference.surface.information import _sentence
 
     flat = {"local_sd_with_surface": np.inf, "local_sd_rigid_floor": np.inf}
     info = {
@@ -435,9 +435,9 @@ def test_the_surface_sentence_says_when_its_share_cannot_be_measured():
 
 def test_the_rbpf_rejuvenates_always_on_a_deck_and_on_surprise_elsewhere(periodic_deck_walk):
     """The deck's bursts move the joint posterior along the record; "auto" follows them."""
-    from workbench.inference.identify import compile_problem
-    from workbench.inference.rbpf import run_rbpf
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.methods.rbpf import run_rbpf
+    from workbench.inference.pipeline.identification import compile_problem
+    from workbench.inference.pipeline.settings import IdentifySettings
 
     insp = inspect_record(periodic_deck_walk.record)
     deck, rigid = (
@@ -463,7 +463,7 @@ def test_a_deck_only_at_the_gait_harmonics_leaves_c_and_k_not_identified(monkeyp
     wrong numbers identified, so such a record is graded not identified whatever the time
     history's own grade (the later checks are switched off here to see this rule alone).
     """
-    import workbench.inference.identify as ident
+    import workbench.inference.pipeline.identification as ident
 
     monkeypatch.setattr(ident, "downgrade_untrustworthy", lambda result: result)
     sim = simulate_walking(

@@ -13,7 +13,7 @@ import pytest
 from workbench.cli import budgets as cli_budgets
 from workbench.cli import main
 from workbench.errors import UsageError, check_seed
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 
 
 def run_cli(argv, capsys):
@@ -106,7 +106,7 @@ def test_identify_guard_uses_the_record_length(tmp_path, capsys, monkeypatch):
     def never(*_, **__):
         raise AssertionError("the identification started")
 
-    monkeypatch.setattr("workbench.inference.identify.identify", never)
+    monkeypatch.setattr("workbench.inference.pipeline.identification.identify", never)
     err = refused(["identify", rec, "--mass", "70"], capsys)
     assert "identify on walk (400 samples) needs about 0.00204 GB of memory" in err
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from workbench.inference.problem import IdentificationProblem, build_problem
+from workbench.inference.core.problem import IdentificationProblem, build_problem
 from workbench.records.inspection import inspect_record
 from workbench.synth.simulate import Simulation, simulate_walking
 

@@ -32,11 +32,11 @@ from workbench.records.record import G_M_S2, Record
 if TYPE_CHECKING:
     from workbench import datasets
     from workbench.diagnostics.criticism import compare, diagnose
+    from workbench.inference.core import IdentificationResult
     from workbench.inference.crosscheck import crosscheck
-    from workbench.inference.identify import identify
     from workbench.inference.methods import PF, RBPF, Exact
-    from workbench.inference.results import IdentificationResult
-    from workbench.inference.settings import IdentifySettings, NoiseSettings, Preprocessing
+    from workbench.inference.pipeline import IdentifySettings, NoiseSettings, Preprocessing
+    from workbench.inference.pipeline.identification import identify
     from workbench.models import effects
     from workbench.models.smd import SMDModel
     from workbench.records.io import load_record
@@ -73,15 +73,15 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "effects": ("workbench.models.effects", None),
     "SMDModel": ("workbench.models.smd", "SMDModel"),
     "load_record": ("workbench.records.io", "load_record"),
-    "identify": ("workbench.inference.identify", "identify"),
-    "IdentificationResult": ("workbench.inference.results", "IdentificationResult"),
-    "IdentifySettings": ("workbench.inference.settings", "IdentifySettings"),
-    "NoiseSettings": ("workbench.inference.settings", "NoiseSettings"),
-    "Preprocessing": ("workbench.inference.settings", "Preprocessing"),
-    "RBPF": ("workbench.inference.methods", "RBPF"),
-    "PF": ("workbench.inference.methods", "PF"),
-    "Exact": ("workbench.inference.methods", "Exact"),
-    "crosscheck": ("workbench.inference.crosscheck", "crosscheck"),
+    "identify": ("workbench.inference.pipeline.identification", "identify"),
+    "IdentificationResult": ("workbench.inference.core.results", "IdentificationResult"),
+    "IdentifySettings": ("workbench.inference.pipeline.settings", "IdentifySettings"),
+    "NoiseSettings": ("workbench.inference.pipeline.settings", "NoiseSettings"),
+    "Preprocessing": ("workbench.inference.pipeline.settings", "Preprocessing"),
+    "RBPF": ("workbench.inference.methods.base", "RBPF"),
+    "PF": ("workbench.inference.methods.base", "PF"),
+    "Exact": ("workbench.inference.methods.base", "Exact"),
+    "crosscheck": ("workbench.inference.crosscheck.check", "crosscheck"),
     "diagnose": ("workbench.diagnostics.criticism", "diagnose"),
     "compare": ("workbench.diagnostics.criticism", "compare"),
     "simulate_walking": ("workbench.synth.simulate", "simulate_walking"),

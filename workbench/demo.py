@@ -249,7 +249,7 @@ def _recovery(folder: Path, seed: int) -> dict[str, Any]:
     depend on pacing, identified as the demo's real records are; ``workbench recovery`` and
     ``analyses/recovery_table.py`` do it at full size (docs/validation/recovery.md).
     """
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline import IdentifySettings
     from workbench.population.recovery import RecoveryDesign, run_recovery, truth_laws
 
     design = RecoveryDesign(

@@ -2,7 +2,7 @@
 
 A batch's ``results.csv`` (:mod:`workbench.population.batch`) and a sensitivity study's runs
 (:mod:`workbench.sensitivity.run`) read the same numbers off an
-:class:`~workbench.inference.results.IdentificationResult`; :func:`result_row` is that one
+:class:`~workbench.inference.core.results.IdentificationResult`; :func:`result_row` is that one
 reading, kept below both.
 """
 
@@ -57,7 +57,7 @@ def c_and_k_source(result: Any) -> str:
 
 
 def result_row(result: Any, path: str, subject: str | None, seed: int) -> dict[str, Any]:
-    """Turn an :class:`~workbench.inference.results.IdentificationResult` into a table row.
+    """Turn an :class:`~workbench.inference.core.results.IdentificationResult` into a table row.
 
     Parameters
     ----------

@@ -6,23 +6,23 @@ default, ``--cores N`` to change; run from a git checkout).
 
 Each run is a fresh process doing what the command does: load the embedded treadmill
 record, identify it with the command's settings (rbpf, 256 particles, n = 10), then
-:func:`~workbench.inference.crosscheck.crosscheck` with the command's defaults (grid
+:func:`~workbench.inference.crosscheck.check.crosscheck` with the command's defaults (grid
 history, surrogate steps, InferenceData built). CPU seconds of the pinned process (all its
 threads), split by instrumenting the cross-check's parts in place:
 
 ``identification``
-    :func:`~workbench.inference.identify.identify` (the filter under test).
+    :func:`~workbench.inference.pipeline.identification.identify` (the filter under test).
 ``grid``
-    :meth:`~workbench.inference.history_grid.HistoryGrid.advance`: every step model on the
-    grid's nodes, for each step and for the rebuilds from the record's start.
+    :meth:`~workbench.inference.crosscheck.history_grid.HistoryGrid.advance`: every step model on
+    the grid's nodes, for each step and for the rebuilds from the record's start.
 ``sampling``
-    :func:`~workbench.inference.mcmc.run_ensembles`: emcee and its convergence checks.
+    :func:`~workbench.inference.crosscheck.mcmc.run_ensembles`: emcee and its convergence checks.
 ``surrogate check``
-    :func:`~workbench.inference.step_target.surrogate_error`: every surrogate step's exact
-    likelihood at 512 of its draws.
+    :func:`~workbench.inference.crosscheck.step_target.surrogate_error`: every surrogate step's
+    exact likelihood at 512 of its draws.
 ``posterior``
-    :func:`~workbench.inference.crosscheck_posterior.completion` and
-    :func:`~workbench.inference.crosscheck_posterior.build_inference_data`.
+    :func:`~workbench.inference.crosscheck.posterior.completion` and
+    :func:`~workbench.inference.crosscheck.posterior.build_inference_data`.
 ``other``
     The rest of the cross-check (comparison, fits, hand-overs between steps).
 
@@ -62,11 +62,11 @@ def _child(steps: list[int | None]) -> dict[str, Any]:
 
     import numpy as np
 
-    import workbench.inference.crosscheck as cc
+    import workbench.inference.crosscheck.check as cc
     from workbench.datasets import load
-    from workbench.inference import history_grid, step_target
-    from workbench.inference.identify import identify
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.crosscheck import history_grid, step_target
+    from workbench.inference.pipeline.identification import identify
+    from workbench.inference.pipeline.settings import IdentifySettings
     from workbench.records.inspection import inspect_record
 
     spent = dict.fromkeys(PARTS[1:-1], 0.0)

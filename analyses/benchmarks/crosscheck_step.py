@@ -11,18 +11,18 @@ harmonics). Two parts, all CPU seconds of this pinned process:
 One step (``--step``), with a Gaussian prior on (C, K) (10 % above / 5 % below the truth,
 sd 25 % / 15 %) inside the problem's prior box; every walker's hand-in is the previous
 step's exact hand-over at its own (C, K), from that step's hand-in at the true (C, K).
-Sampled by :func:`workbench.inference.mcmc.run_ensembles` (4 ensembles, lockstep):
+Sampled by :func:`workbench.inference.crosscheck.mcmc.run_ensembles` (4 ensembles, lockstep):
 
 ``reference``
     The named reference: the same collapsed (C, K) posterior with its likelihood from the
-    piece Kalman filter (:func:`workbench.inference.kalman.piece_filter`, two pieces per
+    piece Kalman filter (:func:`workbench.inference.kalman.filter.piece_filter`, two pieces per
     call: the previous step for every row's own hand-in, then the step) and the runner's
     defaults (differential-evolution moves, first chunk of 500 steps) -- the cross-check as
     it stood before the closed-form step likelihood.
 ``collapsed``
     The same posterior with the closed-form step likelihood
-    (:class:`workbench.inference.step_model.StepModel`) and the t-fit + DE move mixture
-    (:func:`workbench.inference.crosscheck.default_moves`).
+    (:class:`workbench.inference.crosscheck.step_model.StepModel`) and the t-fit + DE move mixture
+    (:func:`workbench.inference.crosscheck.check.default_moves`).
 ``joint``
     All ``2 n + 5`` parameters in the non-centred coordinates ``(C, K, eta)`` (the joint
     density plus ``log |det S(C, K)|``), DE moves, ``4 d`` walkers: ``--mode joint``.
@@ -62,12 +62,12 @@ _CORES = pin_cores(sys.argv)
 
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
-from workbench.inference import kalman as kf  # noqa: E402
-from workbench.inference.crosscheck import StepTarget, crosscheck, default_moves  # noqa: E402
-from workbench.inference.mcmc import run_ensembles  # noqa: E402
-from workbench.inference.problem import build_problem  # noqa: E402
-from workbench.inference.rbpf import run_rbpf  # noqa: E402
-from workbench.inference.step_model import StepModel  # noqa: E402
+from workbench.inference.core.problem import build_problem  # noqa: E402
+from workbench.inference.crosscheck.check import StepTarget, crosscheck, default_moves  # noqa: E402
+from workbench.inference.crosscheck.mcmc import run_ensembles  # noqa: E402
+from workbench.inference.crosscheck.step_model import StepModel  # noqa: E402
+from workbench.inference.kalman import filter as kf  # noqa: E402
+from workbench.inference.methods.rbpf import run_rbpf  # noqa: E402
 from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 

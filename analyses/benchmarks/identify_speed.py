@@ -16,8 +16,8 @@ times over); ``--memory`` adds one traced run per method for the peak memory. Th
 average before and after is printed: read the seconds with it.
 
 Accuracy. ``|z|`` is ``|method mean - exact mean| / exact sd`` for C and K, the exact
-posterior (:func:`workbench.inference.exact.exact_posterior`) being the reference. One run of
-a particle filter is one Monte Carlo draw: ``--rbpf-seeds N`` repeats rbpf with seeds
+posterior (:func:`workbench.inference.methods.exact.exact_posterior`) being the reference. One
+run of a particle filter is one Monte Carlo draw: ``--rbpf-seeds N`` repeats rbpf with seeds
 0..N-1 and prints the spread of its ``|z|`` (the timing uses seed 0).
 
 One core. The issue's target is "on one core", so the process pins itself to one CPU and
@@ -43,12 +43,12 @@ _CORES = pin_cores(sys.argv)
 
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
-from workbench.inference.exact import exact_posterior  # noqa: E402
-from workbench.inference.noise import apply_noise_setting  # noqa: E402
-from workbench.inference.pf import run_pf  # noqa: E402
-from workbench.inference.problem import build_problem  # noqa: E402
-from workbench.inference.rbpf import run_rbpf  # noqa: E402
-from workbench.inference.settings import IdentifySettings  # noqa: E402
+from workbench.inference.core.problem import build_problem  # noqa: E402
+from workbench.inference.methods.exact import exact_posterior  # noqa: E402
+from workbench.inference.methods.pf import run_pf  # noqa: E402
+from workbench.inference.methods.rbpf import run_rbpf  # noqa: E402
+from workbench.inference.pipeline.noise import apply_noise_setting  # noqa: E402
+from workbench.inference.pipeline.settings import IdentifySettings  # noqa: E402
 from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 

@@ -4,18 +4,18 @@ Usage: ``python analyses/benchmarks/kalman_engine.py [--record seed_individual]
 [--pairs 1 16 256] [--repeats 3] [--json]`` (main environment, one pinned core by default).
 
 Every method, the noise estimate and the checks spend their time in
-:func:`workbench.inference.kalman.record_loglik` (or its piece-by-piece form inside the
+:func:`workbench.inference.kalman.filter.record_loglik` (or its piece-by-piece form inside the
 rbpf). This benchmark times the exact log-likelihood of a whole embedded record (default the
 30 s, 200 Hz walk ``seed_individual`` under the identification defaults: footfall pieces,
 n = 10, the noise estimated from the record) for batches of B (C, K) pairs by three routes,
 interleaved repeat by repeat, best CPU time of each:
 
 - ``harmonic``: the default compiled route, from the record's harmonic sufficient
-  statistics (:mod:`workbench.inference._harmonic_kernel`);
-- ``kalman``: the compiled Kalman loop (:mod:`workbench.inference._kalman_kernel`), which
+  statistics (:mod:`workbench.inference.kalman._harmonic_kernel`);
+- ``kalman``: the compiled Kalman loop (:mod:`workbench.inference.kalman._kalman_kernel`), which
   the default takes with process noise, effects or a known surface load;
 - ``numpy``: ``engine="numpy"``, the numpy filter both replaced, kept in
-  :mod:`workbench.inference.kalman_loop` as the pinned reference.
+  :mod:`workbench.inference.kalman.loop` as the pinned reference.
 
 It prints microseconds per pair and sample, the ratios to numpy, and the largest difference
 of each compiled route's log-likelihoods from numpy's (rounding).
@@ -37,10 +37,10 @@ _CORES = pin_cores(sys.argv)
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
 import workbench as wb  # noqa: E402
-from workbench.inference import kalman_compiled  # noqa: E402
-from workbench.inference.identify import _Prepared, _set_noise, compile_problem  # noqa: E402
-from workbench.inference.kalman import record_loglik  # noqa: E402
-from workbench.inference.settings import IdentifySettings  # noqa: E402
+from workbench.inference.kalman import compiled as kalman_compiled  # noqa: E402
+from workbench.inference.kalman.filter import record_loglik  # noqa: E402
+from workbench.inference.pipeline.identification import Prepared, compile_problem, set_noise  # noqa: E402
+from workbench.inference.pipeline.settings import IdentifySettings  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -54,8 +54,8 @@ def main(argv: list[str] | None = None) -> int:
 
     settings = IdentifySettings()
     record = wb.datasets.load(args.record)
-    problem = compile_problem(_Prepared.of(record, settings), settings)
-    problem, _ = _set_noise(problem, settings)
+    problem = compile_problem(Prepared.of(record, settings), settings)
+    problem, _ = set_noise(problem, settings)
     rng = np.random.default_rng(0)
     box = problem.prior
     largest = max(args.pairs)
@@ -64,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     routes = ("harmonic", "kalman", "numpy")
 
     def run(route: str, b: int) -> np.ndarray:
-        kalman_compiled._HARMONIC = route == "harmonic"
+        kalman_compiled.HARMONIC_KERNEL = route == "harmonic"
         engine = "numpy" if route == "numpy" else "compiled"
         return record_loglik(problem, damping[:b], stiffness[:b], engine=engine).loglik
 
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
                 np.max(np.abs(out[route] - out["numpy"]))
             )
         rows.append(row)
-    kalman_compiled._HARMONIC = True
+    kalman_compiled.HARMONIC_KERNEL = True
     report = {
         "benchmark": "kalman_engine",
         "reference": "record_loglik(engine='numpy'), the numpy filter the compiled routes replaced",

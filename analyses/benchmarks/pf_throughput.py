@@ -1,6 +1,6 @@
 """Throughput of the seed-faithful particle filter against the ``particles`` library.
 
-Runs :func:`workbench.inference.pf.run_pf` and the ``particles`` library's bootstrap filter
+Runs :func:`workbench.inference.methods.pf.run_pf` and the ``particles`` library's bootstrap filter
 (``particles.SMC(fk=particles.state_space_models.Bootstrap(ssm=..., data=...))``) on the same
 model, the same data, with the same number of particles, resampling scheme (systematic) and
 ESS threshold (0.5), in the same process, and prints particle-steps per second, their ratio
@@ -19,7 +19,7 @@ the library's ``MvNormal`` with a per-component scale.
 
 A model check runs first: on a short record with (C, K) fixed, both filters' log-likelihood
 estimates (mean and spread over repeats) are printed beside the exact Kalman value
-(:func:`workbench.inference.kalman.dense_kalman_loglik`, Euler discretisation).
+(:func:`workbench.inference.kalman.filter.dense_kalman_loglik`, Euler discretisation).
 
 ``particles`` needs numpy < 2 (and numba), so this script runs from its own virtual
 environment; see ``analyses/benchmarks/README.md``.
@@ -56,14 +56,14 @@ _CORES = pin_cores(sys.argv)
 import numba  # noqa: E402
 import numpy as np  # noqa: E402  (after the thread-pool settings above)
 
-from workbench.inference.kalman import dense_kalman_loglik  # noqa: E402
-from workbench.inference.pf import run_pf  # noqa: E402
-from workbench.inference.problem import (  # noqa: E402
+from workbench.inference.core.problem import (  # noqa: E402
     ForcePrior,
     IdentificationProblem,
     NoiseModel,
     build_problem,
 )
+from workbench.inference.kalman.filter import dense_kalman_loglik  # noqa: E402
+from workbench.inference.methods.pf import run_pf  # noqa: E402
 from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 

@@ -188,7 +188,7 @@ def _child_batch(args: argparse.Namespace) -> dict[str, Any]:
     import resource
 
     cpus = _pin(args.workers)
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline.settings import IdentifySettings
     from workbench.population.batch import run_batch
 
     w0, c0 = time.perf_counter(), time.process_time()

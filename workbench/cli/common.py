@@ -356,7 +356,7 @@ def identify_settings(args: argparse.Namespace) -> Any:
     IdentifySettings
     """
     from workbench import datasets
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline import IdentifySettings
 
     def flag(name: str) -> Any:
         return getattr(args, name, None)

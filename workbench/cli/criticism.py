@@ -125,8 +125,8 @@ def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> tuple[An
     """
     from workbench.diagnostics.posterior_predictive import posterior_predictive
     from workbench.diagnostics.predictive import attach_one_step, one_step_from_result
-    from workbench.inference.identify import identify
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline import IdentifySettings
+    from workbench.inference.pipeline.identification import identify
     from workbench.models.effects import available_effects
 
     settings = IdentifySettings.from_flat(

@@ -1,7 +1,7 @@
 """``workbench crosscheck``: the posterior identify reports, checked against emcee.
 
 Per footstep for a particle filter; on a deck record, where identify reads C and K from the
-deck's transmissibility, that posterior as a whole (:mod:`workbench.inference.crosscheck_surface`).
+deck's transmissibility, that posterior as a whole (:mod:`workbench.inference.crosscheck.surface`).
 """
 
 from __future__ import annotations
@@ -107,8 +107,8 @@ def _what_is_checked(record: Any, surface: str) -> str:
 
 
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
-    from workbench.inference.identify import identify
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline import IdentifySettings
+    from workbench.inference.pipeline.identification import identify
     from workbench.records.inspection import inspect_record
 
     overrides = {
@@ -223,7 +223,7 @@ _FILTER_OPTIONS = {
 def _route_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> _Checked:
     """Check identify's transmissibility posterior against MCMC on its likelihood: JSON, writer."""
     from workbench.fileutil import atomic_path
-    from workbench.inference.crosscheck_surface import ROUTE_CHECKED, crosscheck_surface_route
+    from workbench.inference.crosscheck import ROUTE_CHECKED, crosscheck_surface_route
 
     unused = [
         flag

@@ -24,7 +24,7 @@ __all__ = ["add_identify_parser"]
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
-    from workbench.inference.identify import identify
+    from workbench.inference.pipeline.identification import identify
 
     settings = identify_settings(args)
     if args.crosscheck and args.method is None and settings.method.name == "exact":

@@ -212,7 +212,7 @@ def _warn_outside_prior(args: argparse.Namespace) -> None:
     Such a walker may be simulated on purpose (to see the prior's edge), but ``identify``
     with the default ``--prior modal`` cannot return the true value, so say so up front.
     """
-    from workbench.inference.problem import MODAL_DAMPING_RATIO, MODAL_NATURAL_FREQUENCY_HZ
+    from workbench.inference.core import MODAL_DAMPING_RATIO, MODAL_NATURAL_FREQUENCY_HZ
 
     for flag, value, (lo, hi), unit in (
         ("--natural-frequency-hz", args.natural_frequency_hz, MODAL_NATURAL_FREQUENCY_HZ, " Hz"),

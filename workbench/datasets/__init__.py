@@ -134,7 +134,7 @@ def settings(name: str, **overrides: Any) -> Any:
         (the seed's numerical example: ten harmonics of 0.5 Hz on absolute time, one piece,
         no high-pass).
     """
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline import IdentifySettings
 
     if dataset_path(name) is None:
         raise UsageError(

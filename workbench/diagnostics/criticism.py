@@ -274,7 +274,8 @@ def _surface_frame(
     """Return the record in the frame of the model's surface (docs/science.md 6).
 
     The surface model is ``surface``, else the model's, else the default ``"coupled"`` (as
-    in :func:`~workbench.inference.identify.identify`). Coupled or joint, with measured ground
+    in :func:`~workbench.inference.pipeline.identification.identify`). Coupled or joint, with
+    measured ground
     motion, the spring and damper act on the motion relative to the surface; ``"rigid"``
     keeps the absolute motion, and ``base_motion`` is then the candidate that stands for the
     surface the model left out.

@@ -54,7 +54,7 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from workbench.errors import UsageError
-from workbench.inference.results import IdentificationResult
+from workbench.inference.core import IdentificationResult
 
 __all__ = [
     "DEFAULT_REPLICATES",

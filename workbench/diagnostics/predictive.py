@@ -1,6 +1,6 @@
 """One-step-ahead predictive residuals of an identified model (a criticism level).
 
-The Kalman filter of the identification problem (:mod:`workbench.inference.kalman`) predicts
+The Kalman filter of the identification problem (:mod:`workbench.inference.kalman.filter`) predicts
 every sample from the samples before it, ``E[y_k | y_<k, C, K]``, with the current step's
 force coefficients at their posterior given the step's earlier samples. The GRF residual
 ``M (u''_k - E[u''_k | y_<k])`` [N] is then an *innovation*: for a correct model it is white,
@@ -32,9 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.diagnostics.criticism import Diagnosis, ljung_box_p
+from workbench.inference.core import IdentificationProblem, IdentificationResult
 from workbench.inference.kalman import initial_state, piece_filter
-from workbench.inference.problem import IdentificationProblem
-from workbench.inference.results import IdentificationResult
 
 __all__ = [
     "ONE_STEP_LAGS",

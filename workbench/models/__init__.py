@@ -2,7 +2,7 @@
 
 Models are plain descriptions; algorithms (in :mod:`workbench.inference`) take them. The
 discrete state-space form of the SMD given (C, K) is the Kalman filter's
-(:func:`workbench.inference.kalman.transition_matrices`), the one discretisation.
+(:func:`workbench.inference.kalman.filter.transition_matrices`), the one discretisation.
 
 - :mod:`~workbench.models.conversions`: K, C <-> f_n, zeta; BLF.
 - :mod:`~workbench.models.force`: :class:`FourierForce` and step-phase helpers.

@@ -314,7 +314,7 @@ class Effect:
         """Return the term's columns in the identification problem and the coefficients' names.
 
         The identification fits coefficients ``beta`` shared by the whole record with the
-        term equal to ``columns @ beta`` (see :mod:`workbench.inference.effect_terms`). The
+        term equal to ``columns @ beta`` (see :mod:`workbench.inference.pipeline.effect_terms`). The
         default, for linear effects, is :meth:`regressors` with every parameter fitted; a
         nonlinear effect may override it to fit the parameters its term is linear in, the
         others held at the instance's values (``heel_impact`` fits its height, its decay

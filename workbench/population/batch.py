@@ -1,7 +1,7 @@
 """Batch identification: every record of a manifest, fault-tolerant, resumable, scalable.
 
 ``run_batch(manifest, out_dir)`` identifies each record with
-:func:`workbench.inference.identify.identify` and writes
+:func:`workbench.inference.pipeline.identification.identify` and writes
 
 - ``OUT/records/<key>.json``: one file per record, written atomically (temporary file in the
   same folder, then rename; :mod:`workbench.fileutil`) as soon as the record is finished,
@@ -67,7 +67,7 @@ import pandas as pd
 from workbench.errors import UsageError, WorkbenchError
 from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json, strict_json
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline import IdentifySettings
 from workbench.population.batch_folder import (
     as_in_manifest,
     batch_lock,
@@ -114,13 +114,13 @@ class BatchTask:
     seed : int
         The record's seed (:func:`record_seed`).
     settings : dict
-        :class:`~workbench.inference.settings.IdentifySettings` as JSON.
+        :class:`~workbench.inference.pipeline.settings.IdentifySettings` as JSON.
     allow_negative_force : bool
         Accept force samples below zero with a warning (synthetic benchmarks).
     overrides : Overrides or None
         What a sensitivity design point changes beyond the settings
         (:class:`~workbench.sensitivity.design.Overrides`): applied through the problem
-        hooks of :func:`~workbench.inference.identify.identify`.
+        hooks of :func:`~workbench.inference.pipeline.identification.identify`.
     max_rows : int or None
         Longest record, in file lines, identified; a longer one fails before it is read
         (None: no limit).
@@ -197,7 +197,7 @@ def run_task(task: BatchTask) -> dict[str, Any]:
         ``key, path, status`` (``"done"`` or ``"failed"``), ``row`` or ``reason``,
         ``warnings`` (messages raised while identifying) and ``elapsed_s``.
     """
-    from workbench.inference.identify import identify
+    from workbench.inference.pipeline.identification import identify
     from workbench.records.io import load_record
 
     start = time.perf_counter()

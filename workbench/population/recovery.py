@@ -61,7 +61,7 @@ import pandas as pd
 from workbench.errors import InputError, UsageError
 from workbench.executor import run_tasks
 from workbench.fileutil import atomic_path, atomic_write_json, strict_json
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline import IdentifySettings
 from workbench.population.laws import PopulationLaws
 from workbench.population.recovery_design import (
     FLOORS,

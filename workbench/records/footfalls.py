@@ -165,7 +165,7 @@ def _track_from_footfalls(
     return np.clip(track, 0.7 * fallback_hz, 1.3 * fallback_hz)
 
 
-def _footfalls(
+def locate_footfalls(
     acc: FloatArray,
     sample_rate_hz: float,
     pacing_hz: float | None,
@@ -313,7 +313,7 @@ def detect_footfalls(
         not one-dimensional and finite, or ``pacing_hz`` is not a positive number.
     """
     acc, fs = _as_acceleration(com_or_acc, sample_rate_hz)
-    times = _footfalls(acc, fs, pacing_hz)
+    times = locate_footfalls(acc, fs, pacing_hz)
     return _times_to_indices(times, fs, acc.size)
 
 

@@ -23,8 +23,8 @@ from scipy import ndimage, signal
 
 from workbench.errors import InputError, UsageError
 from workbench.records.footfalls import (
-    _footfalls,
     detect_footfalls,
+    locate_footfalls,
 )
 from workbench.records.pacing import (
     _VARIES_SMOOTH_STEPS,
@@ -188,7 +188,7 @@ def segment_steps(
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
     fs = com.sample_rate_hz
     surface = None if surface_acc_m_s2 is None else np.asarray(surface_acc_m_s2, dtype=np.float64)
-    times = _footfalls(acc, fs, pacing_hz, surface)
+    times = locate_footfalls(acc, fs, pacing_hz, surface)
     indices = np.clip(np.rint(times * fs).astype(np.intp), 0, max(acc.size - 1, 0))
     _, first = np.unique(indices, return_index=True)
     indices, times = indices[first], times[first]

@@ -1,4 +1,4 @@
-"""Figures of the per-step MCMC cross-check (:mod:`workbench.inference.crosscheck`)."""
+"""Figures of the per-step MCMC cross-check (:mod:`workbench.inference.crosscheck.check`)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from workbench.inference.core import IdentificationProblem
 from workbench.inference.crosscheck import CrosscheckResult
-from workbench.inference.problem import IdentificationProblem
 from workbench.models.conversions import damping_ratio, natural_frequency_hz
 from workbench.reporting.figures import save_figure
 

@@ -17,7 +17,7 @@ from scipy import signal
 from workbench.reporting.document import Section, Table
 from workbench.reporting.figures import save_figure
 
-#: An :class:`workbench.inference.results.IdentificationResult`. Not imported: the result's
+#: An :class:`workbench.inference.core.results.IdentificationResult`. Not imported: the result's
 #: own ``plot_diagnostics()`` calls this module, and the import would close a cycle.
 IdentificationResult = Any
 

@@ -188,8 +188,8 @@ def individual_demo_section(
         Progress bars.
     """
     from workbench import datasets
-    from workbench.inference.identify import identify
-    from workbench.inference.prefixes import identify_on_prefixes
+    from workbench.inference.pipeline import identify_on_prefixes
+    from workbench.inference.pipeline.identification import identify
 
     out_dir = Path(out_dir)
     seed_values = _seed_values()

@@ -517,7 +517,7 @@ def run_population_demo(
     dict
         Counts, the fitted laws, the report's files and one line of text.
     """
-    from workbench.inference.settings import IdentifySettings
+    from workbench.inference.pipeline import IdentifySettings
     from workbench.population.batch import run_batch
     from workbench.population.fit import fit_population
     from workbench.population.study import STUDY_SETTINGS, StudyDesign, study_plan, write_study

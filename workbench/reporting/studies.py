@@ -26,8 +26,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from workbench.inference.problem import StiffnessDampingPrior
-from workbench.inference.results import IdentificationResult
+from workbench.inference.core import IdentificationResult, StiffnessDampingPrior
 from workbench.records.inspection import Inspection
 from workbench.records.plateaus import PacingPlateau
 from workbench.reporting.figures import save_figure

@@ -54,14 +54,14 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import UsageError
-from workbench.inference.problem import (
+from workbench.inference.core import (
     SEED_DAMPING_RW_SD,
     SEED_STATE_FRACTION,
     SEED_STIFFNESS_RW_SD,
     IdentificationProblem,
     StiffnessDampingPrior,
 )
-from workbench.inference.settings import METHODS, IdentifySettings
+from workbench.inference.pipeline.settings import METHODS, IdentifySettings
 
 __all__ = [
     "DESIGNS",

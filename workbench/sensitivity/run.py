@@ -22,7 +22,7 @@ from typing import Any
 
 from workbench.errors import UsageError, WorkbenchError
 from workbench.executor import run_tasks as run_engine_tasks
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline import IdentifySettings
 from workbench.records.record import Record
 from workbench.result_rows import result_row
 from workbench.sensitivity.design import DesignPoint, Overrides, point_seed
@@ -90,7 +90,7 @@ def make_tasks(
 
 def run_task(task: SensitivityTask) -> dict[str, Any]:
     """Identify one record at one design point; a failure is returned, not raised."""
-    from workbench.inference.identify import identify
+    from workbench.inference.pipeline.identification import identify
 
     start = time.perf_counter()
     out: dict[str, Any] = {

@@ -29,7 +29,7 @@ import pandas as pd
 
 from workbench.errors import UsageError
 from workbench.fileutil import atomic_path, atomic_write_text, strict_json
-from workbench.inference.settings import IdentifySettings
+from workbench.inference.pipeline import IdentifySettings
 from workbench.records.record import Record
 from workbench.sensitivity.analysis import (
     effects_table,

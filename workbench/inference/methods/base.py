@@ -1,0 +1,399 @@
+"""Identification methods as objects with their own options, in the spirit of ``particles``.
+
+A method takes the compiled :class:`~workbench.inference.core.problem.IdentificationProblem` (the
+linear-Gaussian form of a pedestrian model on one record, which every method shares) and
+returns an :class:`~workbench.inference.core.results.IdentificationResult`::
+
+    wb.identify(record, model, method=wb.RBPF(n_particles=512))
+    wb.identify(record, model, method=wb.PF(n_particles=5000, force_proposal="prior"))
+    wb.identify(record, model, method=wb.Exact())
+
+- :class:`RBPF` (the default): particles over (C, K) only, a Kalman filter per particle for
+  the response and force coefficients; exact for this model, so few particles suffice.
+- :class:`PF`: the seed study's bootstrap particle filter over the whole state, kept
+  faithful to the seed (Euler discretisation, random walks of C and K).
+- :class:`Exact`: the marginal posterior of (C, K) on an adaptive grid, each node one Kalman
+  filter run; the reference every particle filter is checked against.
+
+A method name (``"rbpf"``, ``"pf"``, ``"exact"``) stands for the method with its defaults
+(:func:`as_method`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from workbench.errors import UsageError
+from workbench.inference.core import (
+    KALMAN_STATE_FRACTION,
+    SCHEMES,
+    SEED_STATE_FRACTION,
+    IdentificationProblem,
+    IdentificationResult,
+    ParticleFilterOutput,
+    force_correlation,
+    identifiability_report,
+)
+from workbench.inference.kalman import record_loglik
+from workbench.inference.methods.rbpf import REJUVENATE
+
+__all__ = ["METHODS", "PF", "RBPF", "Exact", "Method", "as_method"]
+
+#: Particles (a weighted subsample) used to estimate the C/K-force correlation of a filter.
+CORRELATION_DRAWS = 128
+#: Method names, in the order the command line lists them.
+METHODS = ("rbpf", "pf", "exact")
+
+
+def _check_resampling(resampling: str, ess_threshold: float, who: str) -> None:
+    if resampling not in SCHEMES:
+        raise UsageError(
+            f"{who}: 'resampling' {resampling!r} is not known; use one of {', '.join(SCHEMES)}",
+            parameter="resampling",
+        )
+    if not (0 < float(ess_threshold) <= 1):
+        raise UsageError(
+            f"{who}: 'ess_threshold' must be a fraction in (0, 1], got {ess_threshold!r}",
+            parameter="ess_threshold",
+        )
+
+
+def _check_particles(n: int, who: str) -> int:
+    if isinstance(n, bool) or int(n) != n or int(n) < 2:
+        raise UsageError(
+            f"{who}: 'n_particles' must be a whole number of at least 2, got {n!r}",
+            parameter="n_particles",
+        )
+    return int(n)
+
+
+@dataclass(frozen=True)
+class Method:
+    """Base class of an identification method (subclasses set ``name`` and implement ``run``).
+
+    ``default_state_noise_fraction`` is the process noise of (u, u') the method uses when the
+    noise settings leave it unset.
+    """
+
+    name: ClassVar[str] = ""
+    default_state_noise_fraction: ClassVar[float] = KALMAN_STATE_FRACTION
+
+    def run(
+        self,
+        problem: IdentificationProblem,
+        *,
+        seed: int = 0,
+        progress: bool = False,
+        common: dict[str, Any] | None = None,
+    ) -> IdentificationResult:
+        """Solve a compiled problem whose noise is set.
+
+        Parameters
+        ----------
+        problem : IdentificationProblem
+            The problem (data, basis, pieces, noise and prior).
+        seed : int, default 0
+            Seed of every random draw of the method.
+        progress : bool, default False
+            Show a progress bar (filters).
+        common : dict, optional
+            Fields passed through to the result (``noise``, ``settings``, ``model``).
+
+        Returns
+        -------
+        IdentificationResult
+        """
+        raise NotImplementedError
+
+    def replace(self, **changes: Any) -> Method:
+        """Return a copy with some options changed."""
+        return dataclasses.replace(self, **changes)
+
+
+def _filter_result(
+    problem: IdentificationProblem,
+    out: ParticleFilterOutput,
+    seed: int,
+    common: dict[str, Any],
+) -> IdentificationResult:
+    w = np.exp(out.log_weights - np.max(out.log_weights))
+    return IdentificationResult(
+        method=out.method,
+        draws=np.asarray(out.particles),
+        weights=w / w.sum(),
+        piece_coefficients_mean=out.piece_coefficients_mean,
+        piece_coefficients_sd=out.piece_coefficients_sd,
+        loglik=float(out.loglik),
+        identifiability=_filter_identifiability(problem, out, seed),
+        piece_mean=out.piece_mean,
+        piece_sd=out.piece_sd,
+        trace_time_s=out.trace_time_s,
+        trace_mean=out.mean,
+        trace_sd=out.sd,
+        ess=out.ess,
+        distinct_ancestors=out.distinct_ancestors,
+        unique_values=out.unique_values,
+        n_particles=out.n_particles,
+        extra={"filter_settings": out.settings},
+        problem=problem,
+        **common,
+    )
+
+
+def _filter_identifiability(
+    problem: IdentificationProblem, out: ParticleFilterOutput, seed: int
+) -> dict[str, Any]:
+    w = np.exp(out.log_weights - np.max(out.log_weights))
+    w /= w.sum()
+    draws = out.particles
+    # Weighted moments without a degrees-of-freedom correction: np.cov's would divide by
+    # zero when all the weight sits on one particle (a collapsed cloud has zero spread).
+    dev = draws - w @ draws
+    cov = (dev * w[:, None]).T @ dev
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = float(cov[0, 1] / (sd[0] * sd[1])) if np.all(sd > 0) else float("nan")
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(draws.shape[0], size=min(CORRELATION_DRAWS, draws.shape[0]), p=w)
+    force_max = (float("nan"), float("nan"))
+    if np.all(sd > 0):
+        res = record_loglik(problem, draws[idx, 0], draws[idx, 1], return_pieces=True)
+        if res.theta_cov is None or res.theta_mean is None:  # pragma: no cover - contract
+            raise RuntimeError("record_loglik(return_pieces=True) returned no coefficients")
+        var = np.diagonal(res.theta_cov, axis1=-2, axis2=-1)
+        fc = force_correlation(
+            draws[idx, 0],
+            draws[idx, 1],
+            np.ones(idx.size),
+            res.theta_mean,
+            var,
+            problem.coefficient_names,
+        )
+        force_max = (fc.max_damping, fc.max_stiffness)
+    report = identifiability_report(sd, problem.prior.sd, corr, force_max)
+    return report.to_json()
+
+
+@dataclass(frozen=True)
+class _ParticleFilter(Method):
+    """What the two particle filters share: particles, resampling and the result."""
+
+    n_particles: int = 256
+    resampling: str = "systematic"
+    ess_threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        who = type(self).__name__
+        object.__setattr__(self, "n_particles", _check_particles(self.n_particles, who))
+        _check_resampling(self.resampling, self.ess_threshold, who)
+
+    def _filter(
+        self, problem: IdentificationProblem, seed: int, progress: bool
+    ) -> ParticleFilterOutput:
+        raise NotImplementedError
+
+    def run(
+        self,
+        problem: IdentificationProblem,
+        *,
+        seed: int = 0,
+        progress: bool = False,
+        common: dict[str, Any] | None = None,
+    ) -> IdentificationResult:
+        """Run the filter on a compiled problem (see :meth:`Method.run`)."""
+        out = self._filter(problem, seed, progress)
+        return _filter_result(problem, out, seed, common or {})
+
+
+@dataclass(frozen=True)
+class RBPF(_ParticleFilter):
+    """Rao-Blackwellised particle filter over (C, K) (the default method).
+
+    Parameters
+    ----------
+    n_particles : int, default 256
+        Particles over (C, K).
+    resampling : str, default "systematic"
+        Resampling scheme (see :mod:`workbench.inference.core.resampling`).
+    ess_threshold : float, default 0.5
+        Resample when the effective sample size falls below this fraction of the particles.
+    rejuvenate : {"auto", "surprise", "always"}, default "auto"
+        When the particles get exact Metropolis moves (:mod:`workbench.inference.methods.rbpf`):
+        ``"surprise"`` (when a piece moves the posterior beyond the cloud, cheap),
+        ``"always"`` (after every resampling: follows a posterior that drifts along the
+        record, several times slower), ``"auto"`` (``"always"`` on a record whose surface
+        acts through K and C, where the deck's bursts move the posterior along the record;
+        ``"surprise"`` otherwise).
+    """
+
+    name: ClassVar[str] = "rbpf"
+    rejuvenate: str = "auto"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.rejuvenate not in REJUVENATE:
+            raise UsageError(
+                f"RBPF: 'rejuvenate' must be one of {', '.join(REJUVENATE)}, got "
+                f"{self.rejuvenate!r}",
+                parameter="rejuvenate",
+            )
+
+    def _filter(
+        self, problem: IdentificationProblem, seed: int, progress: bool
+    ) -> ParticleFilterOutput:
+        from workbench.inference.methods.rbpf import run_rbpf
+
+        return run_rbpf(
+            problem,
+            n_particles=self.n_particles,
+            seed=seed,
+            resampling=self.resampling,
+            ess_threshold=self.ess_threshold,
+            rejuvenate=self.rejuvenate,
+            progress=progress,
+        )
+
+
+@dataclass(frozen=True)
+class PF(_ParticleFilter):
+    """The seed study's bootstrap particle filter over the whole state.
+
+    Parameters
+    ----------
+    n_particles : int, default 4000
+        Particles over (u, u', C, K, force coefficients).
+    resampling : str, default "systematic"
+        Resampling scheme.
+    ess_threshold : float, default 0.5
+        Resampling threshold as a fraction of the particles.
+    force_proposal : {"regression", "prior"}, default "regression"
+        How the force coefficients are regenerated at each footfall: from a Gaussian fitted
+        to the step's data given each particle's (C, K), with the importance correction that
+        keeps the seed's target, or blindly from the force prior as the seed does.
+    """
+
+    name: ClassVar[str] = "pf"
+    default_state_noise_fraction: ClassVar[float] = SEED_STATE_FRACTION
+    n_particles: int = 4000
+    force_proposal: str = "regression"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.force_proposal not in ("regression", "prior"):
+            raise UsageError(
+                f"PF: 'force_proposal' must be 'regression' or 'prior', got "
+                f"{self.force_proposal!r}",
+                parameter="force_proposal",
+            )
+
+    def _filter(
+        self, problem: IdentificationProblem, seed: int, progress: bool
+    ) -> ParticleFilterOutput:
+        from workbench.inference.methods.pf import run_pf
+
+        return run_pf(
+            problem,
+            n_particles=self.n_particles,
+            seed=seed,
+            resampling=self.resampling,
+            ess_threshold=self.ess_threshold,
+            force_proposal=self.force_proposal,
+            progress=progress,
+        )
+
+
+@dataclass(frozen=True)
+class Exact(Method):
+    """The exact marginal posterior of (C, K) on an adaptive grid.
+
+    Parameters
+    ----------
+    n_draws : int, default 4000
+        Draws from the grid posterior that the result holds.
+    """
+
+    name: ClassVar[str] = "exact"
+    n_draws: int = 4000
+
+    def __post_init__(self) -> None:
+        if isinstance(self.n_draws, bool) or int(self.n_draws) < 2:
+            raise UsageError(f"Exact: n_draws must be at least 2, got {self.n_draws!r}")
+
+    def run(
+        self,
+        problem: IdentificationProblem,
+        *,
+        seed: int = 0,
+        progress: bool = False,
+        common: dict[str, Any] | None = None,
+    ) -> IdentificationResult:
+        """Compute the grid posterior of a compiled problem (see :meth:`Method.run`)."""
+        from workbench.inference.methods.exact import exact_posterior
+
+        return exact_result(exact_posterior(problem), problem, int(self.n_draws), seed, common)
+
+
+def exact_result(
+    post: Any,
+    problem: IdentificationProblem,
+    n_draws: int,
+    seed: int,
+    common: dict[str, Any] | None = None,
+) -> IdentificationResult:
+    """Turn an :class:`~workbench.inference.methods.exact_results.ExactPosterior` into a result.
+
+    ``n_draws`` draws from the grid posterior (seeded) stand for it in the result; the force
+    coefficients are the grid mixture's.
+    """
+    draws = post.sample(int(n_draws), np.random.default_rng(seed))
+    force = post.force
+    if force is None:  # pragma: no cover - only with an injected likelihood and no force
+        raise RuntimeError("the exact posterior returned no force coefficients")
+    report = post.identifiability
+    return IdentificationResult(
+        method="exact",
+        draws=draws,
+        weights=np.full(draws.shape[0], 1.0 / draws.shape[0]),
+        piece_coefficients_mean=force.mean,
+        piece_coefficients_sd=force.sd,
+        loglik=float(post.log_evidence),
+        identifiability=report.to_json() if report is not None else {},
+        extra={"exact": post.to_json()},
+        problem=problem,
+        **(common or {}),
+    )
+
+
+_BY_NAME: dict[str, type[Method]] = {"rbpf": RBPF, "pf": PF, "exact": Exact}
+
+
+def as_method(method: Method | str | None, **options: Any) -> Method:
+    """Return a method object from an object, a name or None (the default, Exact).
+
+    Parameters
+    ----------
+    method : Method, str or None
+        ``"rbpf"``, ``"pf"``, ``"exact"`` or a method object.
+    **options
+        Options for a method given by name (``n_particles=...``); None values are ignored.
+
+    Returns
+    -------
+    Method
+    """
+    opts = {k: v for k, v in options.items() if v is not None}
+    if isinstance(method, Method):
+        return method.replace(**opts) if opts else method
+    name = "exact" if method is None else method
+    try:
+        cls = _BY_NAME[name]
+    except (KeyError, TypeError):
+        raise UsageError(
+            f"method {method!r} is not known; choose one of {', '.join(METHODS)} or pass "
+            "a method object such as RBPF(n_particles=256)"
+        ) from None
+    known = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in opts.items() if k in known})

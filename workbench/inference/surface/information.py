@@ -1,0 +1,330 @@
+"""How much of what a record says about C and K came from the walking surface's motion.
+
+On a rigid floor C and K are fixed only by what the force model cannot absorb
+(docs/science.md 4); a moving surface drives the same spring and damper with a measured
+input and pins them (docs/science.md 6). An identification that coupled the surface reports
+the share of the information that the surface carried:
+
+- the observed information matrix ``I = -d^2 log p(y | C, K)`` (force coefficients
+  integrated out, the exact Kalman likelihood) at the posterior mean, by central finite
+  differences with steps of half the posterior sd (9 likelihood evaluations, one vectorised
+  call per model), once for the coupled model and once for the same data and noise with the
+  surface ignored (a rigid floor);
+- per parameter the local posterior sd ``sqrt((I^-1)_ii)`` with and without the surface, for
+  C, K, f_n and zeta (delta method), and the fraction of the information that came from the
+  surface, ``1 - sd_with^2 / sd_without^2`` (1 when the rigid-floor likelihood alone does not
+  bound the parameter there).
+
+The comparison is local (a Laplace view at one point) and ignores the prior box; the method's
+own posterior sd stays the reported uncertainty. It answers "would the number be there
+without the deck?", which is what an experimenter planning a shaker or footbridge test asks.
+
+Beside it the report carries the surface's transmissibility estimate
+(:mod:`workbench.inference.surface.frf`): C and K from the deck-driven part of the response
+alone, which the force model cannot absorb (``transmissibility``, None when the deck has no
+power away from the gait harmonics).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from workbench.inference.core import IdentificationProblem
+from workbench.inference.kalman import record_loglik
+from workbench.inference.surface.frf import surface_transmissibility
+from workbench.records.record import Record
+
+if TYPE_CHECKING:
+    from workbench.inference.core import IdentificationResult
+
+__all__ = ["information_with_and_without", "rigid_floor_problem", "surface_report"]
+
+FloatArray = NDArray[np.float64]
+
+#: Finite-difference step of the information matrix, in posterior sd.
+STEP_SD = 0.5
+#: Below this fraction of the information on C or K from the surface, the sentence says the
+#: deck carried little of it.
+LITTLE_FROM_SURFACE = 0.5
+PARAMETERS = ("damping_ns_per_m", "stiffness_n_per_m", "natural_frequency_hz", "damping_ratio")
+
+
+def rigid_floor_problem(problem: IdentificationProblem) -> IdentificationProblem:
+    """Return the same data and noise with the surface's motion ignored (absolute frame)."""
+    if problem.surface is None:
+        return problem
+    return dataclasses.replace(problem, y=problem.absolute_y, surface=None)
+
+
+def _information(
+    problem: IdentificationProblem, centre: FloatArray, step: FloatArray
+) -> FloatArray:
+    """Observed information of ``log p(y | C, K)`` at ``centre`` (2 x 2)."""
+    offsets = np.array([(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)], dtype=np.float64)
+    pts = centre[None, :] + offsets * step[None, :]
+    # Stay on the physical side (a step below zero would be a negative spring).
+    pts = np.maximum(pts, 1e-9)
+    ll = record_loglik(problem, pts[:, 0], pts[:, 1]).loglik.reshape(3, 3)
+    h = np.empty((2, 2))
+    h[0, 0] = (ll[2, 1] - 2 * ll[1, 1] + ll[0, 1]) / step[0] ** 2
+    h[1, 1] = (ll[1, 2] - 2 * ll[1, 1] + ll[1, 0]) / step[1] ** 2
+    h[0, 1] = h[1, 0] = (ll[2, 2] - ll[2, 0] - ll[0, 2] + ll[0, 0]) / (4 * step[0] * step[1])
+    return -h
+
+
+def _local_sd(info: FloatArray, centre: FloatArray, mass_kg: float) -> dict[str, float]:
+    """Local sd of C, K, f_n and zeta from an information matrix (inf where unbounded)."""
+    evals = np.linalg.eigvalsh(info)
+    if not (np.all(np.isfinite(evals)) and evals[0] > 1e-12 * max(evals[-1], 1e-300)):
+        return dict.fromkeys(PARAMETERS, float("inf"))
+    cov = np.linalg.inv(info)
+    cov = 0.5 * (cov + cov.T)
+    c, k = centre
+    fn = np.sqrt(k / mass_kg) / (2 * np.pi)
+    zeta = c / (2 * np.sqrt(k * mass_kg))
+    # Gradients of f_n and zeta with respect to (C, K).
+    jac = np.array([[0.0, fn / (2 * k)], [zeta / c, -zeta / (2 * k)]])
+    cov_fz = jac @ cov @ jac.T
+    var = [cov[0, 0], cov[1, 1], cov_fz[0, 0], cov_fz[1, 1]]
+    return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(PARAMETERS, var, strict=True)}
+
+
+def information_with_and_without(
+    problem: IdentificationProblem,
+    damping_ns_per_m: float,
+    stiffness_n_per_m: float,
+    step: tuple[float, float],
+) -> dict[str, dict[str, float]]:
+    """Local posterior sd with and without the surface, and the surface's share.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        A problem with the surface coupled (``problem.surface`` set), noise set.
+    damping_ns_per_m, stiffness_n_per_m : float
+        Where to evaluate (the posterior mean).
+    step : (float, float)
+        Finite-difference steps of C and K (module docstring: half the posterior sd).
+
+    Returns
+    -------
+    dict
+        Per parameter (C, K, f_n, zeta): ``local_sd_with_surface``, ``local_sd_rigid_floor``
+        (inf where the rigid-floor likelihood does not bound it) and ``fraction_from_surface``.
+    """
+    centre = np.array([damping_ns_per_m, stiffness_n_per_m], dtype=np.float64)
+    h = np.asarray(step, dtype=np.float64)
+    with_sd = _local_sd(_information(problem, centre, h), centre, problem.mass_kg)
+    rigid = rigid_floor_problem(problem)
+    without_sd = _local_sd(_information(rigid, centre, h), centre, problem.mass_kg)
+    out: dict[str, dict[str, float]] = {}
+    for name in PARAMETERS:
+        a, b = with_sd[name], without_sd[name]
+        if not np.isfinite(a):
+            frac = float("nan")
+        elif not np.isfinite(b):
+            frac = 1.0
+        else:
+            frac = float(np.clip(1.0 - (a / b) ** 2, 0.0, 1.0)) if b > 0 else 0.0
+        out[name] = {
+            "local_sd_with_surface": a,
+            "local_sd_rigid_floor": b,
+            "fraction_from_surface": frac,
+        }
+    return out
+
+
+def _dominant_hz(problem: IdentificationProblem) -> float:
+    """Frequency of the largest peak of the surface acceleration's spectrum [Hz]."""
+    assert problem.surface is not None
+    acc = problem.surface.acc_m_s2
+    spec = np.abs(np.fft.rfft(acc * np.hanning(acc.size)))
+    freq = np.fft.rfftfreq(acc.size, problem.dt_s)
+    return float(freq[int(np.argmax(spec[1:])) + 1]) if acc.size > 2 else float("nan")
+
+
+def surface_report(
+    result: IdentificationResult,
+    problem: IdentificationProblem,
+    record: Record,
+    surface_model: str,
+) -> dict[str, Any]:
+    """Return the ``surface`` section of an identification's JSON (module docstring).
+
+    Parameters
+    ----------
+    result : IdentificationResult
+        The identification (its posterior mean and sd set the evaluation point and steps).
+    problem : IdentificationProblem
+        The problem it solved.
+    record : Record
+        The record (whether it measures a surface motion at all).
+    surface_model : {"coupled", "joint", "rigid"}
+        The model's surface setting.
+
+    Returns
+    -------
+    dict
+        ``model`` (``"coupled"``, ``"ignored (rigid floor)"`` or ``"rigid floor (no
+        ground_acc)"``), ``sentence``, and with a coupled surface its ``source``,
+        ``rms_acc_m_s2``, ``dominant_hz`` and ``information`` per parameter.
+    """
+    if record.ground_acc_m_s2 is None:
+        return {
+            "model": "rigid floor (no ground_acc)",
+            "sentence": "The record measures no surface motion; it was identified as a walk on "
+            "a rigid floor.",
+        }
+    if surface_model == "rigid" or problem.surface is None:
+        rms = float(np.sqrt(np.mean(np.square(record.ground_acc_m_s2))))
+        return {
+            "model": "ignored (rigid floor)",
+            "rms_acc_m_s2": rms,
+            "sentence": f"The record measures a surface motion ({rms:.3g} m/s^2 RMS) but the "
+            "model ignored it (rigid floor).",
+        }
+    est, sd = result.estimates, result.posterior_sd
+    c, k = est["damping_ns_per_m"], est["stiffness_n_per_m"]
+    step = (STEP_SD * sd["damping_ns_per_m"], STEP_SD * sd["stiffness_n_per_m"])
+    rms = problem.surface.rms_acc_m_s2
+    route = result.extra.get("surface_route")
+    if route is None:
+        info = information_with_and_without(problem, c, k, step)
+    else:
+        info = _route_information(problem, c, k, step, sd)
+    if route is not None:
+        # C and K already are the transmissibility's posterior: report it, not again.
+        frf_json: dict[str, Any] | None = {
+            "estimates": dict(est),
+            "posterior_sd": dict(sd),
+            "interval_95": {k: list(v) for k, v in result.interval().items()},
+            "level": result.identifiability.get("level"),
+            "bins": route["bins"],
+            "band_hz": route["band_hz"],
+        }
+    else:
+        frf = surface_transmissibility(problem)
+        frf_json = None if frf is None else frf.to_json()
+    report: dict[str, Any] = {
+        "model": "coupled",
+        "c_and_k_from": "transmissibility" if route is not None else "time history",
+        "source": problem.surface.source,
+        "rms_acc_m_s2": rms,
+        "dominant_hz": _dominant_hz(problem),
+        "information": info,
+        "transmissibility": frf_json,
+    }
+    if route is not None:
+        level = str(result.identifiability.get("level", ""))
+        lo, hi = route["band_hz"]
+        sd_rel = sd["natural_frequency_hz"] / est["natural_frequency_hz"]
+        report["sentence"] = (
+            f"C and K were read from the deck's transmissibility ({route['bins']} bins at "
+            f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them; the posterior "
+            f"sd of f_n is {100 * sd_rel:.1f} % of it" + enough_vibration(rms, sd_rel, level)
+        )
+    elif frf_json is None:
+        report["sentence"] = (
+            f"The deck moved ({rms:.3g} m/s^2 RMS, mostly at {report['dominant_hz']:.2f} Hz) "
+            "only near the walker's gait harmonics, where its drive cannot be told from the "
+            "walker's own force, so C and K came from the time history. " + _sentence(rms, info)
+        )
+    else:
+        report["sentence"] = _sentence(rms, info)
+    return report
+
+
+#: The posterior sd of f_n, as a fraction of f_n, that the advice on more vibration aims at.
+TARGET_SD_FN = 0.03
+
+
+def enough_vibration(rms_m_s2: float, sd_fn_rel: float, level: str) -> str:
+    """Finish the route's sentence: how much deck motion would pin f_n to 3 %.
+
+    The posterior sd of f_n falls in proportion to the deck's RMS acceleration (the
+    deck-driven response, and so each bin's signal-to-noise amplitude ratio, is proportional
+    to it), while a longer record helps much less; ``analyses/deck_information.py`` measures
+    both (docs/validation/deck-information.md). Where the prior still shapes the posterior,
+    the reported sd understates the likelihood's, and the amount is a lower bound.
+
+    Parameters
+    ----------
+    rms_m_s2 : float
+        The deck's RMS acceleration over the record [m/s^2].
+    sd_fn_rel : float
+        Posterior sd of f_n over f_n.
+    level : str
+        The identifiability level.
+
+    Returns
+    -------
+    str
+        ``"."`` when f_n is pinned to 3 % or better, else the advice, ending with a full stop.
+    """
+    identified = level in ("well identified", "weakly identified")
+    if identified and sd_fn_rel <= TARGET_SD_FN:
+        return "."
+    needed = rms_m_s2 * max(sd_fn_rel / TARGET_SD_FN, 1.0)
+    bound = "about" if identified else "at least"
+    head = "" if identified else f"; the deck's {rms_m_s2:.3g} m/s^2 carries too little information"
+    return (
+        f"{head}; sd(f_n) falls in proportion to the deck's RMS, so {bound} {needed:.2g} "
+        f"m/s^2 RMS at these frequencies would bring it to {100 * TARGET_SD_FN:.0f} %, while a "
+        "longer record helps much less (docs/validation/deck-information.md)."
+    )
+
+
+def _route_information(
+    problem: IdentificationProblem,
+    damping_ns_per_m: float,
+    stiffness_n_per_m: float,
+    step: tuple[float, float],
+    posterior_sd: dict[str, float],
+) -> dict[str, dict[str, float]]:
+    """Report the information when C and K came from the transmissibility alone.
+
+    All of it came from the surface: the sd with the surface is the transmissibility's
+    posterior sd; beside it the local sd the rigid-floor time history would give.
+    """
+    centre = np.array([damping_ns_per_m, stiffness_n_per_m], dtype=np.float64)
+    rigid = rigid_floor_problem(problem)
+    without = _local_sd(_information(rigid, centre, np.asarray(step)), centre, problem.mass_kg)
+    return {
+        name: {
+            "local_sd_with_surface": float(posterior_sd[name]),
+            "local_sd_rigid_floor": without[name],
+            "fraction_from_surface": 1.0,
+        }
+        for name in PARAMETERS
+    }
+
+
+def _sentence(rms: float, info: dict[str, dict[str, float]]) -> str:
+    """Plain-words account of what the surface contributed."""
+    parts = []
+    for name, sym in (("damping_ns_per_m", "C"), ("stiffness_n_per_m", "K")):
+        frac = info[name]["fraction_from_surface"]
+        parts.append((sym, frac))
+    weak = [sym for sym, frac in parts if not (np.isfinite(frac) and frac >= LITTLE_FROM_SURFACE)]
+    shares = ", ".join(
+        f"{100 * frac:.0f} % of the information on {sym}"
+        for sym, frac in parts
+        if np.isfinite(frac)
+    )
+    if not weak:
+        return (
+            f"The surface's motion ({rms:.3g} m/s^2 RMS) acted through K and C and carried "
+            f"{shares}."
+        )
+    # A flat or non-concave likelihood at the estimate has no local sd to compare, so the
+    # share cannot be measured; say so rather than print empty parentheses.
+    measured = shares or "its share could not be measured: the likelihood has no curvature there"
+    return (
+        f"The surface's motion ({rms:.3g} m/s^2 RMS) acted through K and C but carried too "
+        f"little information on {' and '.join(weak)} ({measured}); a stronger or longer "
+        "deck excitation is needed to pin them."
+    )
