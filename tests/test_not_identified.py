@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import workbench as wb
-from workbench.cli import identify as identify_cli
+from workbench.cli import output as cli_output
 from workbench.cli.main import main
 from workbench.inference.core.results import CONDITIONAL_KEY, SCALAR_KEYS
 from workbench.synth.simulate import simulate_walking
@@ -160,13 +160,13 @@ def _identify_cli(
 ) -> tuple[dict[str, Any], str]:
     """``workbench identify NAME --json``: the JSON printed and the text it would print."""
     texts: list[str] = []
-    real_emit = identify_cli.emit
+    real_emit = cli_output.emit
 
     def emit(args: Any, obj: dict[str, Any], text: str) -> None:
         texts.append(text)
         real_emit(args, obj, text)
 
-    monkeypatch.setattr(identify_cli, "emit", emit)
+    monkeypatch.setattr(cli_output, "emit", emit)
     assert main(["identify", name, "--json"]) == 0
     return json.loads(capsys.readouterr().out), texts[0]
 
