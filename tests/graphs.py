@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
@@ -23,3 +25,27 @@ def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
     for v, lab in zip(nodes, label, strict=True):
         groups.setdefault(int(lab), []).append(v)
     return sorted(g for g in groups.values() if len(g) > 1)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "workbench"
+
+
+def package_modules() -> dict[str, Path]:
+    """Every module of the package by dotted name (a package by its ``__init__``)."""
+    mods = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        mods[".".join(parts)] = path
+    return mods
+
+
+def resolve_module(name: str, mods: dict[str, Path]) -> str | None:
+    """The module an imported name lives in: the longest dotted prefix that is a module."""
+    while name:
+        if name in mods:
+            return name
+        name = name.rpartition(".")[0]
+    return None

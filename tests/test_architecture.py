@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.graphs import cycles
+from tests.graphs import cycles, package_modules, resolve_module
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "workbench"
@@ -23,27 +23,9 @@ MAX_LINES = 600
 LONG_REASON = "Why this module is long:"
 
 
-def _modules() -> dict[str, Path]:
-    mods = {}
-    for path in PACKAGE.rglob("*.py"):
-        parts = list(path.relative_to(ROOT).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts = parts[:-1]
-        mods[".".join(parts)] = path
-    return mods
-
-
-def _resolve(name: str, mods: dict[str, Path]) -> str | None:
-    while name:
-        if name in mods:
-            return name
-        name = name.rpartition(".")[0]
-    return None
-
-
 def import_graph() -> dict[str, set[str]]:
     """Edges module -> imported workbench module (a package's own parents excluded)."""
-    mods = _modules()
+    mods = package_modules()
     edges: dict[str, set[str]] = {m: set() for m in mods}
     for mod, path in mods.items():
         base = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
@@ -62,7 +44,7 @@ def import_graph() -> dict[str, set[str]]:
             for target in targets:
                 if not target.startswith("workbench"):
                     continue
-                resolved = _resolve(target, mods)
+                resolved = resolve_module(target, mods)
                 # Importing one's own parent package runs nothing new: it is already running.
                 if resolved and resolved != mod and not mod.startswith(resolved + "."):
                     if resolved != "workbench":

@@ -22,7 +22,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from tests.graphs import cycles
+from tests.graphs import cycles, package_modules, resolve_module
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "workbench"
@@ -62,28 +62,10 @@ class Edge:
     function: str | None  # enclosing function of a lazy import, None at module level
 
 
-def _modules() -> dict[str, Path]:
-    mods = {}
-    for path in PACKAGE.rglob("*.py"):
-        parts = list(path.relative_to(ROOT).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts = parts[:-1]
-        mods[".".join(parts)] = path
-    return mods
-
-
 def unit_of(module: str) -> str:
     """``workbench.records.io`` -> ``records``; ``workbench`` itself -> ``__init__``."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
-
-
-def _resolve(name: str, mods: dict[str, Path]) -> str | None:
-    while name:
-        if name in mods:
-            return name
-        name = name.rpartition(".")[0]
-    return None
 
 
 def _is_type_checking(node: ast.If) -> bool:
@@ -139,7 +121,7 @@ def _imports(tree: ast.AST, base: str, mods: dict[str, Path]) -> list[tuple[int,
 @functools.cache
 def package_edges() -> tuple[Edge, ...]:
     """Every import from one unit into another, lazy ones included."""
-    mods = _modules()
+    mods = package_modules()
     edges: dict[Edge, None] = {}
     for mod, path in sorted(mods.items()):
         base = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
@@ -147,7 +129,7 @@ def package_edges() -> tuple[Edge, ...]:
         for line, name, function in _imports(tree, base, mods):
             if not (name == "workbench" or name.startswith("workbench.")):
                 continue
-            target = _resolve(name, mods)
+            target = resolve_module(name, mods)
             if target is None:
                 continue
             source_unit, target_unit = unit_of(mod), unit_of(target)
@@ -176,7 +158,7 @@ def _sanctioned(edge: Edge) -> bool:
 
 
 def _units() -> set[str]:
-    return {unit_of(m) for m in _modules()}
+    return {unit_of(m) for m in package_modules()}
 
 
 def test_the_walk_sees_lazy_and_by_name_imports_but_not_type_checking_ones() -> None:
@@ -189,7 +171,7 @@ def test_the_walk_sees_lazy_and_by_name_imports_but_not_type_checking_ones() -> 
         "    from workbench import hsi\n"
         "LAZY = {'x': ('workbench.records.io', 'load_record')}\n"
     )
-    mods = _modules()
+    mods = package_modules()
     got = {
         (name, function)
         for _, name, function in _imports(tree, "workbench.synth", mods)
