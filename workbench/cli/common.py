@@ -238,6 +238,8 @@ def record_options() -> Parser:
     -------
     Parser
     """
+    from workbench.records.formats import format_names
+
     p = Parser(add_help=False)
     g = p.add_argument_group("record")
     g.add_argument("--mass", type=float, metavar="KG", help="body mass [kg] (overrides sidecar)")
@@ -246,7 +248,7 @@ def record_options() -> Parser:
     g.add_argument(
         "--format",
         dest="fmt",
-        choices=["csv", "mot", "insole", "c3d"],
+        choices=format_names(),  # the registry when the parser is built, registered ones too
         help="file format (detected from the file when omitted)",
     )
     g.add_argument(

@@ -5,7 +5,7 @@ segmentation fault; files with a few bytes changed at random show it), which wou
 workbench without a word and lose any result it held. So the file is read
 in a child process that sends back plain arrays and numbers; a child that dies becomes
 one sentence naming the file. The reader proper (axis, sign, sum, clock) is
-:func:`workbench.records.formats._read_c3d`.
+:mod:`workbench.records.formats.c3d_platforms`.
 """
 
 from __future__ import annotations

@@ -49,7 +49,9 @@ atomically (temporary file in the same folder, then :func:`os.replace`), with fl
 shortest exact text form so that reading back gives identical arrays.
 
 This module keeps :func:`detect_format`, :func:`load_record` and :func:`save_record`. The
-format readers and column names live in :mod:`workbench.records.formats`, the shared
+formats are a registry (:mod:`workbench.records.formats`: one module per format with its
+reader and column names, and :func:`~workbench.records.formats.register_format` to add
+one; the guide page "Adding a record format"), the shared
 text-table parsing in :mod:`workbench.records.text_table`, the sidecar in
 :mod:`workbench.records.sidecar` and batch manifests in :mod:`workbench.records.manifest`;
 the public names among them are re-exported here.
@@ -60,7 +62,7 @@ from __future__ import annotations
 import json
 import numbers
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -68,18 +70,18 @@ from workbench.errors import InputError, UsageError
 from workbench.fileutil import atomic_write_texts
 from workbench.records.embedded import EMBEDDED, EmbeddedRecord, embedded_path
 from workbench.records.formats import (
-    _EXTENSIONS,
-    _FORCE_UNIT_NAMES,
-    _INSOLE_COLUMNS,
+    ARRAY_NAMES,
     COLUMN_ALIASES,
     CSV_COLUMNS,
     FORCE_UNITS,
     FORMATS,
-    _read_c3d,
-    _read_csv,
-    _read_insole,
-    _read_mot,
+    RecordTable,
+    format_names,
+    record_format,
+    registered_formats,
 )
+from workbench.records.formats.base import _FORCE_UNIT_NAMES
+from workbench.records.formats.physionet_insole import INSOLE_COLUMNS
 from workbench.records.manifest import (
     ManifestEntry,
     load_manifest,
@@ -93,12 +95,12 @@ from workbench.records.sidecar import (
 )
 from workbench.records.text_table import (
     _decode,
-    _empty_file,
-    _parse_number,
     _read_bytes,
     _require_file,
-    _split_lines,
-    _Table,
+    empty_file,
+    first_content_line,
+    parse_number,
+    split_lines,
 )
 from workbench.records.validation import validate_record
 
@@ -123,12 +125,14 @@ __all__ = [
 def detect_format(path: str | os.PathLike[str]) -> str:
     """Tell which record format a file is in.
 
-    The extension decides first (``.csv``/``.tsv`` -> ``"csv"``, ``.mot`` -> ``"mot"``,
-    ``.c3d`` -> ``"c3d"``); otherwise (``.txt``, ``.dat``, no extension ...) the content:
-    a C3D binary header, an ``endheader`` line (OpenSim), a headerless numeric table with 19
-    columns (PhysioNet insole), or a text table whose first line is a header (CSV, e.g. a
-    ``.txt`` with tab-separated ``time`` and ``grf`` columns). Pass ``fmt=`` to
-    :func:`load_record` to override.
+    The extension decides first, if a registered format claims it (``.csv``/``.tsv`` ->
+    ``"csv"``, ``.mot`` -> ``"mot"``, ``.c3d`` -> ``"c3d"``); otherwise (``.txt``, ``.dat``,
+    no extension ...) the content, each registered format asked in turn (the order of
+    :mod:`workbench.records.formats.base`): a C3D binary header, an ``endheader`` line
+    (OpenSim), a headerless numeric table with 19 columns (PhysioNet insole), or, asked
+    last, a text table whose first line is a header (CSV, e.g. a ``.txt`` with
+    tab-separated ``time`` and ``grf`` columns). Pass ``fmt=`` to :func:`load_record` to
+    override.
 
     Parameters
     ----------
@@ -138,7 +142,7 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     Returns
     -------
     str
-        One of :data:`FORMATS`.
+        One of :func:`~workbench.records.formats.format_names`.
 
     Raises
     ------
@@ -148,34 +152,40 @@ def detect_format(path: str | os.PathLike[str]) -> str:
     p = Path(path)
     source = str(path)
     _require_file(p, source)
-    by_extension = _EXTENSIONS.get(p.suffix.lower())
-    if by_extension is not None:
-        return by_extension
+    formats = registered_formats()
+    extension = p.suffix.lower()
+    for candidate in formats:
+        if extension in candidate.extensions:
+            return candidate.name
     raw = _read_bytes(p, source)
-    if len(raw) >= 512 and raw[1] == 0x50 and b"\x00" in raw[:512]:
-        # C3D: byte 2 of the binary header block is the fixed key 0x50.
-        return "c3d"
-    text = _decode(raw, source)
-    lines = _split_lines(text)
-    content = [(i, s.strip()) for i, s in enumerate(lines) if s.strip()]
-    if not content:
-        raise _empty_file(source)
-    if any(s.lower() == "endheader" for _, s in content[:200]):
-        return "mot"
-    first_index, first = next(((i, s) for i, s in content if not s.startswith("#")), content[0])
-    tokens = first.split()
-    if tokens and all(_parse_number(tok) is not None for tok in tokens):
-        if len(tokens) == _INSOLE_COLUMNS:
-            return "insole"
+    # Specific formats are asked before generic ones (CSV takes any table with a header).
+    in_order = [f for f in formats if not f.generic] + [f for f in formats if f.generic]
+    for candidate in in_order:
+        if candidate.sniff_bytes(raw):
+            return candidate.name
+    lines = split_lines(_decode(raw, source))
+    if not any(line.strip() for line in lines):
+        raise empty_file(source)
+    for candidate in in_order:
+        if candidate.sniff_text(lines):
+            return candidate.name
+    first_index = first_content_line(lines)
+    tokens = [] if first_index is None else lines[first_index].split()
+    if first_index is not None and all(parse_number(tok) is not None for tok in tokens):
         raise InputError(
             source,
             f"line {first_index + 1}",
             f"the file is a table of numbers without a header, with {len(tokens)} columns "
-            f"(the PhysioNet insole format has {_INSOLE_COLUMNS})",
+            f"(the PhysioNet insole format has {INSOLE_COLUMNS})",
             "add a header line naming the columns 'time' and 'grf' to read it as CSV, or pass "
             "the format as fmt=... (--format on the command line)",
         )
-    return "csv"
+    raise InputError(
+        source,
+        "whole file",
+        f"the content is in none of the formats {', '.join(format_names())}",
+        "pass the format as fmt=... (--format on the command line)",
+    )
 
 
 def load_record(
@@ -197,8 +207,10 @@ def load_record(
     ----------
     path : str or path-like
         The record file; ``Record.source`` is this path as given.
-    fmt : {"csv", "mot", "insole", "c3d"}, optional
-        The format; detected by :func:`detect_format` if not given.
+    fmt : str, optional
+        A registered format (:func:`~workbench.records.formats.format_names`: ``"csv"``,
+        ``"mot"``, ``"insole"``, ``"c3d"`` and any registered since); detected by
+        :func:`detect_format` if not given.
     mass_kg : float, optional
         Body mass [kg]; overrides ``mass_kg`` in the JSON sidecar. For the embedded real
         records the mass from :data:`workbench.records.embedded.EMBEDDED` is used if none is given.
@@ -248,26 +260,22 @@ def load_record(
     _require_file(p, source)
     if fmt is None:
         fmt = detect_format(p)
-    elif str(fmt).lower() in FORMATS:
+    elif str(fmt).lower() in format_names():
         fmt = str(fmt).lower()
     else:
-        raise UsageError(f"fmt must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        raise UsageError(f"fmt must be one of {', '.join(format_names())}, got {fmt!r}")
 
-    readers: dict[str, Callable[[Path, str], _Table]] = {
-        "csv": _read_csv,
-        "mot": _read_mot,
-        "insole": _read_insole,
-        "c3d": _read_c3d,
-    }
-    table = readers[fmt](p, source)
+    table = record_format(fmt).read(p, source)
+    _check_table(table, fmt)
     arrays = table.arrays
     metadata: dict[str, Any] = {}
 
     sidecar, sidecar_path = _read_sidecar(p)
+    file_keys = _file_keys()
     for key, value in sidecar.items():
         # Loader keys in a sidecar describe some other file (e.g. a hand-copied sidecar);
         # this file's own reading fills them in below.
-        if key not in _SIDECAR_FIELDS and key not in _LOADER_KEYS:
+        if key not in _SIDECAR_FIELDS and key not in file_keys:
             metadata[key] = value
     warnings = [str(w) for w in metadata.pop("warnings", None) or []]
     metadata.update(table.metadata)
@@ -287,9 +295,8 @@ def load_record(
     mass_source = f'"mass_kg" in {sidecar_path.name}' if sidecar_path and mass is not None else None
     if mass_arg is not None:
         mass, mass_source = mass_arg, "given as --mass or mass_kg"
-    c3d_mass = metadata.get("c3d", {}).get("body_mass_kg") if fmt == "c3d" else None
-    if mass is None and c3d_mass is not None:
-        mass, mass_source = c3d_mass, "PROCESSING:Bodymass in the C3D file"
+    if mass is None and table.mass_kg is not None:
+        mass, mass_source = table.mass_kg, table.mass_source or f"the {fmt} file"
     if mass is None:
         embedded = _embedded_entry(p)
         if embedded is not None:
@@ -406,6 +413,7 @@ def record_texts(
         raise UsageError(f"save_record writes CSV; give a path ending in .csv, not {str(path)!r}")
     json_path = csv_path.with_suffix(".json")
 
+    file_keys = _file_keys()
     sidecar: dict[str, Any] = {}
     if record.mass_kg is not None:
         sidecar["mass_kg"] = record.mass_kg
@@ -416,7 +424,7 @@ def record_texts(
     if record.notes:
         sidecar["notes"] = record.notes
     for key, value in record.metadata.items():
-        if key in _LOADER_KEYS or key in _SIDECAR_FIELDS:
+        if key in file_keys or key in _SIDECAR_FIELDS:
             continue
         if key == "warnings" and not value:
             continue
@@ -446,6 +454,32 @@ def record_texts(
     csv_text = ",".join(names) + "\n" + "".join(f"{row}\n" for row in rows)
 
     return {json_path: json_text, csv_path: csv_text}
+
+
+def _check_table(table: RecordTable, fmt: str) -> None:
+    """Refuse a reader's result that is not a RecordTable with time and GRF arrays.
+
+    The built-in readers always pass; this names the format whose reader is wrong instead
+    of failing later on a missing key.
+    """
+    if not isinstance(table, RecordTable):
+        raise UsageError(
+            f"the reader of the record format '{fmt}' returned {type(table).__name__}, "
+            "not a RecordTable"
+        )
+    missing = [name for name in ("time_s", "grf_n") if name not in table.arrays]
+    unknown = sorted(set(table.arrays) - set(ARRAY_NAMES))
+    if missing or unknown:
+        raise UsageError(
+            f"the reader of the record format '{fmt}' returned the arrays "
+            f"{', '.join(sorted(table.arrays)) or '(none)'}; it must return time_s and grf_n "
+            f"and only the record fields {', '.join(ARRAY_NAMES)}"
+        )
+
+
+def _file_keys() -> frozenset[str]:
+    """Return the metadata keys that describe how a file was read, for every format."""
+    return _LOADER_KEYS.union(*(f.file_keys for f in registered_formats()))
 
 
 def _number_argument(value: Any, name: str) -> float | None:

@@ -16,17 +16,17 @@ from workbench.errors import InputError
 from workbench.records.text_table import (
     _decode,
     _detect_delimiter,
-    _empty_file,
     _field_count_error,
-    _first_content_line,
     _normalise_name,
-    _parse_number,
     _read_bytes,
     _require_file,
-    _show,
-    _show_list,
     _split_fields,
-    _split_lines,
+    empty_file,
+    first_content_line,
+    parse_number,
+    quote,
+    quote_list,
+    split_lines,
 )
 from workbench.records.validation import mass_problem, pacing_problem
 
@@ -99,10 +99,10 @@ def load_manifest(
     source = str(path)
     _require_file(p, source)
     text = _decode(_read_bytes(p, source), source)
-    lines = _split_lines(text)
-    header_index = _first_content_line(lines)
+    lines = split_lines(text)
+    header_index = first_content_line(lines)
     if header_index is None:
-        raise _empty_file(source)
+        raise empty_file(source)
     header_line = lines[header_index]
     delimiter = _detect_delimiter(header_line)
     names = _split_fields(header_line, delimiter)
@@ -112,7 +112,7 @@ def load_manifest(
         if name not in _MANIFEST_COLUMNS:
             raise InputError(
                 source,
-                f"line {header_index + 1}, column {_show(raw)}",
+                f"line {header_index + 1}, column {quote(raw)}",
                 "this column is not part of a manifest",
                 f"use only the columns {', '.join(_MANIFEST_COLUMNS)} (path is required)",
             )
@@ -120,14 +120,14 @@ def load_manifest(
         if unit is not None and unit != expected_unit:
             raise InputError(
                 source,
-                f"line {header_index + 1}, column {_show(raw)}",
+                f"line {header_index + 1}, column {quote(raw)}",
                 f"the unit {unit!r} does not match the column {name!r}",
                 "give masses in kg and pacing frequencies in Hz and drop the bracketed unit",
             )
         if name in index_of:
             raise InputError(
                 source,
-                f"line {header_index + 1}, column {_show(raw)}",
+                f"line {header_index + 1}, column {quote(raw)}",
                 f"the column {name!r} appears twice",
                 "keep one of them",
             )
@@ -136,7 +136,7 @@ def load_manifest(
         raise InputError(
             source,
             f"line {header_index + 1}",
-            f"there is no 'path' column (columns found: {_show_list(names)})",
+            f"there is no 'path' column (columns found: {quote_list(names)})",
             "name the column with the record files 'path' (optional: "
             f"{', '.join(_MANIFEST_COLUMNS[1:])})",
         )
@@ -166,7 +166,7 @@ def load_manifest(
             raise InputError(
                 source,
                 f"line {number}, column 'path'",
-                f"the record {_show(file_text)} is already listed on line {seen[file_text]}",
+                f"the record {quote(file_text)} is already listed on line {seen[file_text]}",
                 "list every record once",
             )
         seen[file_text] = number
@@ -178,7 +178,7 @@ def load_manifest(
             raise InputError(
                 source,
                 f"line {number}, column 'path'",
-                f"the record {_show(file_text)} is the file {_show(first)} of line {first_line} "
+                f"the record {quote(file_text)} is the file {quote(first)} of line {first_line} "
                 "under another spelling, so it would be identified twice and count twice",
                 "list every record once",
             )
@@ -206,7 +206,7 @@ def load_manifest(
             raise InputError(
                 source,
                 f"line {number}, column 'path'",
-                f"the record {_show(file_text)} lies outside the manifest's folder",
+                f"the record {quote(file_text)} lies outside the manifest's folder",
                 "move it into that folder or below it (paths start from the manifest's "
                 "folder), or pass --allow-outside-paths to read it where it is",
             )
@@ -246,12 +246,12 @@ def _inside(record_path: Path, folder: Path) -> bool:
 def _manifest_number(cell: str, source: str, line: int, column: str) -> float | None:
     if not cell:
         return None
-    value = _parse_number(cell)
+    value = parse_number(cell)
     if value is None or not math.isfinite(value):
         raise InputError(
             source,
             f"line {line}, column {column!r}",
-            f"the value {_show(cell)} is not a number",
+            f"the value {quote(cell)} is not a number",
             "write a plain number or leave the cell empty",
         )
     return value

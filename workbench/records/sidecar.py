@@ -22,8 +22,8 @@ from workbench.records.text_table import (
     _NOT_REGULAR_FIX,
     FILE_MISSING,
     _read_bytes,
-    _show,
     file_problem,
+    quote,
 )
 
 # Metadata that describe how one particular file was read; save_record does not copy them
@@ -95,7 +95,7 @@ def _read_sidecar(p: Path) -> tuple[dict[str, Any], Path | None]:
             raise InputError(
                 source,
                 f"key {key!r}",
-                f"the value {_show(json.dumps(value))} is not a number",
+                f"the value {quote(json.dumps(value))} is not a number",
                 f'write it as a plain number in {unit}, e.g. "{key}": '
                 f"{72.5 if key == 'mass_kg' else 1.8}",
             )

@@ -4,9 +4,14 @@ Holds what every text format needs before its own column rules apply: checking t
 file exists and reading its bytes, decoding UTF-8 (refusing ZIP archives and binary data),
 splitting lines at CR/LF only so that line numbers in messages match a text editor,
 finding the header, detecting the delimiter, normalising column names with a bracketed
-unit, parsing cells as strict decimal numbers, quoting pieces of the file for messages, and
-the ``_Table`` container a format reader returns. Places in messages are 1-based file line
-numbers (``line N``).
+unit, parsing cells as strict decimal numbers and quoting pieces of the file for messages.
+Places in messages are 1-based file line numbers (``line N``).
+
+The public functions are the small set a new record format's reader needs (the guide page
+"Adding a record format"): :func:`read_text`, :func:`split_lines`,
+:func:`first_content_line`, :func:`parse_number`, :func:`parse_rows`, :func:`line_runs`,
+:func:`quote`, :func:`quote_list`, :func:`empty_file` and :func:`no_data_rows`. They keep
+their behaviour, since the built-in readers' messages depend on it.
 """
 
 from __future__ import annotations
@@ -17,7 +22,6 @@ import os
 import re
 import stat
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,15 +30,22 @@ import numpy as np
 from workbench.errors import InputError
 from workbench.records.record import FloatArray
 
-
-@dataclass
-class _Table:
-    """What a format reader found, before sidecar and keyword metadata are merged."""
-
-    arrays: dict[str, FloatArray]
-    metadata: dict[str, Any]
-    warnings: list[str] = field(default_factory=list)
-
+__all__ = [
+    "FILE_MISSING",
+    "LINK_LOOP",
+    "SPECIAL_FILES",
+    "empty_file",
+    "file_problem",
+    "first_content_line",
+    "line_runs",
+    "no_data_rows",
+    "parse_number",
+    "parse_rows",
+    "quote",
+    "quote_list",
+    "read_text",
+    "split_lines",
+]
 
 #: What a path is when it is not a regular file: each would hang (a FIFO waits for a writer)
 #: or never end (``/dev/zero``) if it were read as a record.
@@ -147,7 +158,40 @@ def _read_bytes(p: Path, source: str) -> bytes:
             ) from None
 
 
-def _empty_file(source: str) -> InputError:
+def read_text(p: Path, source: str) -> str:
+    """Read a text file whole, refusing what is not a text table, in one sentence.
+
+    A missing file, a folder, a pipe or a device, an empty file, a ZIP archive (an Excel
+    workbook), binary data and bytes that are not UTF-8 are each an
+    :class:`~workbench.errors.InputError` naming the file. A UTF-8 byte-order mark is
+    dropped.
+
+    Parameters
+    ----------
+    p : Path
+        The file.
+    source : str
+        The path as the user gave it, for messages.
+
+    Returns
+    -------
+    str
+    """
+    return _decode(_read_bytes(p, source), source)
+
+
+def empty_file(source: str) -> InputError:
+    """Return the error for a file with nothing in it, to raise.
+
+    Parameters
+    ----------
+    source : str
+        The path as the user gave it.
+
+    Returns
+    -------
+    InputError
+    """
     return InputError(
         source, "whole file", "the file is empty", "give a file with a header and data rows"
     )
@@ -155,7 +199,7 @@ def _empty_file(source: str) -> InputError:
 
 def _decode(raw: bytes, source: str) -> str:
     if not raw.strip():
-        raise _empty_file(source)
+        raise empty_file(source)
     if raw.startswith(b"PK\x03\x04"):
         raise InputError(
             source,
@@ -183,7 +227,19 @@ def _decode(raw: bytes, source: str) -> str:
         ) from None
 
 
-def _split_lines(text: str) -> list[str]:
+def split_lines(text: str) -> list[str]:
+    """Split text into lines at CR, LF and CRLF only, so line numbers match a text editor.
+
+    Parameters
+    ----------
+    text : str
+
+    Returns
+    -------
+    list of str
+        Without line ends; a final line end adds no empty line. ``lines[i]`` is file line
+        ``i + 1``.
+    """
     # Only CR, LF and CRLF end lines, as in any CSV reader and text editor; str.splitlines
     # would also split at form feeds and Unicode separators and shift the line numbers.
     lines = re.split(r"\r\n|\r|\n", text)
@@ -192,7 +248,18 @@ def _split_lines(text: str) -> list[str]:
     return lines
 
 
-def _first_content_line(lines: Sequence[str]) -> int | None:
+def first_content_line(lines: Sequence[str]) -> int | None:
+    """Index of the first line that is neither blank nor a ``#`` comment.
+
+    Parameters
+    ----------
+    lines : sequence of str
+
+    Returns
+    -------
+    int or None
+        None when every line is blank or a comment.
+    """
     for i, line in enumerate(lines):
         stripped = line.strip()
         if stripped and not stripped.startswith("#"):
@@ -200,8 +267,20 @@ def _first_content_line(lines: Sequence[str]) -> int | None:
     return None
 
 
-def _parse_number(cell: str) -> float | None:
-    """Strict decimal number (also nan/inf, which validation reports) or None."""
+def parse_number(cell: str) -> float | None:
+    """Read a cell as a strict decimal number, or None if it is not one.
+
+    ``nan`` and ``inf`` are numbers here (validation reports them with their place);
+    ``1_000``, non-ASCII digits, decimal commas and empty cells are not.
+
+    Parameters
+    ----------
+    cell : str
+
+    Returns
+    -------
+    float or None
+    """
     text = cell.strip()
     # float() would also take '1_000' and non-ASCII digits; neither is a number in a data file.
     if not text or not text.isascii() or "_" in text:
@@ -212,15 +291,38 @@ def _parse_number(cell: str) -> float | None:
         return None
 
 
-def _show(text: str, limit: int = 40) -> str:
-    """Quote a piece of the user's file for a message, on one line and not too long."""
+def quote(text: str, limit: int = 40) -> str:
+    """Quote a piece of the user's file for a message, on one line and not too long.
+
+    Parameters
+    ----------
+    text : str
+    limit : int, optional
+        Characters shown before ``...`` (default 40).
+
+    Returns
+    -------
+    str
+    """
     if len(text) > limit:
         return repr(text[:limit]) + "..."
     return repr(text)
 
 
-def _show_list(names: Sequence[str], limit: int = 12) -> str:
-    shown = ", ".join(_show(n) for n in names[:limit])
+def quote_list(names: Sequence[str], limit: int = 12) -> str:
+    """Quote names (columns found, say) for a message: ``'a', 'b' and 3 more``.
+
+    Parameters
+    ----------
+    names : sequence of str
+    limit : int, optional
+        Names shown (default 12).
+
+    Returns
+    -------
+    str
+    """
+    shown = ", ".join(quote(n) for n in names[:limit])
     return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
 
 
@@ -270,21 +372,56 @@ def _field_count_error(
     )
 
 
-def _parse_rows(
+def parse_rows(
     lines: Sequence[str],
     first: int,
-    split: Callable[[str], list[str]],
+    *,
     n_fields: int,
-    wanted: Sequence[int],
-    labels: Mapping[int, str],
+    columns: Mapping[int, str],
     source: str,
-    count_error: Callable[[int, int], InputError],
-    decimal_comma_hint: bool,
+    split: Callable[[str], list[str]] = str.split,
+    count_error: Callable[[int, int], InputError] | None = None,
+    decimal_comma_hint: bool = True,
 ) -> tuple[dict[int, FloatArray], list[int]]:
-    """Parse the numeric cells of columns ``wanted`` from ``lines[first:]``.
+    """Parse the numeric cells of some columns of a table's rows.
 
-    Returns the columns by index and the 1-based file line of each parsed row.
+    Blank lines and ``#`` comments are skipped. Every other line from ``lines[first]`` on
+    must have ``n_fields`` fields, and each cell of the wanted columns must be a number
+    (:func:`parse_number`); the first row that is not is an
+    :class:`~workbench.errors.InputError` naming its line and column.
+
+    Parameters
+    ----------
+    lines : sequence of str
+        The file's lines (:func:`split_lines`).
+    first : int
+        Index of the first data line.
+    n_fields : int
+        Fields every data row has.
+    columns : mapping of int to str
+        The wanted columns: 0-based field index -> how messages name it (e.g.
+        ``"column 'grf'"``), in the order each row's cells are checked.
+    source : str
+        The path as the user gave it, for messages.
+    split : callable, optional
+        Splits a line into fields (default: at runs of whitespace).
+    count_error : callable, optional
+        ``count_error(line_number, fields_found)`` returns the error for a row with the
+        wrong number of fields; by default one that names both counts.
+    decimal_comma_hint : bool, optional
+        Suggest writing decimals with a point when a bad cell looks like ``1,5`` (default
+        True; False where commas separate the fields).
+
+    Returns
+    -------
+    columns : dict of int to ndarray
+        The parsed columns by field index.
+    line_numbers : list of int
+        The 1-based file line of each row, for :func:`line_runs`.
     """
+    wanted = list(columns)
+    if count_error is None:
+        count_error = _default_count_error(source, n_fields)
     values: dict[int, list[float]] = {j: [] for j in wanted}
     line_numbers: list[int] = []
     for i in range(first, len(lines)):
@@ -297,12 +434,24 @@ def _parse_rows(
             raise count_error(i + 1, len(fields))
         for j in wanted:
             cell = fields[j]
-            number = _parse_number(cell)
+            number = parse_number(cell)
             if number is None:
-                raise _bad_cell(source, i + 1, labels[j], cell, decimal_comma_hint)
+                raise _bad_cell(source, i + 1, columns[j], cell, decimal_comma_hint)
             values[j].append(number)
         line_numbers.append(i + 1)
     return {j: np.asarray(v, dtype=np.float64) for j, v in values.items()}, line_numbers
+
+
+def _default_count_error(source: str, n_fields: int) -> Callable[[int, int], InputError]:
+    def error(line: int, found: int) -> InputError:
+        return InputError(
+            source,
+            f"line {line}",
+            f"the row has {found} values but the format has {n_fields}",
+            "repair or delete the row (the file may be truncated)",
+        )
+
+    return error
 
 
 def _bad_cell(
@@ -317,13 +466,28 @@ def _bad_cell(
     return InputError(
         source,
         where,
-        f"the value {_show(cell)} is not a number",
+        f"the value {quote(cell)} is not a number",
         f"correct the value or delete the row{hint}",
     )
 
 
-def _line_runs(line_numbers: Sequence[int]) -> dict[str, Any]:
-    """Run-length code of sample index -> file line (JSON-friendly, small)."""
+def line_runs(line_numbers: Sequence[int]) -> dict[str, Any]:
+    """Run-length code of sample index -> file line (JSON-friendly, small).
+
+    Put it in a reader's ``metadata["file_lines"]``: validation then names the file line
+    of a bad sample.
+
+    Parameters
+    ----------
+    line_numbers : sequence of int
+        The 1-based file line of each sample, in sample order.
+
+    Returns
+    -------
+    dict
+        ``{"n_samples": N, "runs": [[first_sample, its_line], ...]}``, one run per block
+        of consecutive lines.
+    """
     runs: list[list[int]] = []
     previous = None
     for index, line in enumerate(line_numbers):
@@ -333,7 +497,20 @@ def _line_runs(line_numbers: Sequence[int]) -> dict[str, Any]:
     return {"n_samples": len(line_numbers), "runs": runs}
 
 
-def _no_data_rows(source: str, header_line: int) -> InputError:
+def no_data_rows(source: str, header_line: int) -> InputError:
+    """Return the error for a file with a header but no data rows, to raise.
+
+    Parameters
+    ----------
+    source : str
+        The path as the user gave it.
+    header_line : int
+        The header's 1-based file line.
+
+    Returns
+    -------
+    InputError
+    """
     return InputError(
         source,
         f"line {header_line}",
