@@ -251,3 +251,17 @@ def test_a_headerless_table_no_format_claims_is_refused(tmp_path: Path) -> None:
     path.write_text("\n0 700 1\n", encoding="utf-8")
     with pytest.raises(InputError, match="line 2: the file is a table of numbers without a header"):
         detect_format(path)
+
+
+def test_a_text_file_no_format_claims_is_refused_naming_the_formats(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Without the generic CSV, a table with a header line is claimed by no format."""
+    from workbench.records.formats import base
+
+    without_csv = {name: f for name, f in base._REGISTRY.items() if name != "csv"}
+    monkeypatch.setattr(base, "_REGISTRY", without_csv)
+    path = tmp_path / "record.txt"
+    path.write_text("time grf\n0 700\n", encoding="utf-8")
+    with pytest.raises(InputError, match="the content is in none of the formats mot, insole, c3d"):
+        detect_format(path)

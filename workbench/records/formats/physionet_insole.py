@@ -1,4 +1,4 @@
-"""The PhysioNet gait-in-Parkinson's insole text format: 19 columns, no header.
+"""The PhysioNet insole text format (gaitpdb): 19 columns, no header.
 
 Time in column 1, the total left and right foot forces [N] in columns 18 and 19 (1-based);
 the ``insole`` entry of :mod:`workbench.records.io` and docs/contracts.md.
