@@ -55,10 +55,10 @@ class ToyFormat(RecordFormat):
         first = first_content_line(lines)
         assert first is not None  # read_text refuses an empty file
         mass_kg = float(lines[first].split()[1])
+        labels = {0: "column 1 (time)", 1: "column 2 (grf)"}
         columns, line_numbers = parse_rows(
-            lines, first + 1, n_fields=2, columns={0: "column 1 (time)", 1: "column 2 (grf)"},
-            source=source,
-        )  # fmt: skip
+            lines, first + 1, n_fields=2, columns=labels, source=source
+        )
         return RecordTable(
             arrays={"time_s": columns[0], "grf_n": columns[1]},
             metadata={
