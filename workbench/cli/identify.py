@@ -7,12 +7,16 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    CROSSCHECK_FILTER,
+    add_method_flag,
     add_no_limits,
     add_rigid_floor_flag,
     check_record_size,
     emit_after_writing,
+    harmonics_help,
     identify_settings,
     load,
+    particles_help,
     positive_int,
     record_options,
     safe_key,
@@ -27,13 +31,17 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from workbench.inference.pipeline.identification import identify
 
     settings = identify_settings(args)
-    if args.crosscheck and args.method is None and settings.method.name == "exact":
-        # The cross-check tests a filter step by step: with no --method, the rbpf.
-        settings = settings.replace(method="rbpf")
-    if args.crosscheck and (settings.method.name == "exact" or settings.model.pieces != "steps"):
+    if args.crosscheck and args.method is None and not settings.method.particle_filter:
+        # The cross-check tests a filter step by step: with no --method, the default filter.
+        settings = settings.replace(method=CROSSCHECK_FILTER)
+    if args.crosscheck and (
+        not settings.method.particle_filter or settings.model.pieces != "steps"
+    ):
+        from workbench.inference.methods import particle_filter_names
+
         raise UsageError(
             "--crosscheck cross-checks a particle filter per footfall step; use it with "
-            "--method rbpf or pf and --pieces steps"
+            f"--method {' or '.join(particle_filter_names())} and --pieces steps"
         )
     if args.crosscheck and settings.model.effects:
         raise UsageError("--crosscheck works on the baseline model; drop --effects to use it")
@@ -101,11 +109,9 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"
     )
-    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
-    p.add_argument(
-        "--particles", type=positive_int, metavar="N", help="particles (rbpf 256, pf 4000)"
-    )
-    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
+    add_method_flag(p)
+    p.add_argument("--particles", type=positive_int, metavar="N", help=particles_help())
+    p.add_argument("--harmonics", type=int, metavar="N", help=harmonics_help())
     p.add_argument(
         "--obs-noise",
         metavar="FRACTION",
@@ -163,8 +169,8 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--crosscheck",
         action="store_true",
         help="also sample every step's posterior with emcee (workbench crosscheck) and grade "
-        "identifiability from the MCMC posterior instead of the filter's cloud (runs the rbpf "
-        "unless --method names the pf)",
+        "identifiability from the MCMC posterior instead of the filter's cloud (runs the "
+        f"{CROSSCHECK_FILTER} unless --method names another particle filter)",
     )
     p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
     p.add_argument("--seed", type=seed_int, help="random seed (default 0)")

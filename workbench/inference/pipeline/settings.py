@@ -4,8 +4,8 @@ An identification is set by four parts, each an object of its own:
 
 - the **model** (:class:`~workbench.models.smd.SMDModel`): force harmonics, time basis,
   pieces, pacing and effects;
-- the **method** (:mod:`workbench.inference.methods.base`): ``RBPF``, ``PF`` or ``Exact`` with
-  their particles, resampling and proposals;
+- the **method** (:mod:`workbench.inference.methods.base`): ``Exact``, ``RBPF``, ``PF`` or any
+  other registered method, with its own options (particles, resampling, proposals);
 - the **noise and priors** (:class:`NoiseSettings`): observation and process noise, the
   (C, K) prior box and the channels the likelihood observes;
 - the **preprocessing** (:class:`Preprocessing`): the high-pass filter and the mass rescale;
@@ -68,23 +68,26 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError, check_seed
-from workbench.inference.methods import METHODS, PF, RBPF, Exact, Method, as_method
+from workbench.inference.methods import (
+    DEFAULT_METHOD,
+    Method,
+    as_method,
+    method_class,
+    method_names,
+)
 from workbench.inference.pipeline.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
+from workbench.models.force import DEFAULT_FORCE_HARMONICS, HARMONICS_RANGE
 from workbench.models.smd import SURFACE_MODELS, SMDModel
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
 __all__ = [
-    "DEFAULT_PARTICLES",
     "FLAT_KEYS",
-    "METHODS",
     "IdentifySettings",
     "NoiseSettings",
     "Preprocessing",
 ]
 
-#: Particles per method when not given: the RBPF needs few, the seed's filter many.
-DEFAULT_PARTICLES = {"rbpf": RBPF.n_particles, "pf": PF.n_particles, "exact": 0}
 #: Keys of the flat form (``--config`` file, ``settings`` in the JSON output), in order.
 FLAT_KEYS = (
     "method",
@@ -243,9 +246,10 @@ def effect_spec(effect: Effect) -> str:
 
 def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
     harmonics = int(flat["harmonics"])
-    if harmonics < 1 or harmonics > 40:
+    low, high = HARMONICS_RANGE
+    if harmonics < low or harmonics > high:
         raise UsageError(
-            f"'harmonics' must be between 1 and 40, got {flat['harmonics']}",
+            f"'harmonics' must be between {low} and {high}, got {flat['harmonics']}",
             parameter="harmonics",
         )
     if flat["time_basis"] not in ("step_phase", "absolute"):
@@ -275,11 +279,13 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
 
 def _method_from_flat(flat: dict[str, Any]) -> Method:
     name = flat["method"]
-    if name not in METHODS:
+    try:
+        method_class(name)
+    except UsageError:
         raise UsageError(
-            f"'method' {name!r} is not known; choose one of {', '.join(METHODS)}",
+            f"'method' {name!r} is not known; choose one of {', '.join(method_names())}",
             parameter="method",
-        )
+        ) from None
     particles = flat["particles"]
     if particles is not None and int(particles) < 2:
         raise UsageError(f"'particles' must be at least 2, got {particles}", parameter="particles")
@@ -303,9 +309,9 @@ def _method_from_flat(flat: dict[str, Any]) -> Method:
 
 
 _FLAT_DEFAULTS: dict[str, Any] = {
-    "method": "exact",
+    "method": DEFAULT_METHOD,
     "particles": None,
-    "harmonics": 10,
+    "harmonics": DEFAULT_FORCE_HARMONICS,
     "pacing_hz": None,
     "highpass_hz": DEFAULT_HIGHPASS_HZ,
     "obs_noise": "auto",
@@ -334,7 +340,7 @@ class IdentifySettings:
     model : SMDModel, optional
         The pedestrian model (its mass comes from the record when unset).
     method : Method, optional
-        ``Exact()`` (default), ``RBPF()`` or ``PF()``.
+        ``Exact()`` (default), ``RBPF()``, ``PF()`` or another registered method.
     noise : NoiseSettings, optional
         Noise model and priors.
     preprocessing : Preprocessing, optional
@@ -355,7 +361,7 @@ class IdentifySettings:
     """
 
     model: SMDModel = dataclasses.field(default_factory=SMDModel)
-    method: Method = dataclasses.field(default_factory=Exact)
+    method: Method = dataclasses.field(default_factory=lambda: as_method(DEFAULT_METHOD))
     noise: NoiseSettings = dataclasses.field(default_factory=NoiseSettings)
     preprocessing: Preprocessing = dataclasses.field(default_factory=Preprocessing)
     seed: int = 0
