@@ -175,8 +175,8 @@ def _validate_method_class(cls: type[Method]) -> None:
     missing = [f.name for f in dataclasses.fields(cls) if _has_no_default(f)]
     if missing:
         raise UsageError(
-            f"{where}: option(s) {', '.join(missing)} have no default; give every option a "
-            "default, so that the method runs when it is named without options"
+            f"{where}: every option needs a default, so that the method runs when it is "
+            f"named without options; give one to {', '.join(missing)}"
         )
     if cls.run is Method.run:
         raise UsageError(
