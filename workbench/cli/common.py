@@ -5,7 +5,7 @@ command line has no import cycle: :mod:`workbench.cli.main` imports the command 
 they import this one, and this one imports only the library.
 
 The work budgets live in :mod:`workbench.cli.budgets` and the method's flags in
-:mod:`workbench.cli.method_flags`; this module re-exports them, so that a command module still
+:mod:`workbench.cli.settings_flags`; this module re-exports them, so that a command module still
 needs only this one.
 """
 
@@ -32,14 +32,17 @@ from workbench.cli.budgets import (
     check_particles,
     check_record_size,
 )
-from workbench.cli.method_flags import (
+from workbench.cli.output import emit, emit_after_writing
+from workbench.cli.settings_flags import (
     CROSSCHECK_FILTER,
     add_method_flag,
     harmonics_help,
+    obs_noise_help,
     particles_help,
+    prior_help,
+    state_noise_help,
     warn_ignored_method_flags,
 )
-from workbench.cli.output import emit, emit_after_writing
 
 __all__ = [
     "CROSSCHECK_FILTER",
@@ -67,12 +70,15 @@ __all__ = [
     "harmonics_help",
     "identify_settings",
     "load",
+    "obs_noise_help",
     "output_options",
     "particles_help",
     "positive_int",
+    "prior_help",
     "record_options",
     "safe_key",
     "seed_int",
+    "state_noise_help",
     "surface_choice",
     "warn_accepted_negative_force",
     "warn_ignored_method_flags",

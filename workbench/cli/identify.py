@@ -16,11 +16,14 @@ from workbench.cli.common import (
     harmonics_help,
     identify_settings,
     load,
+    obs_noise_help,
     particles_help,
     positive_int,
+    prior_help,
     record_options,
     safe_key,
     seed_int,
+    state_noise_help,
 )
 from workbench.errors import UsageError
 
@@ -115,8 +118,7 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--obs-noise",
         metavar="FRACTION",
-        help="observation noise of u, u', u'' as a fraction of their RMS, 'seed' (0.10) or "
-        "'auto' (estimated from the record; default)",
+        help=obs_noise_help(),
     )
     p.add_argument(
         "--time-basis",
@@ -131,15 +133,13 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--prior",
         choices=["modal", "seed"],
-        help="(C, K) prior box: from f_n 1-4 Hz and damping ratio 0.05-0.9 at the "
-        "body mass (default), or the seed's 400-1000 N s/m, 12-20 kN/m",
+        help=prior_help(),
     )
     p.add_argument(
         "--state-noise",
         type=float,
         metavar="FRACTION",
-        help="process noise of u, u' per sample as a fraction of their RMS (default: the "
-        "seed's 0.005 for pf, 0 for rbpf and exact)",
+        help=state_noise_help(),
     )
     p.add_argument(
         "--observe",

@@ -1,7 +1,8 @@
-"""The command-line flags of the identification method: ``--method``, ``--particles`` and kin.
+"""Command-line flags of the identification settings whose choices and defaults the library owns.
 
-Every choice and default here is read from the method registry
-(:mod:`workbench.inference.methods.base`) and the model's constants when a parser is built,
+``--method`` and its options, ``--harmonics``, ``--obs-noise``, ``--prior`` and
+``--state-noise``: every choice and default here is read from the method registry
+(:mod:`workbench.inference.methods.base`) and the library's constants when a parser is built,
 so a registered method appears in every command's ``--method`` and no help text states a
 default of its own. :mod:`workbench.cli.common` re-exports these names, so that a command
 module still needs only that one.
@@ -17,7 +18,10 @@ __all__ = [
     "CROSSCHECK_FILTER",
     "add_method_flag",
     "harmonics_help",
+    "obs_noise_help",
     "particles_help",
+    "prior_help",
+    "state_noise_help",
     "warn_ignored_method_flags",
 ]
 
@@ -88,6 +92,50 @@ def harmonics_help(prefix: str = "force harmonics n") -> str:
 
     low, high = HARMONICS_RANGE
     return f"{prefix}, {low}-{high} (default {DEFAULT_FORCE_HARMONICS})"
+
+
+def obs_noise_help() -> str:
+    """Help of ``--obs-noise``, with the seed's fraction."""
+    from workbench.inference.core import SEED_OBS_FRACTION
+
+    return (
+        "observation noise of u, u', u'' as a fraction of their RMS, "
+        f"'seed' ({SEED_OBS_FRACTION:.2f}) or 'auto' (estimated from the record; default)"
+    )
+
+
+def prior_help() -> str:
+    """Help of ``--prior``, with the ranges of both boxes."""
+    from workbench.inference.core import modal_box_words, seed_box_words
+
+    return (
+        f"(C, K) prior box: from {modal_box_words()} at the body mass (default), or the "
+        f"seed's {seed_box_words()}"
+    )
+
+
+def state_noise_help() -> str:
+    """Help of ``--state-noise``: each registered method's default, from its class."""
+    from workbench.inference.core import SEED_STATE_FRACTION
+    from workbench.inference.methods import method_class, method_names
+
+    by_fraction: dict[float, list[str]] = {}
+    for name in method_names():
+        fraction = method_class(name).default_state_noise_fraction
+        by_fraction.setdefault(fraction, []).append(name)
+    parts = [
+        ("the seed's " if fraction == SEED_STATE_FRACTION else "")
+        + f"{fraction:g} for {_and(names)}"
+        for fraction, names in sorted(by_fraction.items(), reverse=True)
+    ]
+    return (
+        "process noise of u, u' per sample as a fraction of their RMS (default: "
+        f"{', '.join(parts)})"
+    )
+
+
+def _and(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def warn_ignored_method_flags(args: argparse.Namespace, method: str) -> None:
