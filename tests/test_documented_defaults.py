@@ -10,13 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from workbench.cli.settings_flags import particles_help
-from workbench.inference.core import (
-    SEED_OBS_FRACTION,
-    SEED_STATE_FRACTION,
-    modal_box_words,
-    seed_box_words,
-)
+from workbench.cli.settings_flags import modal_box_words, particles_help, seed_box_words
+from workbench.inference.core import SEED_OBS_FRACTION, SEED_STATE_FRACTION
 from workbench.inference.methods import DEFAULT_METHOD, PF, RBPF, method_class, method_names
 from workbench.models.force import DEFAULT_FORCE_HARMONICS, HARMONICS_RANGE
 

@@ -18,9 +18,11 @@ __all__ = [
     "CROSSCHECK_FILTER",
     "add_method_flag",
     "harmonics_help",
+    "modal_box_words",
     "obs_noise_help",
     "particles_help",
     "prior_help",
+    "seed_box_words",
     "state_noise_help",
     "warn_ignored_method_flags",
 ]
@@ -104,10 +106,25 @@ def obs_noise_help() -> str:
     )
 
 
+def modal_box_words() -> str:
+    """Return the modal prior box in words: ``"f_n 1-4 Hz and damping ratio 0.05-0.9"``."""
+    from workbench.inference.core import MODAL_DAMPING_RATIO, MODAL_NATURAL_FREQUENCY_HZ
+
+    (f_lo, f_hi), (z_lo, z_hi) = MODAL_NATURAL_FREQUENCY_HZ, MODAL_DAMPING_RATIO
+    return f"f_n {f_lo:g}-{f_hi:g} Hz and damping ratio {z_lo:g}-{z_hi:g}"
+
+
+def seed_box_words() -> str:
+    """Return the seed's prior box in words: ``"400-1000 N s/m, 12-20 kN/m"``."""
+    from workbench.inference.core import StiffnessDampingPrior
+
+    seed = StiffnessDampingPrior.seed()
+    (c_lo, c_hi), (k_lo, k_hi) = seed.damping_ns_per_m, seed.stiffness_n_per_m
+    return f"{c_lo:g}-{c_hi:g} N s/m, {k_lo / 1e3:g}-{k_hi / 1e3:g} kN/m"
+
+
 def prior_help() -> str:
     """Help of ``--prior``, with the ranges of both boxes."""
-    from workbench.inference.core import modal_box_words, seed_box_words
-
     return (
         f"(C, K) prior box: from {modal_box_words()} at the body mass (default), or the "
         f"seed's {seed_box_words()}"

@@ -61,17 +61,13 @@ from workbench.records.surface import SurfaceMotion
 __all__ = [
     "KALMAN_STATE_FRACTION",
     "OBSERVED_CHANNELS",
-    "SEED_DAMPING_NS_PER_M",
     "SEED_OBS_FRACTION",
     "SEED_STATE_FRACTION",
-    "SEED_STIFFNESS_N_PER_M",
     "ForcePrior",
     "IdentificationProblem",
     "NoiseModel",
     "StiffnessDampingPrior",
     "build_problem",
-    "modal_box_words",
-    "seed_box_words",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -96,25 +92,9 @@ OBSERVED_CHANNELS = {"all": (True, True, True), "acc": (False, False, True)}
 SEED_DAMPING_RW_SD = 5.0
 SEED_STIFFNESS_RW_SD = 100.0
 
-#: Seed section 5.2: the initial (prior) ranges of C [N s/m] and K [N/m] (``prior = "seed"``).
-SEED_DAMPING_NS_PER_M: tuple[float, float] = (400.0, 1000.0)
-SEED_STIFFNESS_N_PER_M: tuple[float, float] = (12000.0, 20000.0)
-
 #: The modal prior box's natural frequency [Hz] and damping ratio ranges (``from_modal``).
 MODAL_NATURAL_FREQUENCY_HZ: tuple[float, float] = (1.0, 4.0)
 MODAL_DAMPING_RATIO: tuple[float, float] = (0.05, 0.9)
-
-
-def seed_box_words() -> str:
-    """Return the seed's prior box in words: ``"400-1000 N s/m, 12-20 kN/m"``."""
-    (c_lo, c_hi), (k_lo, k_hi) = SEED_DAMPING_NS_PER_M, SEED_STIFFNESS_N_PER_M
-    return f"{c_lo:g}-{c_hi:g} N s/m, {k_lo / 1e3:g}-{k_hi / 1e3:g} kN/m"
-
-
-def modal_box_words() -> str:
-    """Return the modal prior box in words: ``"f_n 1-4 Hz and damping ratio 0.05-0.9"``."""
-    (f_lo, f_hi), (z_lo, z_hi) = MODAL_NATURAL_FREQUENCY_HZ, MODAL_DAMPING_RATIO
-    return f"f_n {f_lo:g}-{f_hi:g} Hz and damping ratio {z_lo:g}-{z_hi:g}"
 
 
 @dataclass(frozen=True)
@@ -148,9 +128,7 @@ class StiffnessDampingPrior:
     @classmethod
     def seed(cls) -> StiffnessDampingPrior:
         """Return the seed study's initial ranges: C 400-1000 N s/m, K 12000-20000 N/m."""
-        return cls(
-            SEED_DAMPING_NS_PER_M, SEED_STIFFNESS_N_PER_M, label=f"seed ({seed_box_words()})"
-        )
+        return cls((400.0, 1000.0), (12000.0, 20000.0), label="seed (400-1000 N s/m, 12-20 kN/m)")
 
     @classmethod
     def from_modal(
