@@ -23,7 +23,7 @@ state_noise      process noise of (u, u'), fraction of their RMS  x0.5, x1, x2 (
                                                                   0.005 when the default is 0)
 damping_noise    random-walk sd of C per sample [N s/m] (pf)      x0.5, x1, x2 of 5 N s/m
 stiffness_noise  random-walk sd of K per sample [N/m] (pf)        x0.5, x1, x2 of 100 N/m
-particles        number of particles (rbpf, pf)                   x0.5, x1, x2
+particles        number of particles (particle filters)           x0.5, x1, x2
 prior_box        initial ranges of C and K: log-width scale       x0.5, x1, x2
 highpass_hz      high-pass cut-off [Hz]                           x0.5, x1, x2 (0, 0.075,
                                                                   0.15 when the default is 0)
@@ -225,7 +225,7 @@ def default_levels(name: str, base: IdentifySettings) -> list[Level]:
         values = [d * s for s in SCALES] if d > 0 else [0.0, 0.075, 0.15]
         return _levels(name, base, values)
     if name == "particles":
-        if base.method.name == "exact":
+        if base.n_particles == 0:  # a method without particles (exact)
             return _levels(name, base, [0])
         n = base.n_particles
         return _levels(name, base, sorted({max(2, n // 2), n, 2 * n}))
