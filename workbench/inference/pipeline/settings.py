@@ -70,6 +70,7 @@ from typing import Any
 from workbench.errors import InputError, UsageError, check_seed
 from workbench.inference.methods import (
     DEFAULT_METHOD,
+    PF,
     Method,
     as_method,
     method_class,
@@ -77,7 +78,7 @@ from workbench.inference.methods import (
 )
 from workbench.inference.pipeline.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
-from workbench.models.force import DEFAULT_FORCE_HARMONICS, HARMONICS_RANGE
+from workbench.models.force import HARMONICS_RANGE
 from workbench.models.smd import SURFACE_MODELS, SMDModel
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
@@ -306,29 +307,6 @@ def _method_from_flat(flat: dict[str, Any]) -> Method:
         ess_threshold=flat["ess_threshold"],
         force_proposal=flat["force_proposal"],
     )
-
-
-_FLAT_DEFAULTS: dict[str, Any] = {
-    "method": DEFAULT_METHOD,
-    "particles": None,
-    "harmonics": DEFAULT_FORCE_HARMONICS,
-    "pacing_hz": None,
-    "highpass_hz": DEFAULT_HIGHPASS_HZ,
-    "obs_noise": "auto",
-    "state_noise_fraction": None,
-    "time_basis": "step_phase",
-    "pieces": "steps",
-    "prior": "modal",
-    "resampling": "systematic",
-    "ess_threshold": 0.5,
-    "seed": 0,
-    "force_check": True,
-    "observe": "all",
-    "force_proposal": "regression",
-    "effects": (),
-    "rescale_to_mass": False,
-    "surface": "coupled",
-}
 
 
 @dataclass(frozen=True)
@@ -589,3 +567,39 @@ class IdentifySettings:
                 raise
             # The value came from the file: name the file and its key, not a flag.
             raise InputError(path, f"key {err.parameter!r}", str(err), "correct it") from None
+
+
+def _field_defaults(cls: type) -> dict[str, Any]:
+    return {
+        f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING
+    }
+
+
+_MODEL, _NOISE, _PREPROCESSING, _SETTINGS = (
+    _field_defaults(part) for part in (SMDModel, NoiseSettings, Preprocessing, IdentifySettings)
+)
+#: The method options' defaults are the particle filters' (``PF`` takes all of them).
+_FILTER = _field_defaults(PF)
+#: The defaults of the flat keys: each is the default of the part that holds it, so that it
+#: is stated once, on that part.
+_FLAT_DEFAULTS: dict[str, Any] = {
+    "method": DEFAULT_METHOD,
+    "particles": None,
+    "harmonics": _MODEL["harmonics"],
+    "pacing_hz": _MODEL["pacing_hz"],
+    "highpass_hz": _PREPROCESSING["highpass_hz"],
+    "obs_noise": _NOISE["obs_noise"],
+    "state_noise_fraction": _NOISE["state_noise_fraction"],
+    "time_basis": _MODEL["time_basis"],
+    "pieces": _MODEL["pieces"],
+    "prior": _NOISE["prior"],
+    "resampling": _FILTER["resampling"],
+    "ess_threshold": _FILTER["ess_threshold"],
+    "seed": _SETTINGS["seed"],
+    "force_check": _SETTINGS["force_check"],
+    "observe": _NOISE["observe"],
+    "force_proposal": _FILTER["force_proposal"],
+    "effects": (),
+    "rescale_to_mass": _PREPROCESSING["rescale_to_mass"],
+    "surface": _MODEL["surface"],
+}
