@@ -68,14 +68,7 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError, check_seed
-from workbench.inference.methods import (
-    DEFAULT_METHOD,
-    PF,
-    Method,
-    as_method,
-    method_class,
-    method_names,
-)
+from workbench.inference.methods import DEFAULT_METHOD, PF, Method, as_method, method_names
 from workbench.inference.pipeline.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
 from workbench.models.force import HARMONICS_RANGE
@@ -280,13 +273,11 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
 
 def _method_from_flat(flat: dict[str, Any]) -> Method:
     name = flat["method"]
-    try:
-        method_class(name)
-    except UsageError:
+    if name not in method_names():
         raise UsageError(
             f"'method' {name!r} is not known; choose one of {', '.join(method_names())}",
             parameter="method",
-        ) from None
+        )
     particles = flat["particles"]
     if particles is not None and int(particles) < 2:
         raise UsageError(f"'particles' must be at least 2, got {particles}", parameter="particles")
