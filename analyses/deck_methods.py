@@ -88,7 +88,7 @@ def main() -> None:
             text = ", ".join(f"{p} {est[p]:.3f} +- {sd[p]:.3f}" for p in PARAMETERS)
             print(f"  {name:5s} {text}")
         exact = results["exact"]
-        for name in ("rbpf", "pf"):
+        for name in (n for n in results if n != "exact"):
             gaps = [
                 abs(results[name].estimates[p] - exact.estimates[p]) / exact.posterior_sd[p]
                 for p in PARAMETERS

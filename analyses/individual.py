@@ -61,8 +61,9 @@ import numpy as np
 from workbench.datasets import EMBEDDED, embedded_path
 from workbench.fileutil import atomic_write_json
 from workbench.inference.core.results import IdentificationResult
+from workbench.inference.methods import method_names
 from workbench.inference.pipeline.identification import identify
-from workbench.inference.pipeline.settings import METHODS, IdentifySettings
+from workbench.inference.pipeline.settings import IdentifySettings
 from workbench.records.inspection import inspect_record
 from workbench.records.io import load_record
 from workbench.records.plateaus import PacingPlateau, find_pacing_plateaus
@@ -251,7 +252,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run the study, print the table and write the JSON and figures; return the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--segments", default="all")
-    parser.add_argument("--method", choices=METHODS, default="rbpf")
+    parser.add_argument("--method", choices=method_names(), default="rbpf")
     parser.add_argument("--particles", type=int, default=None)
     parser.add_argument("--obs-noise", default="auto")
     parser.add_argument("--max-duration", type=float, default=None)

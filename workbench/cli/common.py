@@ -4,8 +4,9 @@ Command modules import this module and nothing else from :mod:`workbench.cli`, s
 command line has no import cycle: :mod:`workbench.cli.main` imports the command modules,
 they import this one, and this one imports only the library.
 
-The work budgets live in :mod:`workbench.cli.budgets`; this module re-exports them, so that a
-command module still needs only this one.
+The work budgets live in :mod:`workbench.cli.budgets` and the method's flags in
+:mod:`workbench.cli.settings_flags`; this module re-exports them, so that a command module still
+needs only this one.
 """
 
 from __future__ import annotations
@@ -32,8 +33,19 @@ from workbench.cli.budgets import (
     check_record_size,
 )
 from workbench.cli.output import emit, emit_after_writing
+from workbench.cli.settings_flags import (
+    CROSSCHECK_FILTER,
+    add_method_flag,
+    harmonics_help,
+    obs_noise_help,
+    particles_help,
+    prior_help,
+    state_noise_help,
+    warn_ignored_method_flags,
+)
 
 __all__ = [
+    "CROSSCHECK_FILTER",
     "CURRENT_ARGV",
     "EXIT_RECORDS_FAILED",
     "IDENTIFY_BASE_BYTES",
@@ -44,6 +56,7 @@ __all__ = [
     "Parser",
     "add_allow_negative_force",
     "add_allow_outside_paths",
+    "add_method_flag",
     "add_no_limits",
     "add_rigid_floor_flag",
     "check_budget",
@@ -54,13 +67,18 @@ __all__ = [
     "emit",
     "emit_after_writing",
     "floats",
+    "harmonics_help",
     "identify_settings",
     "load",
+    "obs_noise_help",
     "output_options",
+    "particles_help",
     "positive_int",
+    "prior_help",
     "record_options",
     "safe_key",
     "seed_int",
+    "state_noise_help",
     "surface_choice",
     "warn_accepted_negative_force",
     "warn_ignored_method_flags",
@@ -75,7 +93,6 @@ EXIT_RECORDS_FAILED = 4
 
 #: The arguments of the running :func:`workbench.cli.main` call (``--json`` usage errors).
 CURRENT_ARGV: list[str] = []
-
 
 #: What argparse should read as a (negative) value rather than an option: a number (also
 #: ``-inf``, judged by the option's own check) or a comma-separated list of numbers, so
@@ -391,29 +408,6 @@ def identify_settings(args: argparse.Namespace) -> Any:
     check_particles(args, settings)
     warn_ignored_method_flags(args, settings.method.name)
     return settings
-
-
-def warn_ignored_method_flags(args: argparse.Namespace, method: str) -> None:
-    """Say on stderr that a filter's flag is ignored by the method that runs.
-
-    A warning, not a refusal: scripts that pass --particles to every run keep working, and
-    the result is what the method gives without the flag, but nobody believes the flag acted.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-    method : str
-        The method that runs (``exact``, ``rbpf``, ``pf``).
-    """
-    if "method" in (getattr(args, "factors", None) or ""):
-        return  # a study that varies the method runs the filters too
-    ignored = []
-    if getattr(args, "particles", None) is not None and method == "exact":
-        ignored.append("--particles (the exact posterior has no particles; add --method rbpf)")
-    if getattr(args, "force_proposal", None) is not None and method != "pf":
-        ignored.append(f"--force-proposal (it is the pf's; {method} draws no force proposals)")
-    for flag in ignored:
-        print(f"workbench: warning: the {method} method ignores {flag}", file=sys.stderr)
 
 
 def add_rigid_floor_flag(parser: Any) -> None:

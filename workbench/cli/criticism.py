@@ -48,10 +48,13 @@ def parse_effect_names(text: str | None) -> list[str]:
 
 
 def _check_harmonics(args: argparse.Namespace) -> None:
-    if args.harmonics < 1 or args.harmonics > 40:
+    from workbench.models.force import HARMONICS_RANGE
+
+    low, high = HARMONICS_RANGE
+    if args.harmonics < low or args.harmonics > high:
         raise UsageError(
-            f"--harmonics {args.harmonics}: the shared force shape needs 1 to 40 harmonics; "
-            "give for example --harmonics 6"
+            f"--harmonics {args.harmonics}: the shared force shape needs {low} to {high} "
+            "harmonics; give for example --harmonics 6"
         )
 
 

@@ -13,13 +13,17 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    CROSSCHECK_FILTER,
+    add_method_flag,
     add_no_limits,
     add_rigid_floor_flag,
     check_budget,
     check_particles,
     check_record_size,
     emit_after_writing,
+    harmonics_help,
     load,
+    particles_help,
     positive_int,
     record_options,
     safe_key,
@@ -210,7 +214,7 @@ def _step_check(args: argparse.Namespace, ident: Any, seed: int, name: str) -> _
 #: The options of the per-step filter check, with their defaults: on the transmissibility
 #: route no filter runs, so a value other than the default is reported as not used.
 _FILTER_OPTIONS = {
-    "method": ("--method", "rbpf"),
+    "method": ("--method", CROSSCHECK_FILTER),
     "particles": ("--particles", None),
     "mode": ("--mode", "collapsed"),
     "prior": ("--prior", "sequential"),
@@ -363,11 +367,9 @@ def add_crosscheck_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"
     )
-    p.add_argument("--method", choices=["rbpf", "pf"], default="rbpf", help="filter (rbpf)")
-    p.add_argument(
-        "--particles", type=positive_int, metavar="N", help="particles (rbpf 256, pf 4000)"
-    )
-    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
+    add_method_flag(p, filters_only=True)
+    p.add_argument("--particles", type=positive_int, metavar="N", help=particles_help())
+    p.add_argument("--harmonics", type=int, metavar="N", help=harmonics_help())
     p.add_argument(
         "--obs-noise",
         metavar="FRACTION",

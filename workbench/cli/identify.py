@@ -7,16 +7,23 @@ from pathlib import Path
 from typing import Any
 
 from workbench.cli.common import (
+    CROSSCHECK_FILTER,
+    add_method_flag,
     add_no_limits,
     add_rigid_floor_flag,
     check_record_size,
     emit_after_writing,
+    harmonics_help,
     identify_settings,
     load,
+    obs_noise_help,
+    particles_help,
     positive_int,
+    prior_help,
     record_options,
     safe_key,
     seed_int,
+    state_noise_help,
 )
 from workbench.errors import UsageError
 
@@ -27,13 +34,17 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from workbench.inference.pipeline.identification import identify
 
     settings = identify_settings(args)
-    if args.crosscheck and args.method is None and settings.method.name == "exact":
-        # The cross-check tests a filter step by step: with no --method, the rbpf.
-        settings = settings.replace(method="rbpf")
-    if args.crosscheck and (settings.method.name == "exact" or settings.model.pieces != "steps"):
+    if args.crosscheck and args.method is None and not settings.method.particle_filter:
+        # The cross-check tests a filter step by step: with no --method, the default filter.
+        settings = settings.replace(method=CROSSCHECK_FILTER)
+    if args.crosscheck and (
+        not settings.method.particle_filter or settings.model.pieces != "steps"
+    ):
+        from workbench.inference.methods import particle_filter_names
+
         raise UsageError(
             "--crosscheck cross-checks a particle filter per footfall step; use it with "
-            "--method rbpf or pf and --pieces steps"
+            f"--method {' or '.join(particle_filter_names())} and --pieces steps"
         )
     if args.crosscheck and settings.model.effects:
         raise UsageError("--crosscheck works on the baseline model; drop --effects to use it")
@@ -101,16 +112,13 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "record", help="the record file, or an embedded record by name, e.g. seed_individual"
     )
-    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
-    p.add_argument(
-        "--particles", type=positive_int, metavar="N", help="particles (rbpf 256, pf 4000)"
-    )
-    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics n (default 10)")
+    add_method_flag(p)
+    p.add_argument("--particles", type=positive_int, metavar="N", help=particles_help())
+    p.add_argument("--harmonics", type=int, metavar="N", help=harmonics_help())
     p.add_argument(
         "--obs-noise",
         metavar="FRACTION",
-        help="observation noise of u, u', u'' as a fraction of their RMS, 'seed' (0.10) or "
-        "'auto' (estimated from the record; default)",
+        help=obs_noise_help(),
     )
     p.add_argument(
         "--time-basis",
@@ -125,15 +133,13 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--prior",
         choices=["modal", "seed"],
-        help="(C, K) prior box: from f_n 1-4 Hz and damping ratio 0.05-0.9 at the "
-        "body mass (default), or the seed's 400-1000 N s/m, 12-20 kN/m",
+        help=prior_help(),
     )
     p.add_argument(
         "--state-noise",
         type=float,
         metavar="FRACTION",
-        help="process noise of u, u' per sample as a fraction of their RMS (default: the "
-        "seed's 0.005 for pf, 0 for rbpf and exact)",
+        help=state_noise_help(),
     )
     p.add_argument(
         "--observe",
@@ -163,8 +169,8 @@ def add_identify_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--crosscheck",
         action="store_true",
         help="also sample every step's posterior with emcee (workbench crosscheck) and grade "
-        "identifiability from the MCMC posterior instead of the filter's cloud (runs the rbpf "
-        "unless --method names the pf)",
+        "identifiability from the MCMC posterior instead of the filter's cloud (runs the "
+        f"{CROSSCHECK_FILTER} unless --method names another particle filter)",
     )
     p.add_argument("--config", metavar="TOML", help="settings file (see docs of the settings)")
     p.add_argument("--seed", type=seed_int, help="random seed (default 0)")

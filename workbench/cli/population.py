@@ -13,10 +13,12 @@ from workbench.cli.common import (
     MEMORY_BUDGET_GB,
     add_allow_negative_force,
     add_allow_outside_paths,
+    add_method_flag,
     add_no_limits,
     add_rigid_floor_flag,
     check_budget,
     emit,
+    harmonics_help,
     identify_settings,
     positive_int,
     seed_int,
@@ -219,9 +221,9 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--scheduler", metavar="ADDRESS", help="run on a Dask distributed scheduler instead"
     )
     p.add_argument("--resume", action="store_true", help="continue a batch in DIR")
-    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
+    add_method_flag(p)
     p.add_argument("--particles", type=positive_int, metavar="N", help="particles per record")
-    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
+    p.add_argument("--harmonics", type=int, metavar="N", help=harmonics_help("force harmonics"))
     p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")
     p.add_argument(
         "--no-force-check", action="store_true", help="skip the force-model check (faster)"

@@ -7,10 +7,12 @@ from typing import Any
 
 from workbench.cli.common import (
     IDENTIFY_SECONDS_PER_SAMPLE,
+    add_method_flag,
     add_no_limits,
     add_rigid_floor_flag,
     check_budget,
     emit,
+    harmonics_help,
     identify_settings,
     positive_int,
     seed_int,
@@ -133,9 +135,9 @@ def add_recovery_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--scheduler", metavar="ADDRESS", help="run on a Dask distributed scheduler instead"
     )
     p.add_argument("--resume", action="store_true", help="continue a recovery in DIR")
-    p.add_argument("--method", choices=["rbpf", "pf", "exact"], help="method (default exact)")
+    add_method_flag(p)
     p.add_argument("--particles", type=positive_int, metavar="N", help="particles per record")
-    p.add_argument("--harmonics", type=int, metavar="N", help="force harmonics (default 10)")
+    p.add_argument("--harmonics", type=int, metavar="N", help=harmonics_help("force harmonics"))
     p.add_argument("--obs-noise", metavar="FRACTION", help="as for identify (default auto)")
     p.add_argument("--state-noise", type=float, metavar="FRACTION", help="as for identify")
     p.add_argument(

@@ -10,6 +10,7 @@ from workbench.cli.common import (
     IDENTIFY_SECONDS_PER_SAMPLE,
     add_allow_negative_force,
     add_allow_outside_paths,
+    add_method_flag,
     add_no_limits,
     add_rigid_floor_flag,
     check_budget,
@@ -149,7 +150,7 @@ def add_sensitivity_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="DIR", required=True, help="folder for tables and report")
     add_no_limits(p)
     g = p.add_argument_group("baseline settings (as for identify)")
-    g.add_argument("--method", choices=["rbpf", "pf", "exact"])
+    add_method_flag(g)
     g.add_argument("--particles", type=positive_int)
     g.add_argument("--harmonics", type=int)
     g.add_argument("--highpass-hz", type=float, metavar="F")

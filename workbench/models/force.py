@@ -30,6 +30,8 @@ from workbench.errors import UsageError
 from workbench.records.record import G_M_S2
 
 __all__ = [
+    "DEFAULT_FORCE_HARMONICS",
+    "HARMONICS_RANGE",
     "FourierForce",
     "fourier_phase_rad",
     "piece_time_origin_s",
@@ -38,6 +40,16 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: Harmonics of the force when none are given: the seed's n = 10 (its numerical example),
+#: the default of a model (``SMDModel``) and of an identification (``harmonics``,
+#: ``--harmonics``).
+DEFAULT_FORCE_HARMONICS = 10
+#: Harmonics an identification and the criticism's shared force shape accept (``harmonics``
+#: setting, ``--harmonics``), both ends included. :class:`FourierForce` itself takes any
+#: n >= 0: n = 0 (a constant force) is a model a simulation may use, but it describes no gait
+#: to identify.
+HARMONICS_RANGE = (1, 40)
 
 
 def _check_pacing(pacing_hz: ArrayLike, where: str) -> float:
@@ -97,7 +109,8 @@ class FourierForce:
     ----------
     harmonics : int
         Number n of harmonics (0 gives a constant force). The seed uses n = 10 in its
-        numerical example; about 4 describe a single footfall.
+        numerical example (:data:`DEFAULT_FORCE_HARMONICS`); about 4 describe a single
+        footfall. An identification takes n in :data:`HARMONICS_RANGE`.
 
     Notes
     -----

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from workbench.errors import UsageError
 from workbench.models import conversions
 from workbench.models.effects import Effect, EffectContext, Effects, as_effects
-from workbench.models.force import FourierForce
+from workbench.models.force import DEFAULT_FORCE_HARMONICS, FourierForce
 
 __all__ = ["PIECE_MODES", "SURFACE_MODELS", "TIME_BASES", "SMDModel"]
 
@@ -109,7 +109,7 @@ class SMDModel:
     mass_kg: float | None = None
     stiffness_n_per_m: float | None = None
     damping_ns_per_m: float | None = None
-    harmonics: int = 10
+    harmonics: int = DEFAULT_FORCE_HARMONICS
     effects: Effects = field(default_factory=Effects)
     time_basis: str = "step_phase"
     pieces: str = "steps"
@@ -170,7 +170,7 @@ class SMDModel:
         natural_frequency_hz: float,
         damping_ratio: float,
         *,
-        harmonics: int = 10,
+        harmonics: int = DEFAULT_FORCE_HARMONICS,
         effects: Effect | Effects | Iterable[Effect | str] = (),
         **force: Any,
     ) -> SMDModel:

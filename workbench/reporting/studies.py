@@ -27,6 +27,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from workbench.inference.core import IdentificationResult, StiffnessDampingPrior
+from workbench.inference.methods import method_class, method_names
 from workbench.records.inspection import Inspection
 from workbench.records.plateaus import PacingPlateau
 from workbench.reporting.figures import save_figure
@@ -37,10 +38,10 @@ from workbench.reporting.identification import (
 )
 
 __all__ = [
-    "METHOD_COLOURS",
     "MethodTrace",
     "coefficients_figure",
     "force_convergence_figure",
+    "method_colour",
     "method_convergence_figure",
     "pacing_segments_figure",
     "segment_figures",
@@ -50,8 +51,41 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: One colour per method, the same in every study figure.
-METHOD_COLOURS = {"pf": "C0", "rbpf": "C1", "exact": "C2"}
+#: Colour of a trace whose name is no registered method.
+OTHER_COLOUR = "C4"
+#: The matplotlib colour cycle that registered methods without a colour of their own draw from.
+_CYCLE = tuple(f"C{i}" for i in range(10))
+
+
+def method_colour(method: str) -> str:
+    """Return the colour of a method, the same in every study figure.
+
+    A registered method draws in its class's ``colour``; one without takes, in the order of
+    registration, the colours of the cycle that no registered method has (and that are not
+    :data:`OTHER_COLOUR`). Any other name draws in :data:`OTHER_COLOUR`.
+
+    Parameters
+    ----------
+    method : str
+        A method name (:func:`workbench.inference.methods.method_names`).
+
+    Returns
+    -------
+    str
+        A matplotlib colour (``"C0"``...).
+    """
+    classes = [method_class(name) for name in method_names()]
+    taken = {cls.colour for cls in classes if cls.colour} | {OTHER_COLOUR}
+    free = [c for c in _CYCLE if c not in taken]
+    colourless = [cls.name for cls in classes if not cls.colour]
+    for cls in classes:
+        if cls.name == method and cls.colour:
+            return cls.colour
+    if method in colourless:
+        return free[colourless.index(method) % len(free)]
+    return OTHER_COLOUR
+
+
 _PARAMS = (("damping_ns_per_m", "C [N s/m]"), ("stiffness_n_per_m", "K [N/m]"))
 #: Half-width of the zoomed panels of :func:`method_convergence_figure` (fraction of truth).
 ZOOM_FRACTION = 0.05
@@ -64,7 +98,7 @@ class MethodTrace:
     Attributes
     ----------
     method : str
-        ``"pf"``, ``"rbpf"`` or ``"exact"``.
+        A method name (``"pf"``, ``"rbpf"``, ``"exact"``, ...).
     time_s : ndarray, shape (T,)
         Time up to which the data were used [s].
     mean, sd : ndarray, shape (T, 2)
@@ -95,7 +129,7 @@ class MethodTrace:
     @property
     def colour(self) -> str:
         """Plot colour of the method."""
-        return METHOD_COLOURS.get(self.method, "C4")
+        return method_colour(self.method)
 
 
 def _draw_trace(
@@ -280,7 +314,7 @@ def coefficients_figure(
             width,
             yerr=2 * np.asarray(sd),
             capsize=1.5,
-            color=METHOD_COLOURS.get(method, "C4"),
+            color=method_colour(method),
             label=method,
         )
     ax.set_xticks(x, list(names), fontsize=8)

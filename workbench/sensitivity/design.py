@@ -23,14 +23,15 @@ state_noise      process noise of (u, u'), fraction of their RMS  x0.5, x1, x2 (
                                                                   0.005 when the default is 0)
 damping_noise    random-walk sd of C per sample [N s/m] (pf)      x0.5, x1, x2 of 5 N s/m
 stiffness_noise  random-walk sd of K per sample [N/m] (pf)        x0.5, x1, x2 of 100 N/m
-particles        number of particles (rbpf, pf)                   x0.5, x1, x2
+particles        number of particles (particle filters)           x0.5, x1, x2
 prior_box        initial ranges of C and K: log-width scale       x0.5, x1, x2
 highpass_hz      high-pass cut-off [Hz]                           x0.5, x1, x2 (0, 0.075,
                                                                   0.15 when the default is 0)
 harmonics        number of Fourier harmonics                      n/2, n, 2n
 pieces           segmentation: footfall steps or whole record     steps, whole
 time_basis       force basis clock: step phase or absolute time   step_phase, absolute
-method           identification method                            rbpf, exact, pf
+method           identification method                            the registered methods,
+                                                                  the baseline's first
 ================ ================================================ ===========================
 
 The observation-noise scales multiply whatever the ``--obs-noise`` setting gives (with
@@ -61,7 +62,9 @@ from workbench.inference.core import (
     IdentificationProblem,
     StiffnessDampingPrior,
 )
-from workbench.inference.pipeline.settings import METHODS, IdentifySettings
+from workbench.inference.methods import method_names
+from workbench.inference.pipeline.settings import IdentifySettings
+from workbench.models.force import HARMONICS_RANGE
 
 __all__ = [
     "DESIGNS",
@@ -120,10 +123,12 @@ FACTORS: dict[str, Factor] = {
         Factor("method", "the identification method", "choice"),
     )
 }
-_CHOICES = {
-    "pieces": ("steps", "whole"),
-    "time_basis": ("step_phase", "absolute"),
-    "method": METHODS,
+#: The levels of the choice factors; the method's are the registered methods
+#: (:func:`~workbench.inference.methods.method_names`), read when a design is built.
+_CHOICES: dict[str, Callable[[], Sequence[str]]] = {
+    "pieces": lambda: ("steps", "whole"),
+    "time_basis": lambda: ("step_phase", "absolute"),
+    "method": method_names,
 }
 
 
@@ -220,17 +225,18 @@ def default_levels(name: str, base: IdentifySettings) -> list[Level]:
         values = [d * s for s in SCALES] if d > 0 else [0.0, 0.075, 0.15]
         return _levels(name, base, values)
     if name == "particles":
-        if base.method.name == "exact":
+        if base.n_particles == 0:  # a method without particles (exact)
             return _levels(name, base, [0])
         n = base.n_particles
         return _levels(name, base, sorted({max(2, n // 2), n, 2 * n}))
     if name == "harmonics":
         n = base.model.harmonics
-        return _levels(name, base, sorted({max(1, round(n / 2)), n, min(40, 2 * n)}))
+        low, high = HARMONICS_RANGE
+        return _levels(name, base, sorted({max(low, round(n / 2)), n, min(high, 2 * n)}))
     if name == "method":
         method = base.method.name
-        return _levels(name, base, [method, *(m for m in METHODS if m != method)])
-    return _levels(name, base, list(_CHOICES[name]))
+        return _levels(name, base, [method, *(m for m in method_names() if m != method)])
+    return _levels(name, base, list(_CHOICES[name]()))
 
 
 def _default_value(name: str, base: IdentifySettings) -> float | int | str:
@@ -338,9 +344,10 @@ def parse_levels(
         parsed: list[float | int | str] = []
         for v in raw:
             if factor.kind == "choice":
-                if v not in _CHOICES[name]:
+                choices = _CHOICES[name]()
+                if v not in choices:
                     raise UsageError(
-                        f"'levels' {name}: {v!r} is not a choice; use {', '.join(_CHOICES[name])}",
+                        f"'levels' {name}: {v!r} is not a choice; use {', '.join(choices)}",
                         parameter="levels",
                     )
                 parsed.append(v)

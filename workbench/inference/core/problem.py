@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from workbench.errors import UsageError
 from workbench.models.conversions import damping_ns_per_m, stiffness_n_per_m
-from workbench.models.force import FourierForce
+from workbench.models.force import DEFAULT_FORCE_HARMONICS, FourierForce
 from workbench.records.preprocess import COMResponse
 from workbench.records.record import G_M_S2
 from workbench.records.steps import Steps
@@ -421,7 +421,7 @@ def build_problem(
     com: COMResponse,
     steps: Steps | None = None,
     *,
-    harmonics: int = 10,
+    harmonics: int = DEFAULT_FORCE_HARMONICS,
     pacing_hz: float | None = None,
     time_basis: TimeBasis = "step_phase",
     pieces: PieceMode = "steps",

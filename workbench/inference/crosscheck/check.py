@@ -381,7 +381,10 @@ def crosscheck(
             f"'prior' must be one of {', '.join(PRIORS)}, got {prior!r}", parameter="prior"
         )
     if output.piece_mean is None or output.piece_sd is None:
-        raise UsageError(f"a {output.method} result has no per-step values; cross-check rbpf or pf")
+        from workbench.inference.methods import particle_filter_names
+
+        filters = " or ".join(particle_filter_names())
+        raise UsageError(f"a {output.method} result has no per-step values; cross-check {filters}")
     if output.piece_mean.shape[0] != problem.n_pieces:
         raise UsageError(
             f"the filter output has {output.piece_mean.shape[0]} pieces but the problem has "

@@ -7,13 +7,18 @@ grids and force posterior.
 """
 
 from workbench.inference.methods.base import (
-    METHODS,
+    DEFAULT_METHOD,
     PF,
     RBPF,
     Exact,
     Method,
     as_method,
     exact_result,
+    method_class,
+    method_names,
+    particle_filter_names,
+    register_method,
+    unregister_method,
 )
 from workbench.inference.methods.exact import (
     LogLikelihood,
@@ -26,7 +31,7 @@ from workbench.inference.methods.pf import run_pf
 from workbench.inference.methods.rbpf import run_rbpf
 
 __all__ = [
-    "METHODS",
+    "DEFAULT_METHOD",
     "PF",
     "RBPF",
     "Exact",
@@ -38,6 +43,11 @@ __all__ = [
     "find_mode",
     "kalman_force_moments",
     "kalman_loglik",
+    "method_class",
+    "method_names",
+    "particle_filter_names",
+    "register_method",
     "run_pf",
     "run_rbpf",
+    "unregister_method",
 ]

@@ -8,22 +8,32 @@ returns an :class:`~workbench.inference.core.results.IdentificationResult`::
     wb.identify(record, model, method=wb.PF(n_particles=5000, force_proposal="prior"))
     wb.identify(record, model, method=wb.Exact())
 
-- :class:`RBPF` (the default): particles over (C, K) only, a Kalman filter per particle for
-  the response and force coefficients; exact for this model, so few particles suffice.
+- :class:`Exact` (the default, :data:`DEFAULT_METHOD`): the marginal posterior of (C, K) on
+  an adaptive grid, each node one Kalman filter run; the reference every particle filter is
+  checked against.
+- :class:`RBPF`: particles over (C, K) only, a Kalman filter per particle for the response
+  and force coefficients; exact for this model, so few particles suffice.
 - :class:`PF`: the seed study's bootstrap particle filter over the whole state, kept
   faithful to the seed (Euler discretisation, random walks of C and K).
-- :class:`Exact`: the marginal posterior of (C, K) on an adaptive grid, each node one Kalman
-  filter run; the reference every particle filter is checked against.
 
-A method name (``"rbpf"``, ``"pf"``, ``"exact"``) stands for the method with its defaults
-(:func:`as_method`).
+The registry
+------------
+Every method class is registered once under its ``name`` (:func:`register_method`, a class
+decorator). The registry is the one list of methods: a name stands for the method with its
+defaults (:func:`as_method`), the settings accept the registered names and take each
+method's defaults from its class, every command's ``--method`` lists them
+(:func:`method_names`, in the order of registration), the sensitivity studies vary over them,
+``crosscheck`` offers the ones whose class sets ``particle_filter``
+(:func:`particle_filter_names`) and the study figures draw each in its ``colour``.
+docs/guide/adding-a-method.md shows how to add one.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -39,14 +49,29 @@ from workbench.inference.core import (
     identifiability_report,
 )
 from workbench.inference.kalman import record_loglik
-from workbench.inference.methods.rbpf import REJUVENATE
+from workbench.inference.methods.pf import PF_PARTICLES
+from workbench.inference.methods.rbpf import RBPF_PARTICLES, REJUVENATE
 
-__all__ = ["METHODS", "PF", "RBPF", "Exact", "Method", "as_method"]
+__all__ = [
+    "DEFAULT_METHOD",
+    "PF",
+    "RBPF",
+    "Exact",
+    "Method",
+    "as_method",
+    "method_class",
+    "method_names",
+    "particle_filter_names",
+    "register_method",
+    "unregister_method",
+]
 
 #: Particles (a weighted subsample) used to estimate the C/K-force correlation of a filter.
 CORRELATION_DRAWS = 128
-#: Method names, in the order the command line lists them.
-METHODS = ("rbpf", "pf", "exact")
+#: The method of an identification that names none.
+DEFAULT_METHOD = "exact"
+_SNAKE = re.compile(r"^[a-z][a-z0-9_]*$")
+_M = TypeVar("_M", bound="Method")
 
 
 def _check_resampling(resampling: str, ess_threshold: float, who: str) -> None:
@@ -75,12 +100,29 @@ def _check_particles(n: int, who: str) -> int:
 class Method:
     """Base class of an identification method (subclasses set ``name`` and implement ``run``).
 
-    ``default_state_noise_fraction`` is the process noise of (u, u') the method uses when the
-    noise settings leave it unset.
+    A method is a frozen dataclass: its fields are its options, and their defaults are the
+    method's defaults wherever the method is named without options (the settings, the
+    command line). Register the class with :func:`register_method` to make its name known.
+
+    Class attributes
+    ----------------
+    name : str
+        The registered name (snake_case), used by ``method=`` and ``--method``.
+    default_state_noise_fraction : float
+        The process noise of (u, u') the method uses when the noise settings leave it unset.
+    particle_filter : bool
+        Whether the method filters the record piece by piece with particles, so that
+        ``crosscheck`` can check its per-step posterior (it then has an ``n_particles``
+        option).
+    colour : str or None
+        Matplotlib colour of the method in study figures; None takes one of the colour
+        cycle that no registered method has.
     """
 
     name: ClassVar[str] = ""
     default_state_noise_fraction: ClassVar[float] = KALMAN_STATE_FRACTION
+    particle_filter: ClassVar[bool] = False
+    colour: ClassVar[str | None] = None
 
     def run(
         self,
@@ -112,6 +154,139 @@ class Method:
     def replace(self, **changes: Any) -> Method:
         """Return a copy with some options changed."""
         return dataclasses.replace(self, **changes)
+
+
+# -- registry ----------------------------------------------------------------------------
+_REGISTRY: dict[str, type[Method]] = {}
+
+
+def _validate_method_class(cls: type[Method]) -> None:
+    where = f"method class {cls.__name__}"
+    if not isinstance(cls.name, str) or not _SNAKE.match(cls.name):
+        raise UsageError(
+            f"{where}: class attribute 'name' must be a snake_case string, got {cls.name!r}; "
+            'set for example name: ClassVar[str] = "my_method"'
+        )
+    if not dataclasses.is_dataclass(cls) or "__dataclass_fields__" not in vars(cls):
+        raise UsageError(
+            f"{where}: decorate the class with @dataclass(frozen=True) (under @register_method) "
+            "so that its options are fields with defaults"
+        )
+    missing = [f.name for f in dataclasses.fields(cls) if _has_no_default(f)]
+    if missing:
+        raise UsageError(
+            f"{where}: every option needs a default, so that the method runs when it is "
+            f"named without options; give one to {', '.join(missing)}"
+        )
+    if cls.run is Method.run:
+        raise UsageError(
+            f"{where}: implement run(problem, *, seed, progress, common) returning an "
+            "IdentificationResult"
+        )
+    if cls.particle_filter and "n_particles" not in {f.name for f in dataclasses.fields(cls)}:
+        raise UsageError(
+            f"{where}: a particle filter (particle_filter = True) needs an 'n_particles' option"
+        )
+
+
+def _has_no_default(f: dataclasses.Field[Any]) -> bool:
+    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+
+
+def register_method(cls: type[_M]) -> type[_M]:
+    """Class decorator: make an identification method available by its ``name``.
+
+    A registered method is accepted by :func:`as_method` and the settings (``method =
+    "NAME"``), listed by every command's ``--method`` (in the order of registration), varied
+    by the sensitivity studies and drawn in the study figures; a particle filter
+    (``particle_filter = True``) is also offered by ``crosscheck``. Re-registering the same
+    class (same module and qualified name, e.g. after a reload) replaces the entry in its
+    place; a different class with a taken name is a ``UsageError``.
+
+    Parameters
+    ----------
+    cls : type
+        A frozen dataclass subclass of :class:`Method` that sets ``name`` and implements
+        ``run``, every option with a default.
+
+    Returns
+    -------
+    type
+        ``cls`` itself, so it works as a decorator.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, Method)):
+        raise UsageError(
+            f"register_method: {cls!r} is not a subclass of Method; derive your method from "
+            "workbench.inference.methods.Method"
+        )
+    _validate_method_class(cls)
+    existing = _REGISTRY.get(cls.name)
+    if existing is not None and (existing.__module__, existing.__qualname__) != (
+        cls.__module__,
+        cls.__qualname__,
+    ):
+        raise UsageError(
+            f"register_method: method name '{cls.name}' is already registered by "
+            f"{existing.__module__}.{existing.__qualname__}; choose another name"
+        )
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def unregister_method(name: str) -> None:
+    """Remove a method from the registry (for tests and interactive sessions).
+
+    Parameters
+    ----------
+    name : str
+        Registered method name; unknown names are a ``UsageError``.
+    """
+    method_class(name)
+    del _REGISTRY[name]
+
+
+def method_names() -> tuple[str, ...]:
+    """Names of the registered methods, in the order of registration.
+
+    Returns
+    -------
+    tuple of str
+        ``("rbpf", "pf", "exact")`` and any added after them.
+    """
+    return tuple(_REGISTRY)
+
+
+def particle_filter_names() -> tuple[str, ...]:
+    """Names of the registered particle filters (``particle_filter = True``), in order.
+
+    Returns
+    -------
+    tuple of str
+    """
+    return tuple(name for name, cls in _REGISTRY.items() if cls.particle_filter)
+
+
+def method_class(name: str) -> type[Method]:
+    """Return the registered class of a method name.
+
+    Parameters
+    ----------
+    name : str
+        Method name, e.g. ``"rbpf"``.
+
+    Returns
+    -------
+    type
+        The :class:`Method` subclass.
+    """
+    try:
+        return _REGISTRY[name]
+    except (KeyError, TypeError):
+        raise UsageError(
+            f"method {name!r} is not known; choose one of {', '.join(method_names())} or "
+            "register your own with @register_method",
+            parameter="method",
+        ) from None
 
 
 def _filter_result(
@@ -179,9 +354,13 @@ def _filter_identifiability(
 
 @dataclass(frozen=True)
 class _ParticleFilter(Method):
-    """What the two particle filters share: particles, resampling and the result."""
+    """What the two particle filters share: particles, resampling and the result.
 
-    n_particles: int = 256
+    Each filter sets its own ``n_particles`` default (that of its filter function).
+    """
+
+    particle_filter: ClassVar[bool] = True
+    n_particles: int = 0
     resampling: str = "systematic"
     ess_threshold: float = 0.5
 
@@ -208,14 +387,15 @@ class _ParticleFilter(Method):
         return _filter_result(problem, out, seed, common or {})
 
 
+@register_method
 @dataclass(frozen=True)
 class RBPF(_ParticleFilter):
-    """Rao-Blackwellised particle filter over (C, K) (the default method).
+    """Rao-Blackwellised particle filter over (C, K).
 
     Parameters
     ----------
     n_particles : int, default 256
-        Particles over (C, K).
+        Particles over (C, K) (:data:`~workbench.inference.methods.rbpf.RBPF_PARTICLES`).
     resampling : str, default "systematic"
         Resampling scheme (see :mod:`workbench.inference.core.resampling`).
     ess_threshold : float, default 0.5
@@ -230,6 +410,8 @@ class RBPF(_ParticleFilter):
     """
 
     name: ClassVar[str] = "rbpf"
+    colour: ClassVar[str | None] = "C1"
+    n_particles: int = RBPF_PARTICLES
     rejuvenate: str = "auto"
 
     def __post_init__(self) -> None:
@@ -257,6 +439,7 @@ class RBPF(_ParticleFilter):
         )
 
 
+@register_method
 @dataclass(frozen=True)
 class PF(_ParticleFilter):
     """The seed study's bootstrap particle filter over the whole state.
@@ -264,7 +447,8 @@ class PF(_ParticleFilter):
     Parameters
     ----------
     n_particles : int, default 4000
-        Particles over (u, u', C, K, force coefficients).
+        Particles over (u, u', C, K, force coefficients)
+        (:data:`~workbench.inference.methods.pf.PF_PARTICLES`).
     resampling : str, default "systematic"
         Resampling scheme.
     ess_threshold : float, default 0.5
@@ -277,7 +461,8 @@ class PF(_ParticleFilter):
 
     name: ClassVar[str] = "pf"
     default_state_noise_fraction: ClassVar[float] = SEED_STATE_FRACTION
-    n_particles: int = 4000
+    colour: ClassVar[str | None] = "C0"
+    n_particles: int = PF_PARTICLES
     force_proposal: str = "regression"
 
     def __post_init__(self) -> None:
@@ -305,9 +490,10 @@ class PF(_ParticleFilter):
         )
 
 
+@register_method
 @dataclass(frozen=True)
 class Exact(Method):
-    """The exact marginal posterior of (C, K) on an adaptive grid.
+    """The exact marginal posterior of (C, K) on an adaptive grid (the default method).
 
     Parameters
     ----------
@@ -316,6 +502,7 @@ class Exact(Method):
     """
 
     name: ClassVar[str] = "exact"
+    colour: ClassVar[str | None] = "C2"
     n_draws: int = 4000
 
     def __post_init__(self) -> None:
@@ -367,18 +554,17 @@ def exact_result(
     )
 
 
-_BY_NAME: dict[str, type[Method]] = {"rbpf": RBPF, "pf": PF, "exact": Exact}
-
-
 def as_method(method: Method | str | None, **options: Any) -> Method:
     """Return a method object from an object, a name or None (the default, Exact).
 
     Parameters
     ----------
     method : Method, str or None
-        ``"rbpf"``, ``"pf"``, ``"exact"`` or a method object.
+        A registered name (:func:`method_names`: ``"rbpf"``, ``"pf"``, ``"exact"``, ...) or
+        a method object.
     **options
-        Options for a method given by name (``n_particles=...``); None values are ignored.
+        Options for a method given by name (``n_particles=...``); None values and options the
+        method does not have are ignored.
 
     Returns
     -------
@@ -387,13 +573,13 @@ def as_method(method: Method | str | None, **options: Any) -> Method:
     opts = {k: v for k, v in options.items() if v is not None}
     if isinstance(method, Method):
         return method.replace(**opts) if opts else method
-    name = "exact" if method is None else method
+    name = DEFAULT_METHOD if method is None else method
     try:
-        cls = _BY_NAME[name]
+        cls = _REGISTRY[name]
     except (KeyError, TypeError):
         raise UsageError(
-            f"method {method!r} is not known; choose one of {', '.join(METHODS)} or pass "
-            "a method object such as RBPF(n_particles=256)"
+            f"method {method!r} is not known; choose one of {', '.join(method_names())} or "
+            f"pass a method object such as RBPF(n_particles={RBPF_PARTICLES})"
         ) from None
     known = {f.name for f in dataclasses.fields(cls)}
     return cls(**{k: v for k, v in opts.items() if k in known})

@@ -160,9 +160,12 @@ from workbench.inference.methods._pf_kernel import (
     transition,
 )
 
-__all__ = ["DEFAULT_JITTER_SHRINKAGE", "FORCE_PROPOSALS", "run_pf"]
+__all__ = ["DEFAULT_JITTER_SHRINKAGE", "FORCE_PROPOSALS", "PF_PARTICLES", "run_pf"]
 
 FloatArray = NDArray[np.float64]
+
+#: Particles when none are given: the default of :func:`run_pf` and of the ``PF`` method.
+PF_PARTICLES = 4000
 
 #: Distributions from which the force coefficients are regenerated at a piece start.
 FORCE_PROPOSALS: tuple[str, ...] = ("prior", "regression")
@@ -367,7 +370,7 @@ def _count_unique(values: FloatArray) -> int:
 def run_pf(
     problem: IdentificationProblem,
     *,
-    n_particles: int = 2000,
+    n_particles: int = PF_PARTICLES,
     seed: int | np.random.Generator | None = None,
     resampling: str = "systematic",
     ess_threshold: float = 0.5,
@@ -383,7 +386,7 @@ def run_pf(
     ----------
     problem : IdentificationProblem
         Observations, force basis, pieces, noise and priors.
-    n_particles : int, default 2000
+    n_particles : int, default :data:`PF_PARTICLES` (4000)
         Number of particles P.
     seed : int or numpy.random.Generator, optional
         Seed of the random generator (the only source of randomness); the same seed gives an

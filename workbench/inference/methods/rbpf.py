@@ -1,4 +1,4 @@
-"""Rao-Blackwellised particle filter over (C, K) (method ``"rbpf"``, the default method).
+"""Rao-Blackwellised particle filter over (C, K) (method ``"rbpf"``).
 
 Why this module is long: it is one filter whose parts share one particle cloud -- the
 cloud with its per-particle Kalman statistics, the batched piece filter, the tempered
@@ -128,11 +128,13 @@ from workbench.inference.kalman import (
     sample_dynamics,
 )
 
-__all__ = ["REJUVENATE", "liu_west_move", "run_rbpf"]
+__all__ = ["RBPF_PARTICLES", "REJUVENATE", "liu_west_move", "run_rbpf"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+#: Particles when none are given: the default of :func:`run_rbpf` and of the ``RBPF`` method.
+RBPF_PARTICLES = 256
 #: When the particles get exact moves: chosen by the record ("auto"), on surprise, or always.
 REJUVENATE = ("auto", "surprise", "always")
 
@@ -229,7 +231,7 @@ class _Pieces:
 def run_rbpf(
     problem: IdentificationProblem,
     *,
-    n_particles: int = 256,
+    n_particles: int = RBPF_PARTICLES,
     seed: int | np.random.Generator | None = None,
     resampling: str = "systematic",
     ess_threshold: float = 0.5,
@@ -248,7 +250,7 @@ def run_rbpf(
     ----------
     problem : IdentificationProblem
         The identification problem; (C, K) start uniform in ``problem.prior``.
-    n_particles : int, default 256
+    n_particles : int, default :data:`RBPF_PARTICLES` (256)
         Number of (C, K) particles P.
     seed : int, Generator or None
         Randomness of the prior draws, resampling and moves (the only randomness).

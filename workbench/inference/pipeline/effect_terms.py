@@ -31,7 +31,7 @@ methods handle that (:func:`with_effects`):
    marginal likelihood with ``beta`` integrated out (:func:`conditional_effects`);
 2. *pilot*: the marginal likelihood on successively zoomed 9 x 9 grids of (C, K) (until the
    spacing resolves the peak) gives a mixture posterior of ``beta``;
-3. the chosen method (rbpf, pf or exact) runs on the problem whose basis carries the columns
+3. the chosen method (exact, rbpf, pf, ...) runs on the problem whose basis carries the columns
    ``-R`` with the pilot's posterior as their per-piece prior, so the filters propagate the
    coefficients' uncertainty but cannot let one step absorb the effect;
 4. *report*: the posterior of ``beta`` is the mixture of the conditional posteriors over

@@ -4,8 +4,8 @@ An identification is set by four parts, each an object of its own:
 
 - the **model** (:class:`~workbench.models.smd.SMDModel`): force harmonics, time basis,
   pieces, pacing and effects;
-- the **method** (:mod:`workbench.inference.methods.base`): ``RBPF``, ``PF`` or ``Exact`` with
-  their particles, resampling and proposals;
+- the **method** (:mod:`workbench.inference.methods.base`): ``Exact``, ``RBPF``, ``PF`` or any
+  other registered method, with its own options (particles, resampling, proposals);
 - the **noise and priors** (:class:`NoiseSettings`): observation and process noise, the
   (C, K) prior box and the channels the likelihood observes;
 - the **preprocessing** (:class:`Preprocessing`): the high-pass filter and the mass rescale;
@@ -68,23 +68,20 @@ from pathlib import Path
 from typing import Any
 
 from workbench.errors import InputError, UsageError, check_seed
-from workbench.inference.methods import METHODS, PF, RBPF, Exact, Method, as_method
+from workbench.inference.methods import DEFAULT_METHOD, PF, Method, as_method, method_names
 from workbench.inference.pipeline.noise import parse_noise_setting
 from workbench.models.effects import Effect, parse_effect_specs
+from workbench.models.force import HARMONICS_RANGE
 from workbench.models.smd import SURFACE_MODELS, SMDModel
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
 
 __all__ = [
-    "DEFAULT_PARTICLES",
     "FLAT_KEYS",
-    "METHODS",
     "IdentifySettings",
     "NoiseSettings",
     "Preprocessing",
 ]
 
-#: Particles per method when not given: the RBPF needs few, the seed's filter many.
-DEFAULT_PARTICLES = {"rbpf": RBPF.n_particles, "pf": PF.n_particles, "exact": 0}
 #: Keys of the flat form (``--config`` file, ``settings`` in the JSON output), in order.
 FLAT_KEYS = (
     "method",
@@ -243,9 +240,10 @@ def effect_spec(effect: Effect) -> str:
 
 def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
     harmonics = int(flat["harmonics"])
-    if harmonics < 1 or harmonics > 40:
+    low, high = HARMONICS_RANGE
+    if harmonics < low or harmonics > high:
         raise UsageError(
-            f"'harmonics' must be between 1 and 40, got {flat['harmonics']}",
+            f"'harmonics' must be between {low} and {high}, got {flat['harmonics']}",
             parameter="harmonics",
         )
     if flat["time_basis"] not in ("step_phase", "absolute"):
@@ -275,9 +273,9 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
 
 def _method_from_flat(flat: dict[str, Any]) -> Method:
     name = flat["method"]
-    if name not in METHODS:
+    if name not in method_names():
         raise UsageError(
-            f"'method' {name!r} is not known; choose one of {', '.join(METHODS)}",
+            f"'method' {name!r} is not known; choose one of {', '.join(method_names())}",
             parameter="method",
         )
     particles = flat["particles"]
@@ -302,29 +300,6 @@ def _method_from_flat(flat: dict[str, Any]) -> Method:
     )
 
 
-_FLAT_DEFAULTS: dict[str, Any] = {
-    "method": "exact",
-    "particles": None,
-    "harmonics": 10,
-    "pacing_hz": None,
-    "highpass_hz": DEFAULT_HIGHPASS_HZ,
-    "obs_noise": "auto",
-    "state_noise_fraction": None,
-    "time_basis": "step_phase",
-    "pieces": "steps",
-    "prior": "modal",
-    "resampling": "systematic",
-    "ess_threshold": 0.5,
-    "seed": 0,
-    "force_check": True,
-    "observe": "all",
-    "force_proposal": "regression",
-    "effects": (),
-    "rescale_to_mass": False,
-    "surface": "coupled",
-}
-
-
 @dataclass(frozen=True)
 class IdentifySettings:
     """How to identify one record: model, method, noise and priors, preprocessing, seed.
@@ -334,7 +309,7 @@ class IdentifySettings:
     model : SMDModel, optional
         The pedestrian model (its mass comes from the record when unset).
     method : Method, optional
-        ``Exact()`` (default), ``RBPF()`` or ``PF()``.
+        ``Exact()`` (default), ``RBPF()``, ``PF()`` or another registered method.
     noise : NoiseSettings, optional
         Noise model and priors.
     preprocessing : Preprocessing, optional
@@ -355,7 +330,7 @@ class IdentifySettings:
     """
 
     model: SMDModel = dataclasses.field(default_factory=SMDModel)
-    method: Method = dataclasses.field(default_factory=Exact)
+    method: Method = dataclasses.field(default_factory=lambda: as_method(DEFAULT_METHOD))
     noise: NoiseSettings = dataclasses.field(default_factory=NoiseSettings)
     preprocessing: Preprocessing = dataclasses.field(default_factory=Preprocessing)
     seed: int = 0
@@ -583,3 +558,39 @@ class IdentifySettings:
                 raise
             # The value came from the file: name the file and its key, not a flag.
             raise InputError(path, f"key {err.parameter!r}", str(err), "correct it") from None
+
+
+def _field_defaults(cls: type) -> dict[str, Any]:
+    return {
+        f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING
+    }
+
+
+_MODEL, _NOISE, _PREPROCESSING, _SETTINGS = (
+    _field_defaults(part) for part in (SMDModel, NoiseSettings, Preprocessing, IdentifySettings)
+)
+#: The method options' defaults are the particle filters' (``PF`` takes all of them).
+_FILTER = _field_defaults(PF)
+#: The defaults of the flat keys: each is the default of the part that holds it, so that it
+#: is stated once, on that part.
+_FLAT_DEFAULTS: dict[str, Any] = {
+    "method": DEFAULT_METHOD,
+    "particles": None,
+    "harmonics": _MODEL["harmonics"],
+    "pacing_hz": _MODEL["pacing_hz"],
+    "highpass_hz": _PREPROCESSING["highpass_hz"],
+    "obs_noise": _NOISE["obs_noise"],
+    "state_noise_fraction": _NOISE["state_noise_fraction"],
+    "time_basis": _MODEL["time_basis"],
+    "pieces": _MODEL["pieces"],
+    "prior": _NOISE["prior"],
+    "resampling": _FILTER["resampling"],
+    "ess_threshold": _FILTER["ess_threshold"],
+    "seed": _SETTINGS["seed"],
+    "force_check": _SETTINGS["force_check"],
+    "observe": _NOISE["observe"],
+    "force_proposal": _FILTER["force_proposal"],
+    "effects": (),
+    "rescale_to_mass": _PREPROCESSING["rescale_to_mass"],
+    "surface": _MODEL["surface"],
+}
