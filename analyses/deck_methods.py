@@ -1,10 +1,12 @@
 """Do the methods agree on a deck record? Exact, RBPF and the seed-faithful PF, joint model.
 
 Run: ``python analyses/deck_methods.py`` (about a minute), and
-``python analyses/deck_methods.py --crosscheck [surprise]`` (about eight minutes): the
-cross-check of ``deck_walk(2, duration_s=30)`` (a realistic 30 s walk on a 0.35 m/s^2
-narrow-band deck), which checks the joint time-history RBPF step by step against emcee,
-with the RBPF's default rejuvenation or (``surprise``) exact moves only on surprise.
+``python analyses/deck_methods.py --crosscheck [surprise] [--sample-rate HZ]`` (about
+eight minutes at the record's own 500 Hz): the cross-check of ``deck_walk(2,
+duration_s=30)`` (a realistic 30 s walk on a 0.35 m/s^2 narrow-band deck), which checks the
+joint time-history RBPF step by step against emcee, with the RBPF's default rejuvenation or
+(``surprise``) exact moves only on surprise. ``--sample-rate 100`` simulates the same walk
+and deck at 100 Hz, the record of ``tests/test_deck_crosscheck.py``.
 
 A 70 kg walker (f_n 2.8 Hz, zeta 0.30) at 1.8 Hz without step-to-step variability, 12 s at
 100 Hz, 10 N GRF noise, on a deck moving at 3.1 Hz with 0.1 and 0.5 m/s^2 peak
@@ -20,6 +22,8 @@ figures are quoted in docs/validation/deck.md.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 import workbench as wb
@@ -28,16 +32,24 @@ from workbench.synth.simulate import simulate_walking
 PARAMETERS = ("natural_frequency_hz", "damping_ratio")
 
 
-def crosscheck(rejuvenate: str) -> None:
+def crosscheck(rejuvenate: str, sample_rate_hz: float | None = None) -> None:
     from workbench.inference.crosscheck.check import crosscheck as check_steps
     from workbench.synth import deck_walk
 
-    record = deck_walk(2, duration_s=30.0).record
+    rate = {} if sample_rate_hz is None else {"sample_rate_hz": sample_rate_hz}
+    record = deck_walk(2, duration_s=30.0, **rate).record
     method = wb.RBPF(256, rejuvenate=rejuvenate)
+    t0 = time.process_time()
     ident = wb.identify(record, wb.SMDModel(surface="joint"), method=method, force_check=False)
+    t1 = time.process_time()
     result = check_steps(ident.problem, ident, seed=0, keep_inference_data=False)
+    t2 = time.process_time()
     chosen = ident.extra["filter_settings"]["rejuvenate"]
     print(f"joint model, rbpf rejuvenate={rejuvenate} ({chosen}): agreement {result.agreement:.2f}")
+    print(
+        f"{ident.problem.n_samples} samples; CPU s: identification {t1 - t0:.1f}, "
+        f"cross-check {t2 - t1:.1f}"
+    )
     print(result.verdict())
     steps = [s for s in result.steps if s.converged]
     z = np.array([np.max(np.abs(s.z)) for s in steps])
@@ -53,7 +65,9 @@ def main() -> None:
     import sys
 
     if "--crosscheck" in sys.argv[1:]:
-        crosscheck("surprise" if "surprise" in sys.argv[1:] else "auto")
+        args = sys.argv[1:]
+        rate = float(args[args.index("--sample-rate") + 1]) if "--sample-rate" in args else None
+        crosscheck("surprise" if "surprise" in args else "auto", rate)
         return
     model = wb.SMDModel(
         harmonics=3, pieces="whole", time_basis="absolute", pacing_hz=1.8, surface="joint"

@@ -1,9 +1,8 @@
 """Study-scale speed: one record with every check, a mixed batch, a sensitivity study.
 
-Why this module is long: the issue's must-show figures are one command each, and each part
-needs its own child process (pinned cores, a fresh interpreter for every worker count and
-for the previous revision), its table and its JSON; splitting them into modules would only
-scatter one measurement protocol.
+The issue's must-show figures are one command each, and one script: each part needs its
+own child process (pinned cores, a fresh interpreter for every worker count and for the
+previous revision), its table and its JSON, and all parts share one measurement protocol.
 
 Usage::
 

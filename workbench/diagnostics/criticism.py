@@ -1,5 +1,3 @@
-# Why this module is long: a long module docstring (the method of model criticism) and the ranking;
-# the data, the engine and the results are in their own modules.
 """Model criticism: held-out prediction of GRF, effect ranking and the scoreboard.
 
 Why this level

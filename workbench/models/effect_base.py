@@ -1,6 +1,7 @@
-# Why this module is long: the Effect base class, Effects, the registry and the spec parser are one
-# mechanism; split, the base class and the registry would import each other.
 """The effect mechanism: the :class:`Effect` base class, collections, registry and specs.
+
+They are one mechanism in one module: apart, the base class and the registry would import
+each other.
 
 How to write an effect is in the module docstring of :mod:`workbench.models.effects`, which
 also holds the catalogue and re-exports everything here; import from there.

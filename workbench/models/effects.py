@@ -1,5 +1,3 @@
-# Why this module is long: the extension point's documentation and the seven catalogue effects,
-# each with its term, criticism columns, statistic and reason in one class.
 """Effects: extra physical terms in the SMD force balance, and how to write your own.
 
 The base model is ``M u'' + C u' + K u = F_bio``. An *effect* adds one term to the left-hand

@@ -1,16 +1,14 @@
 """Forward simulation of SMD pedestrians: synthetic GRF records with a known truth.
 
-Why this module is long: it holds the two entry points and the ready-made walks built on
-them, and neither can leave. :func:`simulate_walking` alone is about 325 lines (its
-parameters are the walk's description, documented one by one, then the argument checks,
-the step-to-step variability and the truth, all of which must stay in one reproducible
-order of random draws), :func:`simulate_smd` about 130. The ready-made walks
-(:func:`seed_numerical_example`, :func:`varied_walk`, about 200 lines) call the entry
-points and are imported from this module, so a module of their own would import back the
-module that re-exports them (an import cycle); walks on vibrating decks and the records of
-the detection studies, which nothing here re-exports, live in :mod:`workbench.synth.decks`
-and :mod:`workbench.synth.hidden`. Both
-entry points choose their integration scheme through ``_integrate`` here, which calls
+This module holds the two entry points and the ready-made walks built on them.
+:func:`simulate_walking` documents its parameters (the walk's description) one by one, then
+checks them, draws the step-to-step variability and records the truth, all in one
+reproducible order of random draws. The ready-made walks (:func:`seed_numerical_example`,
+:func:`varied_walk`) call the entry points and are imported from this module, so a module of
+their own would import back the module that re-exports them (an import cycle); walks on
+vibrating decks and the records of the detection studies, which nothing here re-exports,
+live in :mod:`workbench.synth.decks` and :mod:`workbench.synth.hidden`. Both entry points
+choose their integration scheme through ``_integrate`` here, which calls
 ``_integrate_fine`` by this module's name so that replacing it (as the tests do) selects
 the ODE solver. Everything else -- argument checks, ground motion, the two integration
 schemes, the step-phase force, the default walker and the truth bookkeeping -- lives in its

@@ -27,11 +27,20 @@ matrix per sample. :mod:`workbench.inference.kalman.filter` uses this kernel whe
 allows it (no process noise, no known surface load, a basis of harmonics of one frequency
 per piece: the identification defaults) and the Kalman loop otherwise; the two agree to
 rounding (``tests/test_kalman.py``).
+
+:func:`filter_record` takes the model's constants in one bundle (:class:`PieceModel`) and the
+record's statistics in another
+(:class:`~workbench.inference.kalman.harmonic_statistics.HarmonicStatistics`), typed
+``NamedTuple`` classes that numba compiles as records of their fields. Against the revision
+that passed its 19 arguments one by one the results are bit-identical, and compile,
+cache-load and run times stayed within 0.88-1.01 of it, the noise of a shared machine
+(``analyses/benchmarks/kernel_arguments.py``).
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -44,11 +53,23 @@ from workbench.inference.kalman._triangular_kernel import (
     inverse_block,
     state_covariance,
 )
+from workbench.inference.kalman.harmonic_statistics import HarmonicStatistics
 
-__all__ = ["filter_record"]
+__all__ = ["PieceModel", "filter_record"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy", boundscheck=False)
+
+
+class PieceModel(NamedTuple):
+    """The model's constants for a batch of (C, K) pairs, fixed through a record."""
+
+    pair_constants: np.ndarray  # (B, PAIR_CONSTANTS) per pair (_kalman_kernel.PAIR_CONSTANTS)
+    end_share: bool  # first-order hold (Gamma1 != 0)
+    obs_var: np.ndarray  # (3,) observation noise variances
+    mass: float  # body mass [kg]
+    force_mean: np.ndarray  # (m,) the force prior's mean [N]
+    force_sd: np.ndarray  # (m,) the force prior's sd [N]
 
 
 @_jit
@@ -170,31 +191,24 @@ def filter_record(
     piece_starts: np.ndarray,
     first: int,
     stop: int,
-    prm: np.ndarray,
-    end_share: bool,
-    obs_var: np.ndarray,
-    mass: float,
+    model: PieceModel,
     x_mean: np.ndarray,
     x_cov: np.ndarray,
     want_theta_cov: bool,
-    omega: np.ndarray,
-    basis_gram: np.ndarray,
-    basis_y: np.ndarray,
-    y_sq: np.ndarray,
-    row_first: np.ndarray,
-    row_last: np.ndarray,
-    prior_mean: np.ndarray,
-    prior_sd: np.ndarray,
+    stats: HarmonicStatistics,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Filter pieces ``first .. stop - 1`` for every pair from harmonic statistics.
 
     Arguments and returns as :func:`workbench.inference.kalman._kalman_kernel.filter_record`
-    (without process noise), plus the record's statistics, per piece: ``omega`` (rad per
-    sample), ``basis_gram`` (P, m, m) ``S^T S``, ``basis_y`` (P, 3, m) ``S^T y`` per
-    channel, ``y_sq`` (P, 3) ``y^T y`` per channel, ``row_first`` and ``row_last`` (P, m)
-    the basis rows of the piece's first and last samples; ``prior_mean`` and ``prior_sd``
-    (m,) the force prior.
+    (without process noise), with its model constants ``prm``, ``end_share``, ``obs_var``
+    and ``mass`` and the force prior's mean and sd (m,) in ``model``, and the record's
+    statistics per piece in ``stats``: ``omega`` (rad per sample), ``basis_gram`` (P, m, m)
+    ``S^T S``, ``basis_y`` (P, 3, m) ``S^T y`` per channel, ``y_sq`` (P, 3) ``y^T y`` per
+    channel, ``row_first`` and ``row_last`` (P, m) the basis rows of the piece's first and
+    last samples.
     """
+    prm, end_share, obs_var, mass, prior_mean, prior_sd = model
+    omega, basis_gram, basis_y, y_sq, row_first, row_last = stats
     n_total = y.shape[0]
     m = prior_mean.shape[0]
     n_h = (m - 1) // 2

@@ -124,21 +124,16 @@ def run_compiled(
     if HARMONIC_KERNEL and problem.surface_force_n is None and not np.any(problem.noise.state_sd):
         stats = harmonic_statistics(problem)
     if stats is not None:
-        out = _harmonic.filter_record(
-            problem.y,
-            problem.piece_starts,
-            first,
-            stop,
+        model = _harmonic.PieceModel(
             _pair_constants(dyn),
             dyn.has_end_share,
             np.square(problem.noise.obs_sd),
             problem.mass_kg,
-            xm,
-            xc,
-            want_theta_cov,
-            *stats,
             np.ascontiguousarray(fp.mean_n, dtype=np.float64),
             np.ascontiguousarray(fp.sd_n, dtype=np.float64),
+        )
+        out = _harmonic.filter_record(
+            problem.y, problem.piece_starts, first, stop, model, xm, xc, want_theta_cov, stats
         )
     else:
         out = _kernel.filter_record(

@@ -1,13 +1,11 @@
 """Seed-faithful bootstrap particle filter (method ``"pf"``), seed eqs. 15-23.
 
-Why this module is long: about 130 of its lines are this docstring, the method's
-specification (seed equations, pieces, initialisation, resampling, likelihood estimate,
-jitter, regeneration of theta, diagnostics), which belongs with the code it specifies. The
-compiled per-sample loop already lives in :mod:`workbench.inference.methods._pf_kernel`; what
-remains -- the driver's piece loop and buffers, the regression proposal and the Liu-West
-jitter it calls between kernel blocks -- shares one state layout (a ``(4, P)`` moving state
-and a ``(P, m)`` theta table) and one order of random draws, which fixes a seed's result,
-so cutting it apart would spread one filter's bookkeeping over several modules.
+This docstring is the method's specification (seed equations, pieces, initialisation,
+resampling, likelihood estimate, jitter, regeneration of theta, diagnostics). The compiled
+per-sample loop lives in :mod:`workbench.inference.methods._pf_kernel`; the driver's piece
+loop and buffers, the regression proposal and the Liu-West jitter it calls between kernel
+blocks stay here together: they share one state layout (a ``(4, P)`` moving state and a
+``(P, m)`` theta table) and one order of random draws, which fixes a seed's result.
 
 Every particle carries the seed's full state (eq. 15)
 
@@ -155,6 +153,11 @@ from workbench.inference.core import (
 from workbench.inference.methods._pf_kernel import (
     STATUS_COLLAPSED,
     STATUS_RESAMPLE,
+    Cloud,
+    Correction,
+    FilterConstants,
+    Scratch,
+    Traces,
     advance,
     fill_standard_normal,
     transition,
@@ -598,25 +601,12 @@ def run_pf(
         unique_tr[k] = counters[1:]
         return shrinkage is not None
 
-    kernel_args = (
-        rng,
+    # The kernel's buffers by role (the bundles hold the arrays above, not copies).
+    cloud = Cloud(state, acc, lw, w, pointer, origin, counters)
+    proposal_correction = Correction(regression is not None, correction, corr_now, corr_exp)
+    scratch = Scratch(idx_scratch, work, int_scratch, w_aux)
+    constants = FilterConstants(
         move_sd,
-        pointer,
-        origin,
-        state,
-        acc,
-        lw,
-        w,
-        correction,
-        regression is not None,
-        corr_now,
-        corr_exp,
-        w_aux,
-        idx_scratch,
-        work,
-        int_scratch,
-        resample_here,
-        is_end,
         half_prec_sd,
         inv_mass,
         dt,
@@ -625,16 +615,10 @@ def run_pf(
         n_samples,
         random_walk,
         fixed is not None,
-        counters,
-        mean_tr,
-        sd_tr,
-        ess_tr,
-        incr_tr,
-        pred_tr,
-        distinct_tr,
-        unique_tr,
-        resampled_tr,
+        resample_here,
+        is_end,
     )
+    traces = Traces(mean_tr, sd_tr, ess_tr, incr_tr, pred_tr, distinct_tr, unique_tr, resampled_tr)
 
     # Pieces run in blocks of samples that share one force matrix; the compiled kernel
     # returns to Python at piece starts, block ends and resamplings it does not do itself.
@@ -656,7 +640,20 @@ def run_pf(
                 force = _piece_force(basis, table, known_force, b0, b1)
                 k = b0
                 while k < b1:
-                    k_last, status = advance(k, b1, skip, b0, y, force, *kernel_args)
+                    k_last, status = advance(
+                        k,
+                        b1,
+                        skip,
+                        b0,
+                        y,
+                        force,
+                        rng,
+                        cloud,
+                        proposal_correction,
+                        scratch,
+                        constants,
+                        traces,
+                    )
                     if status == STATUS_COLLAPSED:
                         raise UsageError(
                             f"{problem.source}: the particle filter collapsed at t = "

@@ -1,10 +1,9 @@
 """Rao-Blackwellised particle filter over (C, K) (method ``"rbpf"``).
 
-Why this module is long: it is one filter whose parts share one particle cloud -- the
-cloud with its per-particle Kalman statistics, the batched piece filter, the tempered
-assimilation of a piece, the moves after resampling (Liu-West, exact Metropolis) and the
-driver all index the same rows and draw from one random stream in an order that fixes a
-seed's result -- and about 80 lines are this docstring (the method and its known limitation).
+One filter whose parts share one particle cloud: the cloud with its per-particle Kalman
+statistics, the batched piece filter, the tempered assimilation of a piece, the moves after
+resampling (Liu-West, exact Metropolis) and the driver all index the same rows and draw from
+one random stream in an order that fixes a seed's result.
 
 Given damping C and stiffness K the model of :mod:`workbench.inference.core.problem` is
 linear-Gaussian in ``(u, u', theta)``, so only (C, K) need particles: each particle carries
