@@ -36,7 +36,8 @@ def crosscheck(rejuvenate: str) -> None:
     method = wb.RBPF(256, rejuvenate=rejuvenate)
     ident = wb.identify(record, wb.SMDModel(surface="joint"), method=method, force_check=False)
     result = check_steps(ident.problem, ident, seed=0, keep_inference_data=False)
-    chosen = ident.extra["filter_settings"]["rejuvenate"]
+    assert ident.filter_results is not None  # an rbpf run
+    chosen = ident.filter_results.settings["rejuvenate"]
     print(f"joint model, rbpf rejuvenate={rejuvenate} ({chosen}): agreement {result.agreement:.2f}")
     print(result.verdict())
     steps = [s for s in result.steps if s.converged]
