@@ -12,6 +12,7 @@ import pytest
 import workbench as wb
 from workbench.cli import main
 from workbench.errors import UsageError
+from workbench.inference import pipeline as stages
 from workbench.inference.core.problem import ForcePrior, build_problem
 from workbench.inference.kalman import filter as kf
 from workbench.inference.pipeline import IdentifySettings, gather_evidence, grade_identifiability
@@ -484,26 +485,33 @@ def test_a_deck_only_at_the_gait_harmonics_leaves_c_and_k_not_identified():
         ground_acc_m_s2=lambda t: 0.3 * np.sin(2 * np.pi * 2.0 * np.asarray(t)),
         seed=0,
     )
-    res = wb.identify(sim.record, method=wb.Exact(), seed=0, force_check=False)
+
+    def deck_rule_alone(model: wb.SMDModel) -> tuple[wb.IdentificationResult, dict]:
+        # The method's own result on its route, graded by the evidence without the
+        # prior-edge and collapse findings.
+        settings = IdentifySettings(model=model, method=wb.Exact(), seed=0, force_check=False)
+        prepared = stages.prepare(sim.record, settings)
+        problem, noise = stages.set_noise(stages.compile_problem(prepared, settings), settings)
+        route = stages.choose_route(problem, settings)
+        res = stages.run_route(problem, route, settings, prepared=prepared, noise=noise)
+        evidence = gather_evidence(res, settings)
+        assert evidence.force_check is None and evidence.force_check_skipped == CHECK_OFF
+        alone = dataclasses.replace(evidence, at_prior_bound=(), collapsed=False)
+        return res, grade_identifiability(alone)
+
+    res, report = deck_rule_alone(wb.SMDModel())
     assert res.surface.c_and_k_from == "time history"
     assert "only near the walker's gait harmonics" in res.surface.sentence
     assert res.route.deck_only_near_gait_harmonics and res.route.c_and_k_from == "time history"
     assert "only near the walker's gait harmonics" in res.route.reason
-    # The deck's rule alone: the same evidence without a prior-edge or collapse finding.
-    evidence = gather_evidence(res, IdentifySettings(force_check=False))
-    assert evidence.force_check is None and evidence.force_check_skipped == CHECK_OFF
-    assert evidence.deck_only_near_gait_harmonics and evidence.force_redrawn_every_step
-    res = res.replace(
-        identifiability=grade_identifiability(
-            dataclasses.replace(evidence, at_prior_bound=(), collapsed=False)
-        )
-    )
-    assert res.identifiability["level"] == "not identified"
-    assert not res.identifiability["identified_damping"]
-    assert not res.identifiability["identified_stiffness"]
-    assert "gait harmonics" in res.identifiability["sentence"]
+    assert report["level"] == "not identified"
+    assert not report["identified_damping"]
+    assert not report["identified_stiffness"]
+    assert "gait harmonics" in report["sentence"]
     # The same record with a force for the whole record keeps the time history's grade:
     # the rule is about a force redrawn every step.
     whole = wb.SMDModel(harmonics=3, pieces="whole", time_basis="absolute", pacing_hz=2.0)
-    res = wb.identify(sim.record, whole, method=wb.Exact(), seed=0, force_check=False)
-    assert "gait harmonics" not in res.identifiability["sentence"]
+    res, report = deck_rule_alone(whole)
+    assert res.route.deck_only_near_gait_harmonics
+    assert "gait harmonics" not in report["sentence"]
+    assert report == res.identifiability  # the method's own report, unchanged
