@@ -57,7 +57,13 @@ def _by_hand(record: wb.Record, settings: stages.IdentifySettings) -> wb.Identif
     return stages.grade(result, settings)
 
 
-@pytest.mark.parametrize("case", list(CASES))
+#: Cases that take over ten seconds (an effect's pilot fit, the joint deck's exact grid).
+SLOW = {"effect", "deck joint"}
+
+
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, marks=[pytest.mark.slow] if c in SLOW else []) for c in CASES]
+)
 def test_the_stages_by_hand_give_what_identify_gives(case: str) -> None:
     name, seconds, model, method = CASES[case]
     record = wb.datasets.load(name).slice(0, seconds)
