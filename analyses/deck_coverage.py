@@ -76,7 +76,7 @@ def one(job: tuple[int, str]) -> dict[str, Any]:
         "zeta_lo": ci["damping_ratio"][0],
         "zeta_hi": ci["damping_ratio"][1],
         "level": res.identifiability.get("level"),
-        "c_and_k_from": res.extra.get("surface", {}).get("c_and_k_from", ""),
+        "c_and_k_from": (res.surface.c_and_k_from or "") if res.surface is not None else "",
     }
 
 

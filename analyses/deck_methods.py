@@ -44,7 +44,8 @@ def crosscheck(rejuvenate: str, sample_rate_hz: float | None = None) -> None:
     t1 = time.process_time()
     result = check_steps(ident.problem, ident, seed=0, keep_inference_data=False)
     t2 = time.process_time()
-    chosen = ident.extra["filter_settings"]["rejuvenate"]
+    assert ident.filter_results is not None  # an rbpf run
+    chosen = ident.filter_results.settings["rejuvenate"]
     print(f"joint model, rbpf rejuvenate={rejuvenate} ({chosen}): agreement {result.agreement:.2f}")
     print(
         f"{ident.problem.n_samples} samples; CPU s: identification {t1 - t0:.1f}, "

@@ -184,7 +184,7 @@ def summarise(segment: Segment, result: IdentificationResult, seconds: float) ->
         },
         "noise": result.noise.get("label"),
         "warnings": result.warnings,
-        "inspection_warnings": result.extra.get("inspection_warnings", []),
+        "inspection_warnings": list(result.inspection_warnings),
         "seed_population_law": {
             key: slope * pacing + intercept for key, (slope, intercept) in SEED_LAW.items()
         },

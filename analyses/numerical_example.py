@@ -184,7 +184,8 @@ def _summarise(
 ) -> dict[str, Any]:
     """Numbers of one method's full-record result against the truth."""
     est, sd, ci = result.estimates, result.posterior_sd, result.interval()
-    exact_json = result.extra.get("exact") if method == "exact" else None
+    grid = result.grid_results
+    exact_json = grid.to_json() if method == "exact" and grid is not None else None
     if exact_json:  # the grid posterior's own moments (no Monte Carlo error of draws)
         est = {key: float(exact_json[key]) for key, _, _ in SCALARS}
         sd = {key: float(exact_json["posterior_sd"][key]) for key, _, _ in SCALARS}
@@ -221,16 +222,17 @@ def _summarise(
         out["interval_95"][key] = [float(v) for v in ci[key]]
         out["relative_error"][key] = float(est[key] / true - 1.0)
         out["error_in_sd"][key] = _finite((est[key] - true) / sd[key]) if sd[key] > 0 else None
-    diag: dict[str, Any] = {"n_particles": int(result.n_particles)}
-    if result.ess is not None and result.n_particles:
+    filtered = result.filter_results
+    diag: dict[str, Any] = {"n_particles": int(filtered.n_particles if filtered else 0)}
+    if filtered is not None and filtered.n_particles:
         diag["min_ess_fraction"] = result.min_ess_fraction
         diag["median_ess_fraction"] = result.median_ess_fraction
-        diag["final_ess_fraction"] = float(result.ess[-1] / result.n_particles)
+        diag["final_ess_fraction"] = float(filtered.ess[-1] / filtered.n_particles)
         diag["final_distinct_ancestors"] = result.final_ancestors
         diag["frozen_parameters"] = result.frozen_parameters
         diag["degenerate"] = result.degenerate
         diag["warnings"] = result.warnings
-        diag["filter_settings"] = result.extra.get("filter_settings", {})
+        diag["filter_settings"] = dict(filtered.settings)
     if exact_json:
         diag.update(
             grid=exact_json["grid"],
@@ -391,12 +393,13 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         # Time of the last sample each run used.
         ck_time = problem.time_s[np.array([*cuts, n], dtype=np.int64) - 1]
         row["trace_seconds"] = round(time.perf_counter() - t0, 2)
-        if method == "pf" and result.trace_time_s is not None and result.trace_mean is not None:
-            sd_tr = result.trace_sd if result.trace_sd is not None else 0 * result.trace_mean
+        filtered = result.filter_results
+        if method == "pf" and filtered is not None:
+            sd_tr = filtered.trace_sd
             trace = MethodTrace(
                 method,
-                result.trace_time_s,
-                result.trace_mean,
+                filtered.trace_time_s,
+                filtered.trace_mean,
                 sd_tr,
                 coefficients=np.asarray(coefs),
                 continuous=True,
@@ -409,16 +412,16 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
             idx = np.array([*cuts, n], dtype=np.int64) - 1
             if args.force_proposal == "prior":
                 row["checkpoint_runs_match_full_run"] = bool(
-                    np.allclose(np.asarray(ck_mean)[:-1], result.trace_mean[idx[:-1]], rtol=1e-9)
+                    np.allclose(np.asarray(ck_mean)[:-1], filtered.trace_mean[idx[:-1]], rtol=1e-9)
                 )
             else:
                 ck_sd_arr = np.asarray(ck_sd)[:-1]
-                gap = np.abs(np.asarray(ck_mean)[:-1] - result.trace_mean[idx[:-1]])
+                gap = np.abs(np.asarray(ck_mean)[:-1] - filtered.trace_mean[idx[:-1]])
                 row["checkpoint_runs_gap_in_sd"] = _finite(
                     np.max(gap / np.maximum(ck_sd_arr, 1e-300)) if gap.size else 0.0
                 )
             trace_for_json = MethodTrace(
-                method, ck_time, result.trace_mean[idx], sd_tr[idx], np.asarray(coefs)
+                method, ck_time, filtered.trace_mean[idx], sd_tr[idx], np.asarray(coefs)
             )
         else:
             trace = MethodTrace(

@@ -143,7 +143,8 @@ def test_results_are_statsmodels_like(result: wb.IdentificationResult) -> None:
     assert (ci["lower"] < params).all() and (params < ci["upper"]).all()
     narrow = result.conf_int(alpha=0.5)
     assert ((narrow["upper"] - narrow["lower"]) < (ci["upper"] - ci["lower"])).all()
-    effect = result.extra["effects"]["gait_asymmetry"]["a_half_n"]
+    assert result.effects is not None
+    effect = result.effects.parameters["gait_asymmetry"]["a_half_n"]
     assert params["gait_asymmetry.a_half_n"] == pytest.approx(effect["mean"])
     fitted = result.fitted_model
     assert fitted.stiffness_n_per_m == pytest.approx(params["stiffness_n_per_m"])
@@ -263,9 +264,7 @@ def test_one_piece_models_keep_the_inspection_where_the_record_has_footfalls(
     heavy_force = walk.replace(grf_n=1.12 * walk.grf_n)
     whole = wb.SMDModel(harmonics=4, pieces="whole", pacing_hz=1.8)
     res = wb.identify(heavy_force, whole, method=wb.RBPF(n_particles=16), force_check=False)
-    assert any(
-        "static balance" in w or "body weight" in w for w in res.extra["inspection_warnings"]
-    )
+    assert any("static balance" in w or "body weight" in w for w in res.inspection_warnings)
     from workbench.synth.simulate import seed_numerical_example
 
     bench = seed_numerical_example(duration_s=3.0).record
@@ -277,4 +276,4 @@ def test_one_piece_models_keep_the_inspection_where_the_record_has_footfalls(
         preprocessing=wb.Preprocessing(highpass_hz=0.0),
         force_check=False,
     )
-    assert any("one piece at the stated pacing" in w for w in res.extra["inspection_warnings"])
+    assert any("one piece at the stated pacing" in w for w in res.inspection_warnings)

@@ -34,7 +34,8 @@ def test_the_joint_filter_agrees_with_mcmc_on_every_step_of_a_deck_record():
     ident = wb.identify(
         record, wb.SMDModel(surface="joint"), method=wb.RBPF(256), seed=0, force_check=False
     )
-    assert ident.extra["filter_settings"]["rejuvenate"] == "always"
+    assert ident.filter_results is not None
+    assert ident.filter_results.settings["rejuvenate"] == "always"
     result = crosscheck(ident.problem, ident, seed=0, keep_inference_data=False)
     compared = [s for s in result.steps if s.converged]
     assert len(compared) >= 0.95 * len(result.steps) >= 50

@@ -107,8 +107,10 @@ def test_bad_threshold_is_a_usage_error() -> None:
 
 def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
     """C and K are estimated jointly: when the check moves one, neither is identified."""
+    from dataclasses import replace
+
     import workbench.inference.pipeline.force_check as fc
-    from workbench.inference.pipeline.identification import apply_force_model_check, identify
+    from workbench.inference.pipeline import gather_evidence, grade_identifiability, identify
     from workbench.inference.pipeline.settings import IdentifySettings
 
     sim, _, _ = _walk(0, variability=True)
@@ -116,7 +118,6 @@ def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
         particles=32, obs_noise=0.1, harmonics=3, force_check=False
     )
     result = identify(sim.record.slice(0.0, 8.0), settings=settings)
-    problem = result.problem
     assert "force_model_check" not in result.identifiability
     fake = fc.ForceModelCheck(
         reference_mode=np.array([700.0, 9000.0]),
@@ -130,7 +131,10 @@ def test_a_flag_on_one_parameter_marks_both_not_identified(monkeypatch) -> None:
         sentence="C depends on the force model",
     )
     monkeypatch.setattr(fc, "force_model_check", lambda _problem: fake)
-    ident = apply_force_model_check(result, problem).identifiability
+    evidence = gather_evidence(result, settings.replace(force_check=True))
+    assert evidence.force_check is fake and evidence.force_check_skipped is None
+    # The check's rule alone, without the prior-edge and collapse findings.
+    ident = grade_identifiability(replace(evidence, at_prior_bound=(), collapsed=False))
     assert ident["level"] == "not identified"
     assert not ident["identified_damping"] and not ident["identified_stiffness"]
     assert "estimated jointly" in ident["sentence"]

@@ -155,9 +155,9 @@ def test_prior_bound_posterior_is_not_called_identified(short_record):
     problem = problem.with_prior(StiffnessDampingPrior((100.0, 3000.0), (3 * k, 4 * k)))
     problem, _ = apply_noise_setting(problem, 0.02)
     res = identify_problem(problem, settings)
-    from workbench.inference.pipeline.identification import downgrade_untrustworthy
+    from workbench.inference.pipeline import grade
 
-    res = downgrade_untrustworthy(res)
+    res = grade(res, settings.replace(force_check=False))
     assert "stiffness_n_per_m" in res.parameters_at_prior_bound
     assert res.identifiability["level"] == "not identified"
     assert not res.to_json()["diagnostics"]["trustworthy"]

@@ -160,8 +160,11 @@ def test_records_identified_through_a_deck_are_counted_and_reported(tmp_path):
     assert "29 of the 49 records in the fits were identified through the deck" in text
 
     # Where a result row says C and K came from.
+    from workbench.inference.core import SurfaceReport
+
     def result(surface):
-        return SimpleNamespace(extra={} if surface is None else {"surface": surface})
+        report = None if surface is None else SurfaceReport(sentence="", **surface)
+        return SimpleNamespace(surface=report)
 
     assert c_and_k_source(result({"model": "coupled", "c_and_k_from": "transmissibility"})) == (
         "deck transmissibility"

@@ -12,8 +12,11 @@ import pytest
 import workbench as wb
 from workbench.cli import main
 from workbench.errors import UsageError
+from workbench.inference import pipeline as stages
 from workbench.inference.core.problem import ForcePrior, build_problem
 from workbench.inference.kalman import filter as kf
+from workbench.inference.pipeline import IdentifySettings, gather_evidence, grade_identifiability
+from workbench.inference.pipeline.grading import CHECK_OFF
 from workbench.inference.surface.frf import deck_spectra, surface_transmissibility
 from workbench.records.inspection import inspect_record
 from workbench.records.io import save_record
@@ -139,9 +142,10 @@ def test_a_deck_pins_c_and_k_and_the_methods_agree(periodic_deck_walk):
         lo, hi = ci[name]
         assert lo <= truth[name] <= hi, (name, truth[name], ci[name])
     assert exact.posterior_sd["natural_frequency_hz"] < 0.02 * FN
-    surface = exact.extra["surface"]
-    assert surface["model"] == "coupled"
-    info = surface["information"]["damping_ns_per_m"]
+    surface = exact.surface
+    assert surface is not None and surface.model == "coupled"
+    assert surface.information is not None
+    info = surface.information["damping_ns_per_m"]
     assert info["local_sd_with_surface"] < info["local_sd_rigid_floor"]
     sd = exact.posterior_sd
     rbpf = wb.identify(rec, JOINT, method=wb.RBPF(256), seed=1, force_check=False)
@@ -164,7 +168,7 @@ def test_a_deck_pins_c_and_k_and_the_methods_agree(periodic_deck_walk):
     # The same record with the surface ignored: the deck's response becomes force, and the
     # posterior misses the truth or is wide; a confident wrong answer is what must not happen.
     rigid = wb.identify(rec, WHOLE.replace(surface="rigid"), method=wb.Exact(), force_check=False)
-    assert rigid.extra["surface"]["model"] == "ignored (rigid floor)"
+    assert rigid.surface is not None and rigid.surface.model == "ignored (rigid floor)"
     lo, hi = rigid.interval()["natural_frequency_hz"]
     assert not (lo <= truth["natural_frequency_hz"] <= hi)
 
@@ -247,9 +251,13 @@ def test_transmissibility_bands_hold_the_truth_on_deck_walks():
 def test_the_default_reads_c_and_k_from_the_transmissibility():
     sim = deck_walk(2)
     res = wb.identify(sim.record, seed=0)
-    surface = res.extra["surface"]
+    surface = res.surface.to_json()
     assert surface["c_and_k_from"] == "transmissibility"
-    assert res.extra["surface_route"]["requested_method"] == "exact"  # the default
+    route = res.route
+    assert route.requested_method == "exact" and route.method == "exact"  # the default
+    assert route.c_and_k_from == "transmissibility"
+    assert route.bins == surface["transmissibility"]["bins"]
+    assert list(route.band_hz) == surface["transmissibility"]["band_hz"]
     assert res.identifiability["level"] == "well identified"
     assert "force_model_check" not in res.identifiability
     ci = res.interval()
@@ -266,7 +274,10 @@ def test_the_default_reads_c_and_k_from_the_transmissibility():
     # Every method reads C and K from the same transmissibility posterior, so they agree.
     for method in ("pf", "exact"):
         other = wb.identify(sim.record, method=method, seed=0)
-        assert other.extra["surface_route"]["requested_method"] == method
+        # What was asked for is kept; what ran is the exact grid, and the route says why.
+        assert other.route.requested_method == method and other.route.method == "exact"
+        assert other.method == "exact"
+        assert f"whatever method was asked for ({method} here)" in other.route.reason
         for name in ("natural_frequency_hz", "damping_ratio"):
             assert other.estimates[name] == pytest.approx(res.estimates[name], rel=1e-9)
 
@@ -456,16 +467,13 @@ def test_the_rbpf_rejuvenates_always_on_a_deck_and_on_surprise_elsewhere(periodi
         wb.RBPF(rejuvenate="sometimes")
 
 
-def test_a_deck_only_at_the_gait_harmonics_leaves_c_and_k_not_identified(monkeypatch):
+def test_a_deck_only_at_the_gait_harmonics_leaves_c_and_k_not_identified():
     """No bins away from the gait harmonics: the time history alone grades the record.
 
     On realistic walks it does not pin C and K, and in the footbridge closed loop it called
     wrong numbers identified, so such a record is graded not identified whatever the time
     history's own grade (the later checks are switched off here to see this rule alone).
     """
-    import workbench.inference.pipeline.identification as ident
-
-    monkeypatch.setattr(ident, "downgrade_untrustworthy", lambda result: result)
     sim = simulate_walking(
         mass_kg=70.0,
         natural_frequency_hz=2.0,
@@ -477,15 +485,33 @@ def test_a_deck_only_at_the_gait_harmonics_leaves_c_and_k_not_identified(monkeyp
         ground_acc_m_s2=lambda t: 0.3 * np.sin(2 * np.pi * 2.0 * np.asarray(t)),
         seed=0,
     )
-    res = wb.identify(sim.record, method=wb.Exact(), seed=0, force_check=False)
-    assert res.extra["surface"]["c_and_k_from"] == "time history"
-    assert "only near the walker's gait harmonics" in res.extra["surface"]["sentence"]
-    assert res.identifiability["level"] == "not identified"
-    assert not res.identifiability["identified_damping"]
-    assert not res.identifiability["identified_stiffness"]
-    assert "gait harmonics" in res.identifiability["sentence"]
+
+    def deck_rule_alone(model: wb.SMDModel) -> tuple[wb.IdentificationResult, dict]:
+        # The method's own result on its route, graded by the evidence without the
+        # prior-edge and collapse findings.
+        settings = IdentifySettings(model=model, method=wb.Exact(), seed=0, force_check=False)
+        prepared = stages.prepare(sim.record, settings)
+        problem, noise = stages.set_noise(stages.compile_problem(prepared, settings), settings)
+        route = stages.choose_route(problem, settings)
+        res = stages.run_route(problem, route, settings, prepared=prepared, noise=noise)
+        evidence = gather_evidence(res, settings)
+        assert evidence.force_check is None and evidence.force_check_skipped == CHECK_OFF
+        alone = dataclasses.replace(evidence, at_prior_bound=(), collapsed=False)
+        return res, grade_identifiability(alone)
+
+    res, report = deck_rule_alone(wb.SMDModel())
+    assert res.surface.c_and_k_from == "time history"
+    assert "only near the walker's gait harmonics" in res.surface.sentence
+    assert res.route.deck_only_near_gait_harmonics and res.route.c_and_k_from == "time history"
+    assert "only near the walker's gait harmonics" in res.route.reason
+    assert report["level"] == "not identified"
+    assert not report["identified_damping"]
+    assert not report["identified_stiffness"]
+    assert "gait harmonics" in report["sentence"]
     # The same record with a force for the whole record keeps the time history's grade:
     # the rule is about a force redrawn every step.
     whole = wb.SMDModel(harmonics=3, pieces="whole", time_basis="absolute", pacing_hz=2.0)
-    res = wb.identify(sim.record, whole, method=wb.Exact(), seed=0, force_check=False)
-    assert "gait harmonics" not in res.identifiability["sentence"]
+    res, report = deck_rule_alone(whole)
+    assert res.route.deck_only_near_gait_harmonics
+    assert "gait harmonics" not in report["sentence"]
+    assert report == res.identifiability  # the method's own report, unchanged

@@ -45,10 +45,10 @@ def c_and_k_source(result: Any) -> str:
     The deck's transmissibility, or the time history with the surface coupled jointly,
     ignored, or on a rigid floor.
     """
-    surface = result.extra.get("surface") or {}
-    if surface.get("c_and_k_from") == "transmissibility":
+    surface = result.surface
+    if surface is not None and surface.c_and_k_from == "transmissibility":
         return "deck transmissibility"
-    model = surface.get("model", "")
+    model = surface.model if surface is not None else ""
     if model == "coupled":
         return "time history, surface coupled"
     if model.startswith("ignored"):

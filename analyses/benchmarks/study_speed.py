@@ -155,14 +155,15 @@ def _child_record(args: argparse.Namespace) -> dict[str, Any]:
             "cold": name == "default",
             "wall_s": walls,
             "cpu_s": cpus_s,
-            "route": "surface_route" in result.extra,
+            "route": result.route is not None and result.route.through_surface,
             "identifiability": result.identifiability.get("level"),
             "trustworthy": bool(result.trustworthy),
             "obs_fraction": result.noise.get("obs_fraction"),
             **_moments(result),
         }
         if name == "exact":
-            grid = result.extra["exact"]
+            assert result.grid_results is not None  # the exact grid
+            grid = result.grid_results.to_json()
             row["grid_mean"] = [grid["damping_ns_per_m"], grid["stiffness_n_per_m"]]
             row["grid_sd"] = [
                 grid["posterior_sd"]["damping_ns_per_m"],

@@ -153,7 +153,7 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
         minutes=MCMC_SECONDS_PER_WALKER_SAMPLE * walkers * samples / 60,
     )
     ident = identify(insp, settings=settings, progress=False)
-    if "surface_route" in ident.extra:
+    if ident.route is not None and ident.route.through_surface:
         out, write = _route_check(args, ident, settings.seed, record.name)
         out["record"] = record.name
         for warning in out["warnings"]:

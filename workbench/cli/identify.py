@@ -52,7 +52,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     check_record_size(args, record, "identify")
     result = identify(record, settings=settings, progress=not args.json)
     check = None
-    if args.crosscheck and "surface_route" in result.extra:
+    if args.crosscheck and result.route is not None and result.route.through_surface:
         raise UsageError(
             f"--crosscheck checks a filter step by step, but C and K of {record.name} came "
             "from the deck's transmissibility, which has no steps; run 'workbench crosscheck' "

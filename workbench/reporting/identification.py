@@ -45,15 +45,12 @@ def convergence_figure(result: IdentificationResult, truth: dict | None = None) 
     for j, (key, ax) in enumerate(
         zip(("damping_ns_per_m", "stiffness_n_per_m"), axes, strict=True)
     ):
-        if result.trace_time_s is not None and result.trace_mean is not None:
-            t, m = result.trace_time_s, result.trace_mean[:, j]
-            s = result.trace_sd[:, j] if result.trace_sd is not None else np.zeros_like(m)
+        f = result.filter_results
+        if f is not None:
+            t, m, s = f.trace_time_s, f.trace_mean[:, j], f.trace_sd[:, j]
             ax.plot(t, m, lw=1.0, color="C0", label=f"{result.method} mean")
             ax.fill_between(t, m - 2 * s, m + 2 * s, color="C0", alpha=0.2, label="±2 sd")
-        if result.piece_mean is not None:
-            ax.plot(
-                piece_end_t, result.piece_mean[:, j], ".", ms=3, color="C1", label="after each step"
-            )
+            ax.plot(piece_end_t, f.piece_mean[:, j], ".", ms=3, color="C1", label="after each step")
         if result.grade(key) == "not identified":
             # Drawn to diagnose the run, not read off: the legend names no number.
             ax.axhline(est[key], color="k", lw=0.8, label="posterior mean (not identified)")
@@ -154,8 +151,9 @@ def plot_diagnostics(result: IdentificationResult) -> Figure:
     ax_a.axhline(0, color="k", lw=0.5)
     ax_a.set_xlabel("lag [steps]")
     ax_a.set_title("residual autocorrelation")
-    if result.ess is not None and result.trace_time_s is not None:
-        ax_e.plot(result.trace_time_s, result.ess / max(result.n_particles, 1), lw=0.8)
+    f = result.filter_results
+    if f is not None:
+        ax_e.plot(f.trace_time_s, f.ess / max(f.n_particles, 1), lw=0.8)
         ax_e.set_ylim(0, 1.05)
         ax_e.set_xlabel("time [s]")
         ax_e.set_title("ESS / particles")

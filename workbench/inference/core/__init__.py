@@ -35,6 +35,13 @@ from workbench.inference.core.resampling import (
     normalise_log_weights,
     resample,
 )
+from workbench.inference.core.result_parts import (
+    EffectPosterior,
+    FilterResults,
+    GridResults,
+    Route,
+    SurfaceReport,
+)
 from workbench.inference.core.results import IdentificationResult
 from workbench.inference.core.weighted import weighted_quantile
 
@@ -49,14 +56,19 @@ __all__ = [
     "SEED_OBS_FRACTION",
     "SEED_STATE_FRACTION",
     "SEED_STIFFNESS_RW_SD",
+    "EffectPosterior",
+    "FilterResults",
     "ForceCorrelation",
     "ForcePrior",
+    "GridResults",
     "IdentifiabilityReport",
     "IdentificationProblem",
     "IdentificationResult",
     "NoiseModel",
     "ParticleFilterOutput",
+    "Route",
     "StiffnessDampingPrior",
+    "SurfaceReport",
     "build_problem",
     "draw_ancestors",
     "ess",

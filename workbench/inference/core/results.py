@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,6 +32,13 @@ from numpy.typing import NDArray
 
 from workbench.fileutil import atomic_path
 from workbench.inference.core.problem import IdentificationProblem
+from workbench.inference.core.result_parts import (
+    EffectPosterior,
+    FilterResults,
+    GridResults,
+    Route,
+    SurfaceReport,
+)
 from workbench.inference.core.weighted import _moments, weighted_quantile
 from workbench.models.smd import SMDModel
 from workbench.records.record import G_M_S2
@@ -97,12 +104,6 @@ class IdentificationResult:
         Their normalised weights.
     piece_coefficients_mean, piece_coefficients_sd : ndarray, shape (P, 2 n + 1)
         Posterior mean and std of each piece's force coefficients [N].
-    piece_mean, piece_sd : ndarray, shape (P, 2) or None
-        (C, K) estimate after each piece (filters only): the per-step values.
-    trace_time_s, trace_mean, trace_sd : ndarray or None
-        Convergence traces of (C, K) (filters only).
-    ess, distinct_ancestors, unique_values : ndarray or None
-        Filter diagnostics along the trace.
     loglik : float
         (Estimated) log marginal likelihood of the data under the model.
     identifiability : dict
@@ -111,10 +112,22 @@ class IdentificationResult:
         The noise setting used and how it was chosen.
     settings : dict
         The run's settings.
-    extra : dict
-        Method-specific results (e.g. the exact grid, Laplace check).
     model : SMDModel or None
         The pedestrian model that was identified (mass, force description, effects).
+    route : Route or None
+        Which method ran, where C and K came from and why (set by ``identify``; None for a
+        result a method returned on a problem directly).
+    filter_results : FilterResults or None
+        Traces, per-piece values and diagnostics of a particle filter (None for the exact
+        grid).
+    grid_results : GridResults or None
+        The exact grid posterior's summary (None for the filters).
+    surface : SurfaceReport or None
+        What the walking surface contributed (set by ``identify``).
+    effects : EffectPosterior or None
+        The effects' posterior (a model with effects).
+    inspection_warnings : tuple of str
+        What inspecting the record found (static balance, body weight, footfalls).
     """
 
     method: str
@@ -127,17 +140,13 @@ class IdentificationResult:
     identifiability: dict[str, Any]
     noise: dict[str, Any]
     settings: dict[str, Any]
-    piece_mean: FloatArray | None = None
-    piece_sd: FloatArray | None = None
-    trace_time_s: FloatArray | None = None
-    trace_mean: FloatArray | None = None
-    trace_sd: FloatArray | None = None
-    ess: FloatArray | None = None
-    distinct_ancestors: NDArray[np.int64] | None = None
-    unique_values: NDArray[np.int64] | None = None
-    n_particles: int = 0
-    extra: dict[str, Any] = field(default_factory=dict)
     model: SMDModel | None = None
+    route: Route | None = None
+    filter_results: FilterResults | None = None
+    grid_results: GridResults | None = None
+    surface: SurfaceReport | None = None
+    effects: EffectPosterior | None = None
+    inspection_warnings: tuple[str, ...] = ()
 
     def replace(self, **changes: Any) -> IdentificationResult:
         """Return a copy with some fields changed (results are immutable)."""
@@ -331,13 +340,7 @@ class IdentificationResult:
         )
 
     def _effect_posterior(self) -> dict[str, dict[str, float]]:
-        out: dict[str, dict[str, float]] = {}
-        for effect, post in (self.extra.get("effects") or {}).items():
-            if effect == "pilot" or not isinstance(post, dict):
-                continue
-            for param, stats in post.items():
-                out[f"{effect}.{param}"] = {"mean": stats["mean"], "sd": stats["sd"]}
-        return out
+        return {} if self.effects is None else self.effects.means()
 
     @property
     def fitted_model(self) -> SMDModel:
@@ -444,21 +447,23 @@ class IdentificationResult:
     @property
     def min_ess_fraction(self) -> float | None:
         """Smallest ESS along the run as a fraction of the particle count (filters only)."""
-        if self.ess is None or not self.n_particles:
+        f = self.filter_results
+        if f is None or not f.n_particles:
             return None
-        return float(np.min(self.ess) / self.n_particles)
+        return float(np.min(f.ess) / f.n_particles)
 
     @property
     def median_ess_fraction(self) -> float | None:
         """Median ESS along the run as a fraction of the particle count (filters only)."""
-        if self.ess is None or not self.n_particles:
+        f = self.filter_results
+        if f is None or not f.n_particles:
             return None
-        return float(np.median(self.ess) / self.n_particles)
+        return float(np.median(f.ess) / f.n_particles)
 
     @property
     def static_parameters(self) -> bool:
         """Whether C and K had no artificial random walk in the filter (pf only)."""
-        fs = self.extra.get("filter_settings", {})
+        fs = self.filter_results.settings if self.filter_results is not None else {}
         return (
             float(fs.get("damping_rw_sd_ns_per_m", 0.0)) == 0.0
             and float(fs.get("stiffness_rw_sd_n_per_m", 0.0)) == 0.0
@@ -467,11 +472,11 @@ class IdentificationResult:
     @property
     def frozen_parameters(self) -> list[str]:
         """Parameters whose particles collapsed to a handful of distinct values at the end."""
-        if self.unique_values is None:
+        if self.filter_results is None:
             return []
         # A random walk makes every value distinct after each move, so look at the fewest
         # distinct values over the last tenth of the run (resampling points show the truth).
-        uv = np.asarray(self.unique_values)
+        uv = np.asarray(self.filter_results.unique_values)
         tail = uv[-max(1, uv.shape[0] // 10) :]
         fewest = tail.min(axis=0)
         names = ("damping_ns_per_m", "stiffness_n_per_m")
@@ -500,9 +505,22 @@ class IdentificationResult:
     @property
     def final_ancestors(self) -> int | None:
         """Distinct initial particles with descendants at the end (filters only)."""
-        if self.distinct_ancestors is None or len(self.distinct_ancestors) == 0:
+        f = self.filter_results
+        if f is None or len(f.distinct_ancestors) == 0:
             return None
-        return int(np.asarray(self.distinct_ancestors)[-1])
+        return int(np.asarray(f.distinct_ancestors)[-1])
+
+    @property
+    def collapsed(self) -> bool:
+        """Whether the particle cloud collapsed (a frozen parameter, or few ancestors).
+
+        Few ancestors: all particles descend from at most :data:`FROZEN_ANCESTORS` initial
+        ones, for a filter where that means a collapse
+        (:attr:`~workbench.inference.core.result_parts.FilterResults.collapse_on_few_ancestors`).
+        """
+        f, anc = self.filter_results, self.final_ancestors
+        few = f is not None and f.collapse_on_few_ancestors and anc is not None
+        return bool(self.frozen_parameters) or (few and anc is not None and anc <= FROZEN_ANCESTORS)
 
     @property
     def degenerate(self) -> bool:
@@ -529,8 +547,10 @@ class IdentificationResult:
         # With the seed's random walks of C and K every value is renewed at each sample, so
         # a single surviving lineage over a long record is expected and says nothing about
         # the cloud's spread (the frozen check does); for static C and K it does.
+        f = self.filter_results
         if (
-            self.method == "pf"
+            f is not None
+            and f.collapse_on_few_ancestors
             and anc is not None
             and anc <= FROZEN_ANCESTORS
             and self.static_parameters
@@ -595,7 +615,7 @@ class IdentificationResult:
         out["noise"] = self.noise
         out["loglik"] = float(self.loglik)
         out["diagnostics"] = {
-            "n_particles": int(self.n_particles),
+            "n_particles": int(self.filter_results.n_particles if self.filter_results else 0),
             "min_ess_fraction": self.min_ess_fraction,
             "median_ess_fraction": self.median_ess_fraction,
             "frozen_parameters": self.frozen_parameters,
@@ -606,12 +626,13 @@ class IdentificationResult:
         }
         out["warnings"] = self.warnings
         out["settings"] = self.settings
-        if "surface" in self.extra:
+        if self.surface is not None:
             out["surface"] = self._surface_json(hidden)
-        if "effects" in self.extra:
-            out["effects"] = None if force_hidden else self.extra["effects"]
+        if self.effects is not None:
+            effects = self.effects.to_json()
+            out["effects"] = None if force_hidden else effects
             if force_hidden:
-                conditional["effects"] = self.extra["effects"]
+                conditional["effects"] = effects
         out[CONDITIONAL_KEY] = conditional
         return out
 
@@ -622,7 +643,8 @@ class IdentificationResult:
         is that same posterior; graded not identified, its numbers go the way of the
         result's (null, kept under ``conditional_on_prior_box``).
         """
-        surface = dict(self.extra["surface"])
+        assert self.surface is not None
+        surface = self.surface.to_json()
         frf = surface.get("transmissibility")
         if not hidden or surface.get("c_and_k_from") != "transmissibility" or not frf:
             return surface
@@ -684,7 +706,7 @@ class IdentificationResult:
         lines += [
             "",
             f"identifiability: {sentence}",
-            *([f"surface: {self.extra['surface']['sentence']}"] if "surface" in self.extra else []),
+            *([f"surface: {self.surface.sentence}"] if self.surface is not None else []),
             f"log-likelihood {self.loglik:.2f}; Ljung-Box p of GRF residuals "
             f"{p_value(float(lb['lb_pvalue'].iloc[0]))} at lag {int(lb.index[0])}",
         ]
@@ -771,12 +793,12 @@ class IdentificationResult:
             "time": p.time_s,
             "response": ["u_m", "u_dot_m_s", "u_ddot_m_s2"],
         }
-        if self.trace_time_s is not None:
-            coords["trace_time"] = self.trace_time_s
-            data["trace_mean"] = (("trace_time", "parameter"), self.trace_mean)
-            data["trace_sd"] = (("trace_time", "parameter"), self.trace_sd)
-            if self.ess is not None:
-                data["ess"] = (("trace_time",), self.ess)
+        f = self.filter_results
+        if f is not None:
+            coords["trace_time"] = f.trace_time_s
+            data["trace_mean"] = (("trace_time", "parameter"), f.trace_mean)
+            data["trace_sd"] = (("trace_time", "parameter"), f.trace_sd)
+            data["ess"] = (("trace_time",), f.ess)
         ds = xr.Dataset(data, coords=coords)
         ds.attrs["workbench_result_json"] = json.dumps(self.to_json(), default=float)
         path = Path(path)

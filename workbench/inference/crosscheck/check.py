@@ -119,6 +119,7 @@ from workbench.inference.crosscheck.compare import (
     FilterRun,
     _multimodal,
     compare_step,
+    filter_traces,
     pf_step_stats,
 )
 from workbench.inference.crosscheck.history_grid import (
@@ -380,14 +381,15 @@ def crosscheck(
         raise UsageError(
             f"'prior' must be one of {', '.join(PRIORS)}, got {prior!r}", parameter="prior"
         )
-    if output.piece_mean is None or output.piece_sd is None:
+    traces = filter_traces(output)
+    if traces.piece_mean is None or traces.piece_sd is None:
         from workbench.inference.methods import particle_filter_names
 
         filters = " or ".join(particle_filter_names())
         raise UsageError(f"a {output.method} result has no per-step values; cross-check {filters}")
-    if output.piece_mean.shape[0] != problem.n_pieces:
+    if traces.piece_mean.shape[0] != problem.n_pieces:
         raise UsageError(
-            f"the filter output has {output.piece_mean.shape[0]} pieces but the problem has "
+            f"the filter output has {traces.piece_mean.shape[0]} pieces but the problem has "
             f"{problem.n_pieces}; cross-check the output with the problem it was run on"
         )
     n_pieces = problem.n_pieces if max_pieces is None else min(int(max_pieces), problem.n_pieces)
@@ -514,7 +516,7 @@ def crosscheck(
         "grid": _grid_summary(grid_log) if use_grid else None,
         "filter": {
             "method": output.method,
-            "n_particles": output.n_particles,
+            "n_particles": traces.n_particles,
             "seed": getattr(output, "seed", None),
         },
     }
@@ -543,7 +545,8 @@ def recompare(
     """
     if result.prior != "sequential":
         raise UsageError("only a cross-check with the sequential prior can be reused")
-    if output.piece_mean is None or output.piece_mean.shape[0] != problem.n_pieces:
+    traces = filter_traces(output)
+    if traces.piece_mean is None or traces.piece_mean.shape[0] != problem.n_pieces:
         raise UsageError("the filter run does not belong to this problem")
     ess, unique = pf_step_stats(problem, output)
     checks = []
@@ -558,7 +561,7 @@ def recompare(
     settings = dict(result.settings)
     settings["filter"] = {
         "method": output.method,
-        "n_particles": output.n_particles,
+        "n_particles": traces.n_particles,
         "seed": getattr(output, "seed", None),
     }
     return replace(result, method=output.method, steps=checks, settings=settings)
@@ -568,14 +571,15 @@ def _filter_prior(
     problem: IdentificationProblem, output: FilterRun, j: int
 ) -> tuple[FloatArray, FloatArray]:
     """Return the filter's per-step normal at step ``j`` in logit coordinates."""
-    if output.piece_mean is None or output.piece_sd is None:  # pragma: no cover - checked
+    traces = filter_traces(output)
+    if traces.piece_mean is None or traces.piece_sd is None:  # pragma: no cover - checked
         raise UsageError("the filter run has no per-step values")
-    mean = np.asarray(output.piece_mean[j], dtype=float)
+    mean = np.asarray(traces.piece_mean[j], dtype=float)
     lo, hi = box_bounds(problem.prior)
     mean = np.clip(mean, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo))
     slope = (hi - lo) / ((mean - lo) * (hi - mean))
     centre = box_logit(problem.prior, mean[None])[0][0]
-    return centre, np.diag(np.square(np.maximum(output.piece_sd[j] * slope, 1e-6)))
+    return centre, np.diag(np.square(np.maximum(traces.piece_sd[j] * slope, 1e-6)))
 
 
 def _floor_cov(cov: FloatArray, problem: IdentificationProblem) -> FloatArray:

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from workbench.errors import UsageError
 from workbench.inference.core import (
+    FilterResults,
     IdentificationProblem,
     IdentificationResult,
     ParticleFilterOutput,
@@ -28,7 +29,14 @@ from workbench.inference.core import (
 from workbench.inference.crosscheck.mcmc_result import McmcResult
 from workbench.inference.crosscheck.results import SD_RATIO_RANGE, Z_TOLERANCE, StepCheck
 
-__all__ = ["DEGENERATE_ESS", "FROZEN_UNIQUE_VALUES", "FilterRun", "compare_step", "pf_step_stats"]
+__all__ = [
+    "DEGENERATE_ESS",
+    "FROZEN_UNIQUE_VALUES",
+    "FilterRun",
+    "compare_step",
+    "filter_traces",
+    "pf_step_stats",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -41,21 +49,37 @@ FROZEN_UNIQUE_VALUES = 5
 FilterRun = ParticleFilterOutput | IdentificationResult
 
 
+def filter_traces(output: FilterRun) -> ParticleFilterOutput | FilterResults:
+    """Return the per-step values and traces of a filter run.
+
+    A filter's raw output carries them itself; an identification result in its
+    ``filter_results`` (None for the exact grid, which has no steps to check).
+    """
+    if not isinstance(output, IdentificationResult):
+        return output
+    if output.filter_results is None:
+        raise UsageError(f"a {output.method} result has no per-step values; cross-check rbpf or pf")
+    return output.filter_results
+
+
 def pf_step_stats(
     problem: IdentificationProblem, out: FilterRun
 ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Smallest ESS inside every piece and distinct values of C, K at its end."""
     p = problem.n_pieces
-    if out.ess is None or out.unique_values is None or out.trace_time_s is None:
+    if isinstance(out, IdentificationResult) and out.filter_results is None:
         raise UsageError(f"a {out.method} result has no filter traces; cross-check rbpf or pf")
-    if out.trace_time_s.size == p:
-        return np.asarray(out.ess, dtype=float), np.asarray(out.unique_values)
+    traces = filter_traces(out)
+    if traces.ess is None or traces.unique_values is None or traces.trace_time_s is None:
+        raise UsageError(f"a {out.method} result has no filter traces; cross-check rbpf or pf")
+    if traces.trace_time_s.size == p:
+        return np.asarray(traces.ess, dtype=float), np.asarray(traces.unique_values)
     # Per-sample traces (pf): the piece's rows by time.
     bounds = problem.time_s[problem.piece_starts[:-1]]
-    idx = np.searchsorted(bounds, out.trace_time_s, side="right") - 1
-    ess = np.array([float(np.min(out.ess[idx == j])) for j in range(p)])
+    idx = np.searchsorted(bounds, traces.trace_time_s, side="right") - 1
+    ess = np.array([float(np.min(traces.ess[idx == j])) for j in range(p)])
     last = np.array([np.flatnonzero(idx == j)[-1] for j in range(p)])
-    return ess, np.asarray(out.unique_values)[last]
+    return ess, np.asarray(traces.unique_values)[last]
 
 
 def _wasserstein_to_normal(draws: FloatArray, mean: float, sd: float) -> float:
@@ -107,10 +131,11 @@ def compare_step(
     unique: NDArray[np.int64],
 ) -> StepCheck:
     """Compare the filter's step ``j`` with its MCMC run ``res`` (module docstring)."""
-    if output.piece_mean is None or output.piece_sd is None:  # pragma: no cover - checked
+    traces = filter_traces(output)
+    if traces.piece_mean is None or traces.piece_sd is None:  # pragma: no cover - checked
         raise UsageError("the filter run has no per-step values")
-    pf_mean = np.asarray(output.piece_mean[j], dtype=float)
-    pf_sd = np.asarray(output.piece_sd[j], dtype=float)
+    pf_mean = np.asarray(traces.piece_mean[j], dtype=float)
+    pf_sd = np.asarray(traces.piece_sd[j], dtype=float)
     m_mean, m_sd = res.mean[:2], res.sd[:2]
     with np.errstate(divide="ignore", invalid="ignore"):
         z = (pf_mean - m_mean) / m_sd
@@ -127,7 +152,7 @@ def compare_step(
         flags.append("MCMC not converged (not compared): " + " ".join(res.reasons))
     if ess[j] < DEGENERATE_ESS:
         flags.append(
-            f"filter degenerate: ESS {ess[j]:.1f} of {output.n_particles} particles in the step"
+            f"filter degenerate: ESS {ess[j]:.1f} of {traces.n_particles} particles in the step"
         )
     for i, sym in enumerate(symbols):
         if unique[j, i] <= FROZEN_UNIQUE_VALUES:

@@ -158,7 +158,7 @@ def crosscheck_surface_route(
         The problem identify ran on (surface coupled).
     result : IdentificationResult
         identify's result; it must come from the transmissibility route
-        (``extra["surface_route"]``).
+        (its ``route`` reads C and K from the transmissibility).
     seed : int, default 0
         Fixes every random number of the MCMC.
     n_ensembles, n_walkers, min_steps, max_steps
@@ -168,7 +168,7 @@ def crosscheck_surface_route(
     -------
     RouteCheck
     """
-    if "surface_route" not in result.extra:
+    if result.route is None or not result.route.through_surface:
         raise UsageError(
             "this result did not read C and K from the deck's transmissibility; "
             "cross-check it with the per-step check (crosscheck) instead"

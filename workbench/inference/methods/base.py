@@ -42,6 +42,8 @@ from workbench.inference.core import (
     KALMAN_STATE_FRACTION,
     SCHEMES,
     SEED_STATE_FRACTION,
+    FilterResults,
+    GridResults,
     IdentificationProblem,
     IdentificationResult,
     ParticleFilterOutput,
@@ -294,16 +296,14 @@ def _filter_result(
     out: ParticleFilterOutput,
     seed: int,
     common: dict[str, Any],
+    *,
+    collapse_on_few_ancestors: bool,
 ) -> IdentificationResult:
     w = np.exp(out.log_weights - np.max(out.log_weights))
-    return IdentificationResult(
-        method=out.method,
-        draws=np.asarray(out.particles),
-        weights=w / w.sum(),
-        piece_coefficients_mean=out.piece_coefficients_mean,
-        piece_coefficients_sd=out.piece_coefficients_sd,
-        loglik=float(out.loglik),
-        identifiability=_filter_identifiability(problem, out, seed),
+    filtered = FilterResults(
+        n_particles=out.n_particles,
+        settings=out.settings,
+        collapse_on_few_ancestors=collapse_on_few_ancestors,
         piece_mean=out.piece_mean,
         piece_sd=out.piece_sd,
         trace_time_s=out.trace_time_s,
@@ -312,8 +312,16 @@ def _filter_result(
         ess=out.ess,
         distinct_ancestors=out.distinct_ancestors,
         unique_values=out.unique_values,
-        n_particles=out.n_particles,
-        extra={"filter_settings": out.settings},
+    )
+    return IdentificationResult(
+        method=out.method,
+        draws=np.asarray(out.particles),
+        weights=w / w.sum(),
+        piece_coefficients_mean=out.piece_coefficients_mean,
+        piece_coefficients_sd=out.piece_coefficients_sd,
+        loglik=float(out.loglik),
+        identifiability=_filter_identifiability(problem, out, seed),
+        filter_results=filtered,
         problem=problem,
         **common,
     )
@@ -357,9 +365,13 @@ class _ParticleFilter(Method):
     """What the two particle filters share: particles, resampling and the result.
 
     Each filter sets its own ``n_particles`` default (that of its filter function).
+    ``collapse_on_few_ancestors`` says whether particles that all descend from a handful of
+    initial ones mean a collapsed cloud for this filter (its values renewed by nothing but a
+    random walk) rather than the normal path degeneracy of a filter whose moves renew them.
     """
 
     particle_filter: ClassVar[bool] = True
+    collapse_on_few_ancestors: ClassVar[bool] = False
     n_particles: int = 0
     resampling: str = "systematic"
     ess_threshold: float = 0.5
@@ -384,7 +396,13 @@ class _ParticleFilter(Method):
     ) -> IdentificationResult:
         """Run the filter on a compiled problem (see :meth:`Method.run`)."""
         out = self._filter(problem, seed, progress)
-        return _filter_result(problem, out, seed, common or {})
+        return _filter_result(
+            problem,
+            out,
+            seed,
+            common or {},
+            collapse_on_few_ancestors=self.collapse_on_few_ancestors,
+        )
 
 
 @register_method
@@ -462,6 +480,9 @@ class PF(_ParticleFilter):
     name: ClassVar[str] = "pf"
     default_state_noise_fraction: ClassVar[float] = SEED_STATE_FRACTION
     colour: ClassVar[str | None] = "C0"
+    # Only the random walk renews the values of C and K, so few surviving initial
+    # particles is a collapse of the cloud, not path degeneracy.
+    collapse_on_few_ancestors: ClassVar[bool] = True
     n_particles: int = PF_PARTICLES
     force_proposal: str = "regression"
 
@@ -548,7 +569,7 @@ def exact_result(
         piece_coefficients_sd=force.sd,
         loglik=float(post.log_evidence),
         identifiability=report.to_json() if report is not None else {},
-        extra={"exact": post.to_json()},
+        grid_results=GridResults(post.to_json()),
         problem=problem,
         **(common or {}),
     )

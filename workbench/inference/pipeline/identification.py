@@ -1,54 +1,67 @@
-"""Identify a record: preprocess, compile the model into the problem, run a method, grade.
+"""Identify a record: a pipeline of public stages, from the record to the graded result.
 
-This is the one function the Python API, the command line, the demo, the studies and batch
-work call::
+:func:`identify` is the one function the Python API, the command line, the demo, the studies
+and batch work call::
 
     res = identify(record, SMDModel(harmonics=6) + GaitAsymmetry(), method=RBPF(), seed=1)
 
-The steps, with the decisions they take:
+It calls the stages below in order; each is public, so an analysis or a researcher can run
+them one by one, look at what each returns, or change it before the next
+(docs/guide/identify.md, "The stages one by one"):
 
-1. inspect the record (validation, preprocessing, steps, pacing, static balance);
-2. compile the pedestrian model (:class:`~workbench.models.smd.SMDModel`) into the
+1. :func:`prepare`: inspect the record (validation, preprocessing, steps, pacing, static
+   balance) into a :class:`Prepared` record;
+2. :func:`compile_problem`: compile the pedestrian model
+   (:class:`~workbench.models.smd.SMDModel`) into the
    :class:`~workbench.inference.core.problem.IdentificationProblem` every method shares: the
    model's force basis, pieces and pacing, and the prior (``"modal"`` scales with body mass;
-   ``"seed"`` is the seed's box);
-3. set the observation noise (``auto``: maximum marginal likelihood, the default; ``seed``:
-   10 % of the RMS of u, u', u''; or a fraction);
-4. on a record that measures its surface's motion (``ground_acc``), the spring and damper
-   act on the motion relative to it unless the model says ``surface="rigid"``
-   (:mod:`workbench.records.surface`, docs/science.md 6); with the default
-   ``surface="coupled"`` C and K are read from the deck's transmissibility and the force
-   given them (:mod:`workbench.inference.surface.route`; the force-model check does not
-   apply there), with ``"joint"`` from the time history; the result's ``extra["surface"]``
-   (``--json`` ``surface``) says which surface model was used and how much of the
-   information on C and K came from the surface
-   (:mod:`workbench.inference.surface.information`);
-5. with effects in the model, their columns join the force basis as coefficients shared by
-   the whole record (:mod:`workbench.inference.pipeline.effect_terms`), and the result's
-   ``extra["effects"]`` (``--json`` ``effects``) reports their posterior;
-6. run the method (:mod:`workbench.inference.methods.base`: ``Exact`` by default, ``RBPF``,
-   ``PF`` seed-faithful);
-7. assess identifiability from the posterior: contraction against the prior, C-K correlation
-   and the joint correlation of C and K with the force coefficients, then the force-model
-   check and the prior-edge and collapse checks, each of which can only downgrade it.
+   ``"seed"`` is the seed's box); on a record that measures its surface's motion
+   (``ground_acc``) the spring and damper act on the motion relative to it unless the model
+   says ``surface="rigid"`` (:mod:`workbench.records.surface`, docs/science.md 6);
+3. :func:`set_noise`: set the observation noise (``auto``: maximum marginal likelihood, the
+   default; ``seed``: 10 % of the RMS of u, u', u''; or a fraction);
+4. :func:`add_effects`: with effects in the model, their columns join the force basis as
+   coefficients shared by the whole record
+   (:mod:`workbench.inference.pipeline.effect_terms`);
+5. :func:`choose_route`: decide where C and K come from, as a
+   :class:`~workbench.inference.core.result_parts.Route`. With the default
+   ``surface="coupled"`` on a deck that moved away from the gait harmonics, from the deck's
+   transmissibility on the exact grid, the force given them
+   (:mod:`workbench.inference.surface.route`), whatever method was asked for; otherwise
+   (``"joint"``, a rigid floor, effects, or a deck that moved only near the gait harmonics)
+   from the time history with the settings' method;
+6. :func:`run_route`: run the method on the route (:mod:`workbench.inference.methods.base`:
+   ``Exact`` by default, ``RBPF``, ``PF`` seed-faithful) and attach what the result reports
+   beside the posterior: the route, the surface report (``result.surface``, ``--json``
+   ``surface``: which surface model was used and how much of the information on C and K
+   came from the surface, :mod:`workbench.inference.surface.information`), the effects'
+   posterior (``result.effects``, ``--json`` ``effects``) and the inspection's warnings;
+7. :func:`~workbench.inference.pipeline.grading.grade`: grade identifiability once from the
+   evidence (:mod:`workbench.inference.pipeline.grading`): the method's own report
+   (contraction against the prior, C-K correlation and the joint correlation of C and K
+   with the force coefficients), then the force-model check, the deck's rule and the
+   prior-edge and collapse checks, each of which can only downgrade it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from workbench.errors import InputError, UsageError
 from workbench.inference.core import (
+    EffectPosterior,
     IdentificationProblem,
     IdentificationResult,
+    Route,
     StiffnessDampingPrior,
     build_problem,
 )
 from workbench.inference.methods import Method
+from workbench.inference.pipeline.grading import grade
 from workbench.inference.pipeline.noise import apply_noise_setting
 from workbench.inference.pipeline.settings import IdentifySettings, NoiseSettings, Preprocessing
 from workbench.models.smd import SMDModel
@@ -57,18 +70,35 @@ from workbench.records.preprocess import COMResponse, preprocess
 from workbench.records.record import Record
 from workbench.records.steps import Steps
 from workbench.records.surface import surface_motion
-from workbench.wording import parameters_in_words, verb
 
-__all__ = ["compile_problem", "identify", "identify_problem"]
+if TYPE_CHECKING:
+    from workbench.inference.pipeline.effect_terms import EffectTerms
+
+__all__ = [
+    "EffectColumns",
+    "NoiseInfo",
+    "Prepared",
+    "add_effects",
+    "choose_route",
+    "compile_problem",
+    "identify",
+    "identify_problem",
+    "prepare",
+    "run_route",
+    "set_noise",
+]
 
 
 @dataclass(frozen=True)
-class _NoiseInfo:
+class NoiseInfo:
+    """What a run reports of its observation noise: level, source, how it was estimated."""
+
     fraction: float | None
     source: str
     detail: dict[str, Any]
 
     def to_json(self) -> dict[str, Any]:
+        """Return the JSON's ``noise`` section."""
         label = (
             f"{self.source}: observation noise {100 * self.fraction:.3g} % of the RMS of u, u', u''"
             if self.fraction is not None
@@ -89,6 +119,7 @@ class Prepared:
 
     @classmethod
     def of(cls, record: Record | Inspection, settings: IdentifySettings) -> Prepared:
+        """Inspect a record for the settings (see :func:`prepare`, which also sets the mass)."""
         if isinstance(record, Inspection):
             insp = record
         else:
@@ -115,17 +146,36 @@ class Prepared:
         return cls(insp.record, insp.com, insp.steps, tuple(insp.warnings), insp.pacing.pacing_hz)
 
 
+def prepare(record: Record | Inspection, settings: IdentifySettings) -> Prepared:
+    """Inspect a record for the settings' model (the first stage).
+
+    Parameters
+    ----------
+    record : Record or Inspection
+        A loaded record, or its inspection if already done. When only the settings' model
+        states the body mass, the record takes it.
+    settings : IdentifySettings
+        The model (whether it needs footfalls) and the preprocessing.
+
+    Returns
+    -------
+    Prepared
+        The record, its COM response, steps, pacing and the inspection's warnings.
+    """
+    return Prepared.of(_with_mass(record, settings.model), settings)
+
+
 def compile_problem(
     insp: Inspection | Prepared, settings: IdentifySettings
 ) -> IdentificationProblem:
     """Compile the settings' model on an inspected record into the shared problem.
 
-    The observation noise is not yet set (:func:`identify` sets it).
+    The observation noise is not yet set (:func:`set_noise` sets it).
 
     Parameters
     ----------
-    insp : Inspection
-        The inspected record (body mass, COM response, steps, pacing).
+    insp : Prepared or Inspection
+        The prepared record (body mass, COM response, steps, pacing).
     settings : IdentifySettings
         Model (force basis, pieces, pacing), noise and priors, method.
 
@@ -166,7 +216,7 @@ def compile_problem(
 
 def set_noise(
     problem: IdentificationProblem, settings: IdentifySettings
-) -> tuple[IdentificationProblem, _NoiseInfo]:
+) -> tuple[IdentificationProblem, NoiseInfo]:
     """Set the observation noise of ``settings`` on the problem (the noise stage).
 
     Returns the problem and what the run reports of its noise (level, source, and how an
@@ -176,7 +226,7 @@ def set_noise(
     detail: dict[str, Any] = {}
     if estimate is not None:
         detail = {"method": estimate.method, "at_bound": estimate.at_bound}
-    return problem, _NoiseInfo(problem.noise.obs_fraction, problem.noise.source, detail)
+    return problem, NoiseInfo(problem.noise.obs_fraction, problem.noise.source, detail)
 
 
 def identify_problem(
@@ -186,7 +236,10 @@ def identify_problem(
     noise_info: dict[str, Any] | None = None,
     progress: bool = False,
 ) -> IdentificationResult:
-    """Run the settings' method on a problem whose noise is already set.
+    """Run the settings' method on a problem whose noise is already set, as it is.
+
+    No route is chosen and nothing is graded beyond the method's own report; :func:`run_route`
+    and :func:`~workbench.inference.pipeline.grading.grade` do that.
 
     Parameters
     ----------
@@ -234,6 +287,195 @@ def _with_mass(record: Record | Inspection, model: SMDModel | None) -> Record | 
     return record
 
 
+@dataclass(frozen=True, eq=False)
+class EffectColumns:
+    """The effects' columns added to a problem's force basis (:func:`add_effects`).
+
+    Attributes
+    ----------
+    base : IdentificationProblem
+        The problem without the effects (noise set), on which their posterior is computed.
+    terms : EffectTerms
+        The effects' columns and prior.
+    pilot : dict
+        The pilot fit's posterior that set the effects' prior (JSON-able).
+    """
+
+    base: IdentificationProblem
+    terms: EffectTerms
+    pilot: dict[str, Any]
+
+
+def add_effects(
+    problem: IdentificationProblem, prepared: Prepared, settings: IdentifySettings
+) -> tuple[IdentificationProblem, EffectColumns | None]:
+    """Add the model's effects to the force basis (the stage after the noise).
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        The compiled problem, noise set.
+    prepared : Prepared
+        The prepared record (its ground acceleration, for effects that use it).
+    settings : IdentifySettings
+        The model's effects and the preprocessing.
+
+    Returns
+    -------
+    (IdentificationProblem, EffectColumns or None)
+        The problem with the effects' columns, and what their posterior needs; the problem
+        unchanged and None for a model without effects.
+    """
+    effects = settings.model.effects
+    if problem.surface is not None and any(e.name == "base_motion" for e in effects):
+        raise UsageError(
+            f"{prepared.record.source}: the model already couples the measured surface motion "
+            "through K and C, so 'base_motion' would count it twice; leave base_motion out, or "
+            "identify on a rigid floor (surface='rigid', --rigid-floor) to fit it as a free "
+            "effect",
+            parameter="effects",
+        )
+    if not effects:
+        return problem, None
+    from workbench.inference.pipeline.effect_terms import effect_terms, with_effects
+
+    terms = effect_terms(
+        problem,
+        effects,
+        ground_acc_m_s2=_ground_on(prepared, problem),
+        highpass_hz=settings.preprocessing.highpass_hz,
+    )
+    augmented, pilot = with_effects(problem, terms)
+    return augmented, EffectColumns(problem, terms, pilot)
+
+
+def choose_route(problem: IdentificationProblem, settings: IdentifySettings) -> Route:
+    """Decide where C and K come from and which method runs (module docstring, stage 5).
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        The problem with its noise and effects set.
+    settings : IdentifySettings
+        The model's surface setting and effects, and the method asked for.
+
+    Returns
+    -------
+    Route
+        The deck's transmissibility on the exact grid when the model couples a measured
+        surface motion (``surface="coupled"``), has no effects and the deck moved away from
+        the gait harmonics; otherwise the time history with the settings' method.
+    """
+    asked = settings.method.name
+    surface = settings.model.surface
+
+    def time_history(reason: str, *, deck_only: bool = False) -> Route:
+        return Route(asked, asked, "time history", reason, deck_only_near_gait_harmonics=deck_only)
+
+    if problem.surface is None:
+        if surface == "rigid":
+            return time_history(
+                "The model treats the walking surface as rigid, so C and K come from the time "
+                "history of the response."
+            )
+        return time_history(
+            "The record measures no surface motion, so C and K come from the time history of "
+            "the response on a rigid floor."
+        )
+    if surface != "coupled":
+        return time_history(
+            "The joint surface model reads C and K from the time history with the surface's "
+            "motion acting through K and C."
+        )
+    if settings.model.effects:
+        return time_history(
+            "The model has effects, whose coefficients need the time history, so C and K come "
+            "from the time history with the surface's motion acting through K and C."
+        )
+    from workbench.inference.surface import deck_spectra
+    from workbench.inference.surface.route import transmissibility_route
+
+    spectra = deck_spectra(problem)
+    if spectra is None:
+        return time_history(
+            "The deck moved only near the walker's gait harmonics (or the record is too short "
+            "for its spectrum), where its drive cannot be told from the walker's own force, so "
+            "C and K fall back to the time history.",
+            deck_only=True,
+        )
+    return transmissibility_route(spectra, asked)
+
+
+def run_route(
+    problem: IdentificationProblem,
+    route: Route,
+    settings: IdentifySettings,
+    *,
+    prepared: Prepared,
+    effects: EffectColumns | None = None,
+    noise: NoiseInfo | None = None,
+    progress: bool = False,
+) -> IdentificationResult:
+    """Run the method on the route and attach what the result reports beside the posterior.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+        The problem with its noise and effects set.
+    route : Route
+        Where C and K come from (:func:`choose_route`).
+    settings : IdentifySettings
+        The method and seed.
+    prepared : Prepared
+        The prepared record (the surface report and the inspection's warnings).
+    effects : EffectColumns, optional
+        The effects' columns (:func:`add_effects`), whose posterior the result reports.
+    noise : NoiseInfo, optional
+        How the noise was set (:func:`set_noise`).
+    progress : bool, default False
+        Show a progress bar (filters).
+
+    Returns
+    -------
+    IdentificationResult
+        The method's result with its own identifiability report (not yet graded), and its
+        ``route``, ``surface``, ``effects`` and ``inspection_warnings``.
+    """
+    common = _common(problem, settings, None if noise is None else noise.to_json())
+    if route.through_surface:
+        from workbench.inference.surface import identify_through_surface
+
+        routed = identify_through_surface(
+            problem, seed=settings.seed, common=common, requested_method=route.requested_method
+        )
+        if routed is None:
+            raise UsageError(
+                f"{problem.source}: the deck has no power away from the gait harmonics, so C "
+                "and K cannot be read from its transmissibility; choose the route on this "
+                "problem (choose_route)"
+            )
+        result = routed
+    else:
+        if route.method != settings.method.name:
+            raise UsageError(
+                f"the route runs {route.method!r} on the time history but the settings name "
+                f"{settings.method.name!r}; choose the route with these settings (choose_route)"
+            )
+        result = settings.method.run(problem, seed=settings.seed, progress=progress, common=common)
+    result = result.replace(route=route, inspection_warnings=tuple(prepared.warnings))
+    if effects is not None:
+        from workbench.inference.pipeline.effect_terms import effect_posterior
+
+        post = effect_posterior(
+            effects.base, effects.terms, result.draws, result.weights, seed=settings.seed
+        )
+        result = result.replace(effects=EffectPosterior(post, effects.pilot))
+    from workbench.inference.surface import surface_report
+
+    surface = surface_report(result, problem, prepared.record, settings.model.surface)
+    return result.replace(surface=surface)
+
+
 def identify(
     record: Record | Inspection,
     model: SMDModel | None = None,
@@ -248,7 +490,7 @@ def identify(
     adjust_problem: Callable[[IdentificationProblem], IdentificationProblem] | None = None,
     adjust_noise: Callable[[IdentificationProblem], IdentificationProblem] | None = None,
 ) -> IdentificationResult:
-    """Identify the SMD model of one record.
+    """Identify the SMD model of one record: the stages of the module docstring in order.
 
     Parameters
     ----------
@@ -303,87 +545,25 @@ def identify(
         preprocessing=preprocessing,
         force_check=force_check,
     )
-    insp = Prepared.of(_with_mass(record, settings.model), settings)
-    problem = compile_problem(insp, settings)
+    prepared = prepare(record, settings)
+    problem = compile_problem(prepared, settings)
     if adjust_problem is not None:
         problem = adjust_problem(problem)
-    problem, info = set_noise(problem, settings)
+    problem, noise_info = set_noise(problem, settings)
     if adjust_noise is not None:
         problem = adjust_noise(problem)
-    base = problem
-    terms = None
-    effects = settings.model.effects
-    if problem.surface is not None and any(e.name == "base_motion" for e in effects):
-        raise UsageError(
-            f"{insp.record.source}: the model already couples the measured surface motion "
-            "through K and C, so 'base_motion' would count it twice; leave base_motion out, or "
-            "identify on a rigid floor (surface='rigid', --rigid-floor) to fit it as a free "
-            "effect",
-            parameter="effects",
-        )
-    if effects:
-        from workbench.inference.pipeline.effect_terms import effect_terms, with_effects
-
-        terms = effect_terms(
-            problem,
-            effects,
-            ground_acc_m_s2=_ground_on(insp, problem),
-            highpass_hz=settings.preprocessing.highpass_hz,
-        )
-        problem, pilot = with_effects(problem, terms)
-    result = None
-    route = settings.model.surface == "coupled" and problem.surface is not None and not effects
-    if route:
-        from workbench.inference.surface import identify_through_surface
-
-        result = identify_through_surface(
-            problem,
-            seed=settings.seed,
-            common=_common(problem, settings, info.to_json()),
-            requested_method=settings.method.name,
-        )
-    deck_only_at_harmonics = route and result is None
-    if result is None:
-        result = identify_problem(problem, settings, noise_info=info.to_json(), progress=progress)
-    extra = {**result.extra, "inspection_warnings": list(insp.warnings)}
-    if terms is not None:
-        from workbench.inference.pipeline.effect_terms import effect_posterior
-
-        post = effect_posterior(base, terms, result.draws, result.weights, seed=settings.seed)
-        post["pilot"] = pilot
-        extra["effects"] = post
-    from workbench.inference.surface import surface_report
-
-    extra["surface"] = surface_report(result, problem, insp.record, settings.model.surface)
-    result = result.replace(extra=extra)
-    if settings.force_check and "surface_route" not in extra:
-        result = apply_force_model_check(result, problem)
-    if deck_only_at_harmonics and settings.model.pieces == "steps":
-        result = _not_identified_by_the_deck(result)
-    return downgrade_untrustworthy(result)
-
-
-def _not_identified_by_the_deck(result: IdentificationResult) -> IdentificationResult:
-    """Grade a deck record whose deck moved only near the gait harmonics as not identified.
-
-    There the force redrawn every step absorbs whatever the deck drives through K and C, so
-    the deck adds nothing on C and K and the time history is left on its own, which does not
-    identify them on realistic walks (the footbridge closed loop of docs/validation/deck.md
-    measures it). The numbers stay in the result; the grade says they are not estimates.
-    """
-    report = dict(result.identifiability)
-    if report.get("level") == "not identified":
-        return result
-    report["level"] = "not identified"
-    report["sentence"] = (
-        "Not identified: the deck moved only near the walker's gait harmonics, where the "
-        "step-by-step force absorbs its drive, so C and K rest on the time history alone, "
-        "which does not pin them on a realistic walk; a deck moving away from the gait "
-        "harmonics is needed (docs/validation/deck-information.md)."
+    problem, effects = add_effects(problem, prepared, settings)
+    route = choose_route(problem, settings)
+    result = run_route(
+        problem,
+        route,
+        settings,
+        prepared=prepared,
+        effects=effects,
+        noise=noise_info,
+        progress=progress,
     )
-    report["identified_damping"] = False
-    report["identified_stiffness"] = False
-    return result.replace(identifiability=report)
+    return grade(result, settings)
 
 
 def _ground_on(insp: Prepared, problem: IdentificationProblem) -> Any:
@@ -392,68 +572,3 @@ def _ground_on(insp: Prepared, problem: IdentificationProblem) -> Any:
     if rec.ground_acc_m_s2 is None:
         return None
     return np.interp(problem.time_s, rec.time_s, rec.ground_acc_m_s2)
-
-
-def apply_force_model_check(
-    result: IdentificationResult, problem: IdentificationProblem
-) -> IdentificationResult:
-    """Run :func:`~workbench.inference.pipeline.force_check.force_model_check` and grade by it.
-
-    Returns a new result (results are immutable).
-
-    The check's JSON goes to ``identifiability["force_model_check"]``; when C or K moves
-    beyond the threshold both become "not identified" with the check's sentence, whatever
-    their contraction (a misfitting model is often the more confident one).
-    """
-    from workbench.inference.pipeline.force_check import force_model_check
-
-    check = force_model_check(problem)
-    report = dict(result.identifiability)
-    report["force_model_check"] = check.to_json()
-    if not check.passed:
-        # C and K are estimated jointly: a misfit that moves one moves the other along their
-        # ridge, so neither is reported as identified (on the simulated walks of
-        # analyses/coverage_study.py the check moved C by 11-12 sd on two records while K
-        # stayed within 3 sd, yet K's band missed the truth there).
-        jointly = "" if check.dependent.all() else "; the other is estimated jointly with it"
-        report["level"] = "not identified"
-        report["sentence"] = f"Not identified: {check.sentence}{jointly}."
-        report["identified_damping"] = False
-        report["identified_stiffness"] = False
-    return result.replace(identifiability=report)
-
-
-def downgrade_untrustworthy(result: IdentificationResult) -> IdentificationResult:
-    """Mark a posterior piled at the prior's edge, or a collapsed cloud, as not identified.
-
-    Returns a new result (or the same one when nothing is wrong).
-
-    Contraction alone would call such a posterior "well identified"; say what it is instead.
-    """
-    bound = result.parameters_at_prior_bound
-    # Few surviving *initial* ancestors is path degeneracy, normal for the rbpf (its moves
-    # renew the values); it means a collapse only for the seed's pf, whose values are
-    # renewed by nothing but the random walk.
-    collapsed = bool(result.frozen_parameters) or (
-        result.method == "pf" and result.final_ancestors is not None and result.final_ancestors <= 5
-    )
-    if not bound and not collapsed:
-        return result
-    report = dict(result.identifiability)
-    why = (
-        f"{parameters_in_words(bound)} {verb(len(bound), 'sits', 'sit')} at the edge of the "
-        "prior box"
-        if bound
-        else "the particle cloud collapsed"
-    )
-    check = report.get("force_model_check") or {}
-    also = "" if check.get("passed", True) else f" Also, {check['sentence']}."
-    report["level"] = "not identified"
-    report["sentence"] = (
-        f"Not identified: {why}, so the numbers reflect the prior range or a collapsed filter, "
-        "not this record; a model that fits the record better (see the residual diagnostics) "
-        f"or another noise setting is needed before C and K can be read from it.{also}"
-    )
-    report["identified_damping"] = False
-    report["identified_stiffness"] = False
-    return result.replace(identifiability=report)

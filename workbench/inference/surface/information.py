@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from workbench.inference.core import IdentificationProblem
+from workbench.inference.core import IdentificationProblem, SurfaceReport
 from workbench.inference.kalman import record_loglik
 from workbench.inference.surface.frf import surface_transmissibility
 from workbench.records.record import Record
@@ -152,8 +152,8 @@ def surface_report(
     problem: IdentificationProblem,
     record: Record,
     surface_model: str,
-) -> dict[str, Any]:
-    """Return the ``surface`` section of an identification's JSON (module docstring).
+) -> SurfaceReport:
+    """Return what the surface contributed: the JSON's ``surface`` (module docstring).
 
     Parameters
     ----------
@@ -168,30 +168,32 @@ def surface_report(
 
     Returns
     -------
-    dict
+    SurfaceReport
         ``model`` (``"coupled"``, ``"ignored (rigid floor)"`` or ``"rigid floor (no
-        ground_acc)"``), ``sentence``, and with a coupled surface its ``source``,
-        ``rms_acc_m_s2``, ``dominant_hz`` and ``information`` per parameter.
+        ground_acc)"``), ``sentence``, and with a coupled surface where C and K came from,
+        its ``source``, ``rms_acc_m_s2``, ``dominant_hz``, ``information`` per parameter and
+        the ``transmissibility`` estimate. C and K came from the transmissibility when the
+        result's route says so (:class:`~workbench.inference.core.result_parts.Route`).
     """
     if record.ground_acc_m_s2 is None:
-        return {
-            "model": "rigid floor (no ground_acc)",
-            "sentence": "The record measures no surface motion; it was identified as a walk on "
+        return SurfaceReport(
+            model="rigid floor (no ground_acc)",
+            sentence="The record measures no surface motion; it was identified as a walk on "
             "a rigid floor.",
-        }
+        )
     if surface_model == "rigid" or problem.surface is None:
         rms = float(np.sqrt(np.mean(np.square(record.ground_acc_m_s2))))
-        return {
-            "model": "ignored (rigid floor)",
-            "rms_acc_m_s2": rms,
-            "sentence": f"The record measures a surface motion ({rms:.3g} m/s^2 RMS) but the "
+        return SurfaceReport(
+            model="ignored (rigid floor)",
+            rms_acc_m_s2=rms,
+            sentence=f"The record measures a surface motion ({rms:.3g} m/s^2 RMS) but the "
             "model ignored it (rigid floor).",
-        }
+        )
     est, sd = result.estimates, result.posterior_sd
     c, k = est["damping_ns_per_m"], est["stiffness_n_per_m"]
     step = (STEP_SD * sd["damping_ns_per_m"], STEP_SD * sd["stiffness_n_per_m"])
     rms = problem.surface.rms_acc_m_s2
-    route = result.extra.get("surface_route")
+    route = result.route if result.route is not None and result.route.through_surface else None
     if route is None:
         info = information_with_and_without(problem, c, k, step)
     else:
@@ -203,39 +205,40 @@ def surface_report(
             "posterior_sd": dict(sd),
             "interval_95": {k: list(v) for k, v in result.interval().items()},
             "level": result.identifiability.get("level"),
-            "bins": route["bins"],
-            "band_hz": route["band_hz"],
+            "bins": route.bins,
+            "band_hz": list(route.band_hz or ()),
         }
     else:
         frf = surface_transmissibility(problem)
         frf_json = None if frf is None else frf.to_json()
-    report: dict[str, Any] = {
-        "model": "coupled",
-        "c_and_k_from": "transmissibility" if route is not None else "time history",
-        "source": problem.surface.source,
-        "rms_acc_m_s2": rms,
-        "dominant_hz": _dominant_hz(problem),
-        "information": info,
-        "transmissibility": frf_json,
-    }
+    dominant = _dominant_hz(problem)
     if route is not None:
         level = str(result.identifiability.get("level", ""))
-        lo, hi = route["band_hz"]
+        lo, hi = route.band_hz or (float("nan"), float("nan"))
         sd_rel = sd["natural_frequency_hz"] / est["natural_frequency_hz"]
-        report["sentence"] = (
-            f"C and K were read from the deck's transmissibility ({route['bins']} bins at "
+        sentence = (
+            f"C and K were read from the deck's transmissibility ({route.bins} bins at "
             f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them; the posterior "
             f"sd of f_n is {100 * sd_rel:.1f} % of it" + enough_vibration(rms, sd_rel, level)
         )
     elif frf_json is None:
-        report["sentence"] = (
-            f"The deck moved ({rms:.3g} m/s^2 RMS, mostly at {report['dominant_hz']:.2f} Hz) "
+        sentence = (
+            f"The deck moved ({rms:.3g} m/s^2 RMS, mostly at {dominant:.2f} Hz) "
             "only near the walker's gait harmonics, where its drive cannot be told from the "
             "walker's own force, so C and K came from the time history. " + _sentence(rms, info)
         )
     else:
-        report["sentence"] = _sentence(rms, info)
-    return report
+        sentence = _sentence(rms, info)
+    return SurfaceReport(
+        model="coupled",
+        sentence=sentence,
+        rms_acc_m_s2=rms,
+        c_and_k_from="transmissibility" if route is not None else "time history",
+        source=problem.surface.source,
+        dominant_hz=dominant,
+        information=info,
+        transmissibility=frf_json,
+    )
 
 
 #: The posterior sd of f_n, as a fraction of f_n, that the advice on more vibration aims at.
