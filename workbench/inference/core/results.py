@@ -13,9 +13,10 @@ numbers are kept, named as the posterior given the prior box, for diagnosis.
 
 Plotting lives in :mod:`workbench.reporting`; this module only computes.
 
-Why this module is long: it is the one object every method returns, and all its views
-(statsmodels-like accessors, summary, JSON, netCDF, arviz) read the same grades here; split
-across modules, one view could print what another withholds.
+All the views (statsmodels-like accessors, summary, JSON, netCDF, arviz) live in this one
+class because they read the same grades: split across modules, one view could print what
+another withholds. The parts only some runs produce are typed objects of
+:mod:`workbench.inference.core.result_parts`.
 """
 
 from __future__ import annotations
