@@ -123,8 +123,8 @@ def gait_record(
 
     GRF = M g (1 + sum_h BLF_h cos(2 pi h phi + p_h) + s cos(pi phi + 0.4)) + noise, with
     phi the elapsed steps (linear in t, or a linear chirp to ``end_pacing_hz``); s is a
-    left/right asymmetry sub-harmonic. The step waveform's maximum sits at a fixed phase,
-    so without the sub-harmonic the true footfall peaks are where phi crosses it.
+    left/right asymmetry sub-harmonic. The peak of the first harmonic sits at a fixed phase,
+    so without the sub-harmonic the true footfalls are where phi crosses it.
     """
     t = np.arange(round(duration_s * sample_rate_hz)) / sample_rate_hz
     rate_change = 0.0 if end_pacing_hz is None else (end_pacing_hz - pacing_hz) / duration_s
@@ -135,12 +135,9 @@ def gait_record(
     shape += subharmonic * np.cos(np.pi * phi + 0.4)
     rng = np.random.default_rng(seed)
     grf = mass_kg * G_M_S2 * (1 + shape) + noise_n * rng.standard_normal(t.size)
-    grid = np.linspace(0.0, 1.0, 200_001)[:-1]
-    one_step = sum(
-        b * np.cos(2 * np.pi * h * grid + p)
-        for h, (b, p) in enumerate(zip(blf, phases_rad, strict=True), start=1)
-    )
-    peak_phase = grid[np.argmax(one_step)]
+    # A boundary is the peak of the pacing (first-harmonic) component of the step shape,
+    # whichever of the waveform's humps is higher (docs/science.md 2).
+    peak_phase = (-phases_rad[0] / (2 * np.pi)) % 1.0
     k = np.arange(np.ceil(phi[0] - peak_phase), np.floor(phi[-1] - peak_phase) + 1)
     true_times = np.interp(k + peak_phase, phi, t)
     return Record(t, grf, mass_kg=mass_kg, source="synthetic.csv"), true_times

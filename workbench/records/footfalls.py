@@ -35,7 +35,14 @@ IntArray = NDArray[np.intp]
 _SAMPLES_PER_STEP = 128
 _DETECT_BAND_CYCLES_PER_STEP = (0.7, 1.4)  # keeps the pacing component only
 _REFINE_CUTOFF_CYCLES_PER_STEP = 6.0  # keeps the shape of the peak, not impact ringing
-_REFINE_HALF_WINDOW_STEPS = 0.3
+# Template matching: each step's window (0.6 step either side of its candidate, so both
+# humps of the step and a little of its neighbours) is compared with the median step at
+# shifts up to 0.3 step (less than the 0.35-0.65 step between the humps, so a match cannot
+# jump to the other hump); three passes let the template settle on the moved steps.
+_TEMPLATE_HALF_WINDOW_STEPS = 0.6
+_TEMPLATE_MAX_SHIFT_STEPS = 0.3
+_TEMPLATE_PASSES = 3
+_TEMPLATE_MIN_STEPS = 3
 _MIN_INTERVAL_STEPS = 0.6  # closer peaks are one step's double peak
 _EDGE_GUARD_STEPS = 0.25  # a peak this close to an end cannot be told from a filter edge
 _LOCAL_PROMINENCE_PEAKS = 17
@@ -115,22 +122,13 @@ def _detect_in_phase(
     )
     peaks = peaks[keep]
 
-    # Move each detection to the dominant peak of the acceleration (kept to the shape of
-    # the step, not its impact ringing) within a third of a step, with sub-sample precision.
-    half = round(_REFINE_HALF_WINDOW_STEPS * _SAMPLES_PER_STEP)
-    refined = np.empty(peaks.size)
-    height = np.empty(peaks.size)
-    for k, p in enumerate(peaks):
-        lo, hi = max(0, p - half), min(shape.size, p + half + 1)
-        j = lo + int(np.argmax(shape[lo:hi]))
-        offset = 0.0
-        if 0 < j < shape.size - 1:
-            a, b, c = shape[j - 1 : j + 2]
-            curvature = a - 2 * b + c
-            if curvature < 0:
-                offset = float(np.clip(0.5 * (a - c) / curvature, -0.5, 0.5))
-        refined[k] = grid[j] + offset / _SAMPLES_PER_STEP
-        height[k] = shape[j]
+    # Place each step by its whole shape, not by its highest point: each candidate moves to
+    # where its step best matches the walker's median step (normalised cross-correlation
+    # within 0.3 step), and the boundary is the peak of that median step's pacing component.
+    # Both humps of a double-humped step take part in the match, so the boundary keeps the
+    # same gait event whichever hump is higher in a given step.
+    refined, height = _align_to_template(shape, peaks)
+    refined = grid[0] + refined / _SAMPLES_PER_STEP
 
     # Spurious double peaks: while two footfalls are closer than 0.6 step, drop the lower.
     order = np.argsort(refined)
@@ -140,11 +138,74 @@ def _detect_in_phase(
         k = int(np.argmin(gaps))
         if gaps[k] >= _MIN_INTERVAL_STEPS:
             break
-        drop = k if height[k] < height[k + 1] else k + 1
+        drop = k if height[k] < height[k + 1] else k + 1  # the worse match goes
         refined = np.delete(refined, drop)
         height = np.delete(height, drop)
     inside = (refined >= _EDGE_GUARD_STEPS) & (refined <= total_steps - _EDGE_GUARD_STEPS)
     return np.interp(refined[inside], phase, time_s)
+
+
+def _align_to_template(shape: FloatArray, peaks: IntArray) -> tuple[FloatArray, FloatArray]:
+    """Place steps on the walker's median step shape (time warped to step units).
+
+    ``shape`` is the acceleration at :data:`_SAMPLES_PER_STEP` samples per step; ``peaks``
+    are the candidate footfalls (maxima of the pacing component). Each step's window of
+    ``2 x`` :data:`_TEMPLATE_HALF_WINDOW_STEPS` around its candidate is compared with the
+    median of all windows (each normalised to unit energy) at shifts up to
+    :data:`_TEMPLATE_MAX_SHIFT_STEPS`; the best shift (refined by a parabola) moves the
+    candidate, the template is rebuilt on the moved steps, and after
+    :data:`_TEMPLATE_PASSES` passes each step is placed at the peak of the template's
+    pacing component (its first Fourier coefficient over one step). Returns the positions
+    [fractional samples of ``shape``] and each step's correlation with the template.
+    """
+    n_peaks = peaks.size
+    positions = peaks.astype(np.float64)
+    match = np.ones(n_peaks)
+    if n_peaks < _TEMPLATE_MIN_STEPS:
+        return positions, match
+    per_step = _SAMPLES_PER_STEP
+    half = round(_TEMPLATE_HALF_WINDOW_STEPS * per_step)
+    shift = round(_TEMPLATE_MAX_SHIFT_STEPS * per_step)
+    pad = half + shift + per_step
+    padded = np.pad(shape, pad, mode="edge")
+    window = np.arange(-half, half + 1)
+    lags = np.arange(-shift, shift + 1)
+    # One step of the template, centred, for its pacing component.
+    one_step = np.arange(-(per_step // 2), per_step - per_step // 2)
+    carrier = np.exp(-2j * np.pi * one_step / per_step)
+    for _ in range(_TEMPLATE_PASSES):
+        centre = np.clip(np.rint(positions).astype(np.intp), -per_step, shape.size + per_step)
+        segments = padded[pad + centre[:, None] + window[None, :]]
+        segments = segments - segments.mean(axis=1, keepdims=True)
+        norms = np.linalg.norm(segments, axis=1)
+        usable = norms > 0
+        if np.count_nonzero(usable) < _TEMPLATE_MIN_STEPS:
+            return positions, match
+        template = np.median(segments[usable] / norms[usable, None], axis=0)
+        template -= template.mean()
+        template_norm = float(np.linalg.norm(template))
+        if template_norm == 0.0:
+            return positions, match
+        template /= template_norm
+        # Anchor: the peak of the template's pacing component, relative to the window centre.
+        c1 = complex(np.sum(template[half + one_step] * carrier))
+        anchor = -float(np.angle(c1)) / (2.0 * np.pi) * per_step
+        wide = padded[pad + centre[:, None] + np.arange(-half - shift, half + shift + 1)[None, :]]
+        views = np.lib.stride_tricks.sliding_window_view(wide, window.size, axis=1)
+        views = views - views.mean(axis=2, keepdims=True)
+        energy = np.linalg.norm(views, axis=2)
+        corr = np.einsum("klw,w->kl", views, template) / np.where(energy > 0, energy, np.inf)
+        best = np.argmax(corr, axis=1)
+        offset = np.zeros(n_peaks)
+        inner = (best > 0) & (best < lags.size - 1)
+        k = np.flatnonzero(inner)
+        a, b, c = corr[k, best[k] - 1], corr[k, best[k]], corr[k, best[k] + 1]
+        curvature = a - 2 * b + c
+        ok = curvature < 0
+        offset[k[ok]] = np.clip(0.5 * (a[ok] - c[ok]) / curvature[ok], -0.5, 0.5)
+        match = corr[np.arange(n_peaks), best]
+        positions = centre + lags[best] + offset + anchor
+    return positions, match
 
 
 def _track_from_footfalls(

@@ -19,6 +19,10 @@ Speed change (the real treadmill trial changes belt speed): steady walking at th
 requested pacing, a ramp over a few steps to ``pacing_ratio`` times it, and steady walking
 at the new pacing. The amplitudes follow Young's BLF1 law ``0.41 (f_p - 0.95)``, the one the
 population sampler uses, so a faster walker also pushes harder.
+
+Double-humped steps (:func:`double_hump_force`): the mean step force as two humps of chosen
+relative height, the loading hump after heel strike and the push-off hump before the next
+one, for testing that footfalls do not jump between humps of similar height.
 """
 
 from __future__ import annotations
@@ -30,8 +34,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.errors import UsageError
+from workbench.records.record import G_M_S2
 
-__all__ = ["GaitProfile"]
+__all__ = ["DOUBLE_HUMP_PHASES_STEP", "GaitProfile", "double_hump_force"]
 
 FloatArray = NDArray[np.float64]
 
@@ -44,6 +49,11 @@ BLF1_OFFSET_HZ = 0.95
 MIN_WALKING_STEPS = 2 * len(INITIATION_AMPLITUDE) + 2
 #: Range of a speed change's new pacing over the old one.
 PACING_RATIO_RANGE = (0.7, 1.4)
+#: Step phase of the loading hump and of the push-off hump of :func:`double_hump_force`
+#: [share of a step after heel strike]: loading a quarter step after heel strike, push-off
+#: just before the other foot's heel strike, so 0.35 step apart across the boundary and
+#: 0.65 step apart within the step (the mid-stance valley between them).
+DOUBLE_HUMP_PHASES_STEP = (0.25, 0.9)
 
 
 @dataclass(frozen=True)
@@ -184,3 +194,73 @@ class GaitProfile:
             "duration_factors": list(self.duration_factors),
             "amplitude_factors": list(self.amplitude_factors),
         }
+
+
+def double_hump_force(
+    mass_kg: float,
+    hump_ratio: float = 1.0,
+    *,
+    peak_fraction: float = 0.25,
+    width_step: float = 0.1,
+    harmonics: int = 4,
+) -> tuple[float, ...]:
+    """Return the mean step force of a double-humped step as Fourier coefficients.
+
+    The force over one step (phase ``theta`` from 0 at heel strike to ``2 pi``) is two
+    periodic Gaussian humps at :data:`DOUBLE_HUMP_PHASES_STEP`, the push-off hump
+    ``hump_ratio`` times the loading one, kept to ``harmonics`` harmonics (without the
+    constant) and scaled so that its maximum is ``peak_fraction`` of the body weight above
+    the mean. Pass the result as ``coefficients=`` to
+    :func:`~workbench.synth.simulate_walking`.
+
+    Parameters
+    ----------
+    mass_kg : float
+        Body mass [kg].
+    hump_ratio : float, default 1.0
+        Height of the push-off hump over the loading hump (above 0, at most 2); 0.8-1.2 are humps that
+        differ by up to 20 %.
+    peak_fraction : float, default 0.25
+        Highest point of the step force above the body weight, as a share of it.
+    width_step : float, default 0.1
+        Standard deviation of each hump [share of a step].
+    harmonics : int, default 4
+        Harmonics kept.
+
+    Returns
+    -------
+    tuple of float
+        ``a0, a1, b1, ..., an, bn`` [N] in the simulator's convention
+        ``a0 + sum_i a_i cos(i theta) + b_i sin(i theta)``, with ``a0 = 0``.
+    """
+    checks = (
+        (mass_kg, 0.0, np.inf, "mass_kg"),
+        (hump_ratio, 0.0, 2.0, "hump_ratio"),
+        (peak_fraction, 0.0, 1.0, "peak_fraction"),
+        (width_step, 0.02, 0.3, "width_step"),
+    )
+    for value, lo, hi, name in checks:
+        if not (np.isfinite(value) and lo < value <= hi):
+            raise UsageError(
+                f"double_hump_force: {name} must lie in ({lo:g}, {hi:g}], got {value!r}"
+            )
+    if int(harmonics) != harmonics or harmonics < 2:
+        raise UsageError(
+            f"double_hump_force: harmonics must be a whole number >= 2, got {harmonics!r}"
+        )
+    grid = np.arange(4096) / 4096.0
+    shape = np.zeros_like(grid)
+    for centre, height in zip(DOUBLE_HUMP_PHASES_STEP, (1.0, float(hump_ratio)), strict=True):
+        distance = (grid - centre + 0.5) % 1.0 - 0.5
+        shape += height * np.exp(-0.5 * (distance / width_step) ** 2)
+    orders = np.arange(1, int(harmonics) + 1)
+    cos = np.cos(2.0 * np.pi * np.outer(orders, grid))
+    sin = np.sin(2.0 * np.pi * np.outer(orders, grid))
+    a = 2.0 * (cos @ shape) / grid.size
+    b = 2.0 * (sin @ shape) / grid.size
+    kept = a @ cos + b @ sin
+    scale = peak_fraction * mass_kg * G_M_S2 / float(kept.max())
+    coefficients = np.zeros(1 + 2 * orders.size)
+    coefficients[1::2] = scale * a
+    coefficients[2::2] = scale * b
+    return tuple(float(x) for x in coefficients)
