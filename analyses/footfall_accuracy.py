@@ -7,9 +7,10 @@ Usage::
 Walks (seeds fixed in advance: 0-71 by default; walk ``s`` draws its details from
 ``numpy.random.default_rng([s, 0xF007])``): the kind cycles with the seed -- steady,
 overground (standing, three steps to start, steady, three to stop, standing:
-:meth:`GaitProfile.overground`), speed change (:meth:`GaitProfile.speed_change`, the new
-pacing 0.8-1.25 times the old after 18 steps, a 4-step ramp and 30 steps at the new pacing, so that the median pacing is the new one) -- and every other triple of seeds walks on a deck (sine or
-narrow-band, 1.5-4 Hz, 0.1-1.5 m/s^2 RMS, log-uniform). Every walk has double-humped steps
+:meth:`GaitProfile.overground`), speed change (:meth:`GaitProfile.speed_change`: 18 steps,
+a 4-step ramp, then 30 steps at 0.8-1.25 times the first pacing, so that the median pacing
+is the new one) -- and every other triple of seeds walks on a deck (sine or narrow-band,
+1.5-4 Hz, 0.1-1.5 m/s^2 RMS, log-uniform). Every walk has double-humped steps
 (:func:`double_hump_force`, the push-off hump 0.8-1.25 times the loading hump, drawn
 log-uniform, so the two humps differ by 0-20 % whichever is higher), mass 50-100 kg, pacing
 1.5-2.3 Hz, f_n 1.8-3.4 Hz, damping ratio 0.2-0.5, 1-3 % step-duration jitter, 2-8 %
@@ -230,7 +231,8 @@ def study(seeds: range, surface: bool) -> int:
         rows.append({"seed": seed, **d, **m, "failed": False})
         deck = f"{d['deck_rms_m_s2']:.2f}, {d['deck_frequency_hz']:.2f}" if d["deck"] else "-"
         print(
-            f"| {seed} | {d['kind']} | {deck} | {d['hump_ratio']:.2f} | {m['true_pacing_hz']:.3f} | "
+            f"| {seed} | {d['kind']} | {deck} | {d['hump_ratio']:.2f} | "
+            f"{m['true_pacing_hz']:.3f} | "
             f"{m['n']} | {100 * m['within_fund'] / max(m['n'], 1):.0f} % | "
             f"{100 * m['within_peak'] / max(m['n'], 1):.0f} % | {m['off_median']} | "
             f"{100 * m['pacing_error']:.2f} | {100 * m['p10']:+.1f}, {100 * m['p90']:+.1f} | "
@@ -296,7 +298,7 @@ def summarise(rows: list[dict[str, Any]]) -> None:
 
 
 def heel_strike_times(time_s: np.ndarray, force_n: np.ndarray) -> np.ndarray:
-    """Times where the force rises through 50 N after having been below 20 N."""
+    """Return the times where the force rises through 50 N after having been below 20 N."""
     strikes, loaded = [], bool(force_n[0] > 50.0)
     for i, value in enumerate(force_n):
         if not loaded and value > 50.0:
@@ -352,10 +354,11 @@ def embedded() -> None:
             regular = (span > 0.3) & (span < 1.0)  # not across a turn or a missed strike
             lag = lag[regular]
             centre = float(np.median(lag))
+            off = int(np.sum(np.abs(lag - centre) > OFF_HUMP_STEP))
             check = (
                 f"heel strikes {strikes.size}: footfall at {centre:.3f} step after the last "
-                f"heel strike (sd {np.std(lag):.3f}), {int(np.sum(np.abs(lag - centre) > OFF_HUMP_STEP))} "
-                f"of {lag.size} more than {OFF_HUMP_STEP} step from it"
+                f"heel strike (sd {np.std(lag):.3f}), {off} of {lag.size} more than "
+                f"{OFF_HUMP_STEP} step from it"
             )
         else:
             check = "no truth, no foot channels"

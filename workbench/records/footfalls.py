@@ -232,18 +232,17 @@ def locate_footfalls(
     pacing_hz: float | None,
     surface_acc: FloatArray | None = None,
     *,
-    place_on_cleaned: bool = False,
+    place_on_cleaned: bool = True,
 ) -> FloatArray:
     """Footfall times [s from the first sample, fractional]; see :func:`detect_footfalls`.
 
-    With a measured surface acceleration, the pacing and the candidate footfalls come from the
-    acceleration without its part that is a linear response to the surface
-    (:func:`without_surface`), so that a strong deck cannot pass for the walker's pacing; each
-    footfall is still placed on the dominant peak of the acceleration itself, as on a rigid
-    floor (placing it on the cleaned one picks the other hump of many steps on a deck, which
-    would change the step convention of every deck result). ``place_on_cleaned`` places
-    them on the cleaned acceleration instead; ``analyses/deck_footfalls.py`` measures both
-    against the true steps of simulated deck walks.
+    With a measured surface acceleration, the pacing, the candidate footfalls and their
+    placement all use the acceleration without its part that is a linear response to the
+    surface (:func:`without_surface`): the walker's own response, so that a strong deck can
+    neither pass for the walker's pacing nor move a boundary. ``place_on_cleaned=False``
+    places the steps on the acceleration itself (the deck's response included), for
+    ``analyses/deck_footfalls.py``, which compares the two placements against the true steps
+    of simulated deck walks.
     """
     n = acc.size
     band = _search_band(pacing_hz)

@@ -218,8 +218,8 @@ def double_hump_force(
     mass_kg : float
         Body mass [kg].
     hump_ratio : float, default 1.0
-        Height of the push-off hump over the loading hump (above 0, at most 2); 0.8-1.2 are humps that
-        differ by up to 20 %.
+        Height of the push-off hump over the loading hump (above 0, at most 2); 0.8-1.25
+        are humps that differ by up to 20 %.
     peak_fraction : float, default 0.25
         Highest point of the step force above the body weight, as a share of it.
     width_step : float, default 0.1
