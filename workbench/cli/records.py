@@ -51,7 +51,7 @@ def _inspect_text(r: dict[str, Any]) -> str:
         f"pacing          {r['pacing_hz']:.3f} Hz from footfalls "
         f"(spectral {p['spectral_hz']}, per-step p10-p90 {p['instantaneous_p10_hz']}-"
         f"{p['instantaneous_p90_hz']} Hz{', varies' if p['varies'] else ''})",
-        f"steps           {r['steps']} whole steps",
+        f"steps           {r['steps']} whole steps{_split_text(r.get('split'))}",
         f"mean GRF        {r['mean_grf_n']:.1f} N over whole steps",
         f"static balance  {r['static_balance']:.3f} (mean GRF / M g)",
     ]
@@ -62,6 +62,15 @@ def _inspect_text(r: dict[str, Any]) -> str:
     if r.get("report"):
         lines.append(f"report          {r['report']}")
     return "\n".join(lines)
+
+
+def _split_text(split: dict[str, Any] | None) -> str:
+    if not split:
+        return ""
+    off = split["off_rhythm_steps"]
+    if not off:
+        return ", all on the walker's rhythm"
+    return f", {len(off)} off the walker's rhythm ({100 * split['off_rhythm_share']:.0f} %)"
 
 
 def add_records_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:

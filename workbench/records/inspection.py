@@ -17,7 +17,9 @@ from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ, COMResponse, prepr
 from workbench.records.record import G_M_S2, Record
 from workbench.records.steps import (
     PacingEstimate,
+    SplitCheck,
     Steps,
+    check_split,
     estimate_pacing,
     rescale_to_mass,
     segment_steps,
@@ -50,7 +52,8 @@ class Inspection:
     com : COMResponse
         COM acceleration, velocity and displacement after preprocessing.
     steps : Steps
-        Footfall steps, peak to peak of the COM acceleration.
+        Footfall steps, each from one peak of the walker's pacing component to the next
+        (docs/science.md 2).
     pacing : PacingEstimate
         Global and instantaneous pacing frequency.
     static_balance : float
@@ -59,6 +62,8 @@ class Inspection:
         The same ratio before any rescaling (equal to ``static_balance`` without rescaling).
     warnings : list of str
         Plain sentences about anything suspicious.
+    split : SplitCheck or None
+        Whether the steps keep the walker's rhythm (:func:`~workbench.records.steps.check_split`).
     """
 
     record: Record
@@ -68,6 +73,7 @@ class Inspection:
     static_balance: float
     static_balance_raw: float
     warnings: list[str] = field(default_factory=list)
+    split: SplitCheck | None = None
 
     @property
     def mean_grf_n(self) -> float:
@@ -99,6 +105,7 @@ class Inspection:
                 "times_s": [round(float(x), 4) for x in self.pacing.times_s],
                 "instantaneous_hz": [round(float(x), 4) for x in inst],
             },
+            "split": None if self.split is None else self.split.to_json(self.steps),
             "static_balance_raw": round(float(self.static_balance_raw), 4),
             "grf_scale_factor": rec.metadata.get("grf_scale_factor"),
             "highpass_hz": self.com.highpass_hz,
@@ -207,8 +214,12 @@ def inspect_record(
         )
     elif message is not None:
         warnings.append(message)
-    pacing = estimate_pacing(com, steps)
+    pacing = estimate_pacing(com, steps, surface_acc_m_s2=record.ground_acc_m_s2)
     check_walking(record, steps, pacing)
+    split = check_split(steps)
+    off_rhythm = split.warning(steps, record.name)
+    if off_rhythm is not None:
+        warnings.append(off_rhythm)
     if not highpass_hz and abs(balance - 1.0) > DRIFT_BALANCE_TOLERANCE:
         warnings.append(
             f"{record.name}: with the high-pass off, the static offset of "
@@ -242,4 +253,5 @@ def inspect_record(
         static_balance=float(balance),
         static_balance_raw=float(balance_raw),
         warnings=warnings,
+        split=split,
     )

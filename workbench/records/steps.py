@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,6 +26,7 @@ from workbench.errors import InputError, UsageError
 from workbench.records.footfalls import (
     detect_footfalls,
     locate_footfalls,
+    without_surface,
 )
 from workbench.records.pacing import (
     _VARIES_SMOOTH_STEPS,
@@ -38,7 +40,9 @@ from workbench.records.record import G_M_S2, Record
 __all__ = [
     "WALKING_BAND_HZ",
     "PacingEstimate",
+    "SplitCheck",
     "Steps",
+    "check_split",
     "detect_footfalls",
     "estimate_pacing",
     "rescale_to_mass",
@@ -53,6 +57,20 @@ IntArray = NDArray[np.intp]
 # --- pacing estimate -------------------------------------------------------------------
 _WELCH_SEGMENT_S = 16.0
 _VARIES_SPREAD = 0.05
+
+# --- consistency of the split -----------------------------------------------------------
+#: A footfall further than this from where its four neighbours put it is off the rhythm
+#: [step]: a boundary on the other hump of a double-humped step is 0.35-0.65 step off, the
+#: step-to-step jitter of steady walking about 0.02 and a gait initiation (durations 1.30,
+#: 1.12 of steady) 0.07.
+OFF_RHYTHM_PHASE_STEPS = 0.15
+#: A step whose duration is outside this band around the median of the nine steps centred
+#: on it is off the rhythm (a pause, a turn, a missed or extra footfall).
+OFF_RHYTHM_DURATION = (0.75, 1.35)
+_RHYTHM_NEIGHBOURS = 2  # footfalls either side that predict one
+_RHYTHM_DURATION_STEPS = 9
+#: Off-rhythm steps named in a warning; more are counted.
+_NAMED_STEPS = 8
 
 
 # ======================================================================================
@@ -121,6 +139,18 @@ class Steps:
     def stop(self) -> int:
         """Sample closing the last whole step (exclusive end of the steps' span)."""
         return int(self.boundaries[-1])
+
+    @property
+    def pacing_hz(self) -> float:
+        """The walk's pacing [Hz]: median over strides of ``2 / (d_j + d_j+1)``.
+
+        The one definition every command reports (NaN without steps): the median of the
+        step rate, taken over pairs of steps so that the alternation of an asymmetric gait
+        does not bias it, and over the record so that a turn or a pause does not.
+        """
+        if self.n_steps == 0:
+            return float("nan")
+        return float(np.median(_stride_pacing(self.durations_s)))
 
     @property
     def mid_times_s(self) -> FloatArray:
@@ -216,6 +246,120 @@ def segment_steps(
 
 
 # ======================================================================================
+# consistency of the split
+# ======================================================================================
+
+
+@dataclass(frozen=True)
+class SplitCheck:
+    """Whether the steps keep the walker's rhythm (docs/science.md 2).
+
+    Every boundary should be the same gait event of its step. A boundary that jumped to the
+    other hump of the GRF, an extra or a missed footfall, a pause or a turn shows as a
+    footfall away from where its neighbours put it, or a step much longer or shorter than
+    those around it.
+
+    Parameters
+    ----------
+    phase_off_steps : ndarray
+        For each footfall, its distance [step] from the time its two neighbours on either
+        side predict (each neighbour ``j`` predicts ``t_j + (k - j) d`` with ``d`` the
+        median duration of the four steps between them; the median prediction is used);
+        NaN where fewer than two neighbours exist.
+    duration_ratio : ndarray
+        Each step's duration over the median of the nine steps centred on it.
+    off_rhythm : ndarray of int
+        Steps (0-based) off the rhythm: a boundary more than
+        :data:`OFF_RHYTHM_PHASE_STEPS` off, or a duration ratio outside
+        :data:`OFF_RHYTHM_DURATION`.
+    n_steps : int
+        Number of steps checked.
+    """
+
+    phase_off_steps: FloatArray
+    duration_ratio: FloatArray
+    off_rhythm: IntArray
+    n_steps: int
+
+    @property
+    def share(self) -> float:
+        """Share of the steps that are off the rhythm (0 without steps)."""
+        return float(self.off_rhythm.size / self.n_steps) if self.n_steps else 0.0
+
+    def to_json(self, steps: Steps) -> dict[str, Any]:
+        """Return the ``split`` object of ``inspect --json`` (steps numbered from 1)."""
+        start = steps.footfall_times_s[:-1]
+        finite = self.phase_off_steps[np.isfinite(self.phase_off_steps)]
+        return {
+            "off_rhythm_share": round(self.share, 4),
+            "off_rhythm_steps": [int(j) + 1 for j in self.off_rhythm],
+            "off_rhythm_times_s": [round(float(start[j]), 3) for j in self.off_rhythm],
+            "phase_off_p95_steps": round(float(np.percentile(finite, 95)), 4)
+            if finite.size
+            else None,
+            "phase_tolerance_steps": OFF_RHYTHM_PHASE_STEPS,
+            "duration_band": list(OFF_RHYTHM_DURATION),
+        }
+
+    def warning(self, steps: Steps, name: str) -> str | None:
+        """Return a warning sentence naming the off-rhythm steps, or None when there are none."""
+        if self.off_rhythm.size == 0:
+            return None
+        start = steps.footfall_times_s[:-1]
+        named = ", ".join(
+            f"{int(j) + 1} ({float(start[j]):.1f} s)" for j in self.off_rhythm[:_NAMED_STEPS]
+        )
+        more = self.off_rhythm.size - _NAMED_STEPS
+        if more > 0:
+            named += f" and {more} more"
+        return (
+            f"{name}: {self.off_rhythm.size} of {self.n_steps} steps "
+            f"({100 * self.share:.0f} %) are off the walker's rhythm -- a boundary more than "
+            f"{OFF_RHYTHM_PHASE_STEPS:g} step from where its neighbours put it, or a duration "
+            f"outside {OFF_RHYTHM_DURATION[0]:g}-{OFF_RHYTHM_DURATION[1]:g} times that of the "
+            f"steps around it: steps {named}; these are pauses, turns or irregular steps, or "
+            "footfalls the split could not place, and their force pieces and step-paired "
+            "statistics are less reliable."
+        )
+
+
+def check_split(steps: Steps) -> SplitCheck:
+    """Check that every boundary keeps the walker's rhythm (see :class:`SplitCheck`).
+
+    Parameters
+    ----------
+    steps : Steps
+        The steps of a record.
+
+    Returns
+    -------
+    SplitCheck
+    """
+    times = np.asarray(steps.footfall_times_s, dtype=np.float64)
+    durations = np.asarray(steps.durations_s, dtype=np.float64)
+    n_steps = durations.size
+    if n_steps == 0:
+        empty = np.empty(0)
+        return SplitCheck(np.full(times.size, np.nan), empty, np.empty(0, np.intp), 0)
+    local = ndimage.median_filter(durations, size=_RHYTHM_DURATION_STEPS, mode="nearest")
+    ratio = durations / local
+    phase_off = np.full(times.size, np.nan)
+    reach = _RHYTHM_NEIGHBOURS
+    for k in range(times.size):
+        lo, hi = max(0, k - reach), min(times.size - 1, k + reach)
+        neighbours = [j for j in range(lo, hi + 1) if j != k]
+        if len(neighbours) < 2:
+            continue
+        d = float(np.median(durations[lo:hi]))
+        predicted = np.median([times[j] + (k - j) * d for j in neighbours])
+        phase_off[k] = abs(times[k] - predicted) / d
+    lo_ratio, hi_ratio = OFF_RHYTHM_DURATION
+    bad_boundary = np.nan_to_num(phase_off, nan=0.0) > OFF_RHYTHM_PHASE_STEPS
+    bad = (ratio < lo_ratio) | (ratio > hi_ratio) | bad_boundary[:-1] | bad_boundary[1:]
+    return SplitCheck(phase_off, ratio, np.flatnonzero(bad).astype(np.intp), n_steps)
+
+
+# ======================================================================================
 # pacing
 # ======================================================================================
 
@@ -268,9 +412,12 @@ class PacingEstimate:
     method: str
 
 
-def _welch_pacing(com: COMResponse) -> float:
+def _welch_pacing(com: COMResponse, surface_acc_m_s2: ArrayLike | None = None) -> float:
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
     fs = com.sample_rate_hz
+    if surface_acc_m_s2 is not None:
+        # The walker's own response: a deck's line is not the walker's pacing.
+        acc = without_surface(acc, surface_acc_m_s2, fs)
     nperseg = min(acc.size, round(_WELCH_SEGMENT_S * fs))
     if nperseg < 8:
         return float("nan")
@@ -287,7 +434,12 @@ def _welch_pacing(com: COMResponse) -> float:
     return _pacing_from_spectrum(freq_hz, power, WALKING_BAND_HZ)
 
 
-def estimate_pacing(com: COMResponse, steps: Steps | None = None) -> PacingEstimate:
+def estimate_pacing(
+    com: COMResponse,
+    steps: Steps | None = None,
+    *,
+    surface_acc_m_s2: ArrayLike | None = None,
+) -> PacingEstimate:
     """Estimate the pacing frequency of a record from its spectrum and its footfalls.
 
     Parameters
@@ -297,6 +449,9 @@ def estimate_pacing(com: COMResponse, steps: Steps | None = None) -> PacingEstim
     steps : Steps, optional
         Its steps; segmented here when not given. If segmentation finds fewer than three
         steps, the spectral estimate is used alone.
+    surface_acc_m_s2 : array_like, optional
+        The measured surface acceleration (a vibrating deck): the spectrum is then that of
+        the acceleration without its linear response to the deck, as for the footfalls.
 
     Returns
     -------
@@ -304,10 +459,10 @@ def estimate_pacing(com: COMResponse, steps: Steps | None = None) -> PacingEstim
         Global, spectral and footfall-based pacing and the per-step series. The default
         global ``pacing_hz`` is the footfall median.
     """
-    spectral = _welch_pacing(com)
+    spectral = _welch_pacing(com, surface_acc_m_s2)
     if steps is None:
         try:
-            steps = segment_steps(com)
+            steps = segment_steps(com, surface_acc_m_s2=surface_acc_m_s2)
         except InputError:
             steps = None
     if steps is None or steps.n_steps < 1:
@@ -323,7 +478,7 @@ def estimate_pacing(com: COMResponse, steps: Steps | None = None) -> PacingEstim
         )
     instantaneous = 1.0 / steps.durations_s
     stride_hz = _stride_pacing(steps.durations_s)
-    footfall = float(np.median(stride_hz))
+    footfall = steps.pacing_hz
     size = min(_VARIES_SMOOTH_STEPS, stride_hz.size)
     smoothed = ndimage.median_filter(stride_hz, size=size, mode="nearest")
     p10, p50, p90 = np.percentile(smoothed, [10, 50, 90])

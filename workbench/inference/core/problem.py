@@ -444,7 +444,8 @@ def build_problem(
     harmonics : int, default 10
         Number of harmonics n (the seed's numerical example uses 10).
     pacing_hz : float, optional
-        Global pacing frequency; default the median step rate (``1 / median duration``) for
+        Global pacing frequency; default the steps' pacing (:attr:`Steps.pacing_hz
+        <workbench.records.steps.Steps.pacing_hz>`, the one every command reports) for
         ``pieces="steps"``. Required for ``pieces="whole"``.
     time_basis : {"step_phase", "absolute"}
         Basis time convention (module docstring). With ``pieces="whole"`` the step phase is
@@ -489,7 +490,7 @@ def build_problem(
         starts = bounds - first
         durations = np.diff(t[bounds])
         if pacing_hz is None:
-            pacing_hz = float(1.0 / np.median(durations))
+            pacing_hz = steps.pacing_hz
     elif pieces == "whole":
         if pacing_hz is None:
             raise UsageError("pieces='whole' needs a pacing frequency (--pacing HZ)")
