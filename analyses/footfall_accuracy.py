@@ -328,11 +328,13 @@ def embedded() -> None:
         if truth and "step_start_s" in truth:
             phase, _ = footfall_phases(record, times - float(record.time_s[0]))
             frac = phase[np.isfinite(phase)] % 1.0
-            fundamental, _ = true_events(truth)
+            fundamental, peak = true_events(truth)
             centre = float(np.angle(np.mean(np.exp(2j * np.pi * frac))) / (2.0 * np.pi))
             check = (
                 f"truth: {100 * np.mean(np.abs(_wrap(frac - fundamental)) <= WITHIN_STEP):.0f} % "
-                f"within {WITHIN_STEP} step of the event, "
+                f"within {WITHIN_STEP} step of the event "
+                f"({100 * np.mean(np.abs(_wrap(frac - peak)) <= WITHIN_STEP):.0f} % of the GRF "
+                "peak), "
                 f"{int(np.sum(np.abs(_wrap(frac - centre)) > OFF_HUMP_STEP))} more than "
                 f"{OFF_HUMP_STEP} step off the median phase; true pacing "
                 f"{true_pacing(truth):.3f} Hz"

@@ -1,11 +1,11 @@
-"""Footfall detection: one dominant force peak per step, found in time warped to step units.
+"""Footfall detection: one boundary per step, found in time warped to step units.
 
-Holds :func:`detect_footfalls` and its helpers (docs/science.md 2, step 4): the record is
-turned into a COM acceleration, time is warped so that every step lasts the same number of
-samples (after the pacing track of :mod:`workbench.records.pacing`), candidate
-peaks are found in a band around the pacing and refined on a wider band, and the footfall
-times are mapped back to sample indices. :func:`workbench.records.steps.segment_steps` cuts
-the steps between these footfalls.
+Holds :func:`detect_footfalls` and its helpers (docs/science.md 2, step 5): time is warped
+so that every step lasts the same number of samples (after the pacing track of
+:mod:`workbench.records.pacing`), candidate boundaries are the maxima of the pacing
+component, each step is placed by matching its whole shape to the walker's median step,
+and the boundary times are mapped back to sample indices.
+:func:`workbench.records.steps.segment_steps` cuts the steps between these footfalls.
 """
 
 from __future__ import annotations
@@ -89,10 +89,10 @@ def _detect_in_phase(
     pacing_hz: FloatArray,
     place_acc: FloatArray | None = None,
 ) -> FloatArray:
-    """Footfall peak times [s from the first sample, fractional] given a local pacing.
+    """Boundary times [s from the first sample, fractional] given a local pacing.
 
-    Candidates come from ``acc``; each is placed on the dominant peak of ``place_acc``
-    (default ``acc``).
+    Candidates come from ``acc``; each is placed by matching its step of ``place_acc``
+    (default ``acc``) to the median step.
     """
     n = acc.size
     time_s = np.arange(n) / sample_rate_hz
@@ -324,12 +324,16 @@ def detect_footfalls(
     *,
     pacing_hz: float | None = None,
 ) -> IntArray:
-    """Sample indices of the per-step peaks of the COM acceleration.
+    """Sample indices of the step boundaries of the COM acceleration.
 
-    In walking, the total vertical GRF (hence the COM acceleration) has one dominant peak
-    per step, just after each heel strike; the seed study cuts records "peak to peak" there.
-    The algorithm copes with pacing that changes along the record, odd force shapes, weak
-    first harmonics (slow walking) and strong left/right asymmetry:
+    The seed study cuts records "peak to peak", assuming one dominant GRF peak per step. The
+    walking GRF is double-humped (a loading and a push-off hump of similar height), so the
+    highest point jumps between the humps from step to step; a boundary here is instead the
+    peak of the walker's pacing (first-harmonic) component, placed in every step by the
+    step's whole shape, which lies in double support just after heel strike
+    (docs/science.md 2). The algorithm copes with pacing that changes along the record,
+    double humps of any relative height, weak first harmonics (slow walking) and strong
+    left/right asymmetry:
 
     1. Local pacing: Hann-windowed periodograms of 8 s windows every 1 s; in each, the
        highest peak in the walking band (1.0-3.2 Hz, or half an octave either side of
@@ -343,11 +347,14 @@ def detect_footfalls(
        maximum per step; its peaks at least half a step apart are candidates. Candidates
        whose prominence is below 0.2 of the median of their 17 neighbours, or 0.1 of the
        record's median (standing, turning on the spot), are dropped.
-    4. Each candidate moves to the highest point, within 0.3 step, of the acceleration
-       low-passed at 6 cycles per step (the dominant GRF peak of that step, not impact
-       ringing), refined to a fraction of a sample by a parabola.
-    5. Spurious double peaks: while two footfalls are less than 0.6 step apart, the lower
-       one is dropped. Peaks within 0.25 step of either end are dropped (filter edges).
+    4. Each candidate's window (0.6 step either side) of the acceleration low-passed at 6
+       cycles per step is matched to the median of all windows (normalised
+       cross-correlation, shifts up to 0.3 step, refined by a parabola), three times with
+       the template rebuilt on the moved steps; each step is then placed at the peak of the
+       template's pacing component (its first Fourier coefficient over one step).
+    5. Spurious double peaks: while two footfalls are less than 0.6 step apart, the one
+       that matches the template worse is dropped. Boundaries within 0.25 step of either
+       end are dropped (filter edges).
     6. Steps 2-5 are repeated once with the local pacing taken from the footfalls found
        (pacing of each pair of steps, running median over 5, held within 30 % of the
        spectral track), which follows fast changes of pacing better than 8 s spectra.
@@ -364,7 +371,7 @@ def detect_footfalls(
     Returns
     -------
     ndarray of int
-        Increasing sample indices of the footfall peaks (one more than the whole steps).
+        Increasing sample indices of the step boundaries (one more than the whole steps).
 
     Raises
     ------

@@ -1,9 +1,11 @@
 """Footfall steps, pacing frequency and static balance of a walking record.
 
 docs/science.md 2, steps 4-6 (the seed study's section 5.2): the COM acceleration is cut
-into single footfall steps "peak to peak" (in walking, the total vertical GRF has one
-dominant peak per step, just after each heel strike), the pacing (step) frequency is
-estimated from the spectrum and from the footfall times, and the mean force over whole
+into single footfall steps, each from one boundary to the next (a boundary is the peak of
+the walker's pacing component, placed in each step by its whole shape, so that it stays on
+the same gait event whichever hump of the double-humped GRF is higher), the split is
+checked against the walker's rhythm (:func:`check_split`), the pacing (step) frequency is
+estimated from the footfall times and from the spectrum, and the mean force over whole
 steps is checked against the body weight.
 
 The footfall detection lives in :mod:`workbench.records.footfalls` and the spectral pacing
@@ -80,7 +82,7 @@ _NAMED_STEPS = 8
 
 @dataclass(frozen=True, eq=False)
 class Steps:
-    """Single footfall steps of a record, cut peak to peak of the COM acceleration.
+    """Single footfall steps of a record, boundary to boundary (docs/science.md 2).
 
     Step ``j`` spans samples ``boundaries[j]:boundaries[j + 1]`` (the closing peak belongs
     to the next step). Iterating yields one ``slice`` per step, so ``com.acc_m_s2[s]`` is
@@ -89,9 +91,9 @@ class Steps:
     Parameters
     ----------
     boundaries : ndarray of int
-        Sample indices of the footfall peaks, increasing; ``n_steps + 1`` values.
+        Sample indices of the step boundaries (footfalls), increasing; ``n_steps + 1`` values.
     footfall_times_s : ndarray
-        Times of the footfall peaks [s, on the record's time axis], refined to a fraction
+        Times of the step boundaries [s, on the record's time axis], refined to a fraction
         of a sample (``boundaries`` are the nearest samples).
     durations_s : ndarray
         Step durations [s], ``diff(footfall_times_s)``.
@@ -187,7 +189,7 @@ def segment_steps(
     min_steps: int = 3,
     surface_acc_m_s2: ArrayLike | None = None,
 ) -> Steps:
-    """Cut a COM response into single footfall steps, peak to peak.
+    """Cut a COM response into single footfall steps, boundary to boundary.
 
     Parameters
     ----------
@@ -206,7 +208,7 @@ def segment_steps(
     Returns
     -------
     Steps
-        The whole steps between the first and last footfall peak.
+        The whole steps between the first and last footfall.
 
     Raises
     ------
@@ -519,7 +521,7 @@ def _check_steps_fit(record: Record, steps: Steps) -> None:
 def static_balance(record: Record, steps: Steps) -> float:
     """Mean vertical GRF over whole steps divided by the body weight M g.
 
-    Averaging over whole steps (first footfall peak to last) avoids the bias of a partial
+    Averaging over whole steps (first footfall to last) avoids the bias of a partial
     step at either end. A walking person neither rises nor sinks on average, so the ratio is
     1 for a correct mass and a correctly calibrated sensor.
 

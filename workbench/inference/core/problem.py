@@ -16,8 +16,8 @@ else, the way algorithms in the ``particles`` library take a model. The problem 
   * ``time_basis="absolute"``: the seed's ``cos(2 pi i f_p t)`` on the record's time axis with
     one global pacing frequency;
 
-- the pieces: footfall steps cut peak to peak (seed section 5.2) or the whole record as one
-  piece. At the start of each piece the force coefficients are drawn afresh from
+- the pieces: footfall steps, boundary to boundary (seed section 5.2, docs/science.md 2), or
+  the whole record as one piece. At the start of each piece the force coefficients are drawn afresh from
   :class:`ForcePrior`; C, K, u and u' carry over;
 - the noise model (:class:`NoiseModel`) and the prior box of (C, K)
   (:class:`StiffnessDampingPrior`).

@@ -5,7 +5,7 @@ force cannot absorb, so any force the basis misses lands on (C, K) instead. The 
 width does not show this: it measures the noise, not the misfit, and a misfitting model is
 often *more* confident. Measured on the simulated walks of ``tests/test_exact.py`` (step
 durations, amplitudes and phases varying from step to step, force coefficients splined
-through the steps, footfall pieces cut peak to peak): the marginal likelihood put (C, K) in
+through the steps, footfall pieces boundary to boundary): the marginal likelihood put (C, K) in
 a corner of the prior box some 30-1000 posterior sd from the truth, and merely allowing each
 harmonic to drift linearly across each step moved the mode by 10-30 sd the other way
 (``analyses/coverage_study.py``). A user must be told.
