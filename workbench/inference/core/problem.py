@@ -17,8 +17,8 @@ else, the way algorithms in the ``particles`` library take a model. The problem 
     one global pacing frequency;
 
 - the pieces: footfall steps, boundary to boundary (seed section 5.2, docs/science.md 2), or
-  the whole record as one piece. At the start of each piece the force coefficients are drawn afresh from
-  :class:`ForcePrior`; C, K, u and u' carry over;
+  the whole record as one piece. At the start of each piece the force coefficients are
+  drawn afresh from :class:`ForcePrior`; C, K, u and u' carry over;
 - the noise model (:class:`NoiseModel`) and the prior box of (C, K)
   (:class:`StiffnessDampingPrior`).
 
