@@ -1,0 +1,229 @@
+"""The footfall split: one gait event per boundary, whatever the humps and the deck.
+
+docs/science.md 2, step 5. Seeds and ranges are fixed in advance: double-humped walks are
+seeds 100-111 of :func:`double_hump_walk` (steady, rigid and deck alternating), the hump
+ratios 0.8, 0.9, 1.0, 1.1, 1.25 (seed 7); the deck-off comparison seeds 200-203.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from workbench import datasets
+from workbench.diagnostics.criticism_data import prepare as prepare_criticism
+from workbench.errors import UsageError
+from workbench.inference.core.problem import build_problem
+from workbench.records.inspection import inspect_record
+from workbench.records.steps import (
+    OFF_RHYTHM_PHASE_STEPS,
+    Steps,
+    check_split,
+)
+from workbench.synth import SineDeck, simulate_walking
+from workbench.synth.gait import DOUBLE_HUMP_PHASES_STEP, double_hump_force
+
+from .test_steps import heel_strike_indices, read_insole_feet, read_treadmill_plates
+
+
+def double_hump_walk(seed: int, hump_ratio: float, deck_rms: float = 0.0):
+    """A steady 72 kg walker at 1.85 Hz with double-humped steps (2 % step jitter)."""
+    rng = np.random.default_rng([seed, 33])
+    deck = None
+    if deck_rms > 0:
+        deck = SineDeck(deck_rms, float(rng.uniform(2.3, 3.6)), float(rng.uniform(0, 6.28)))
+    return simulate_walking(
+        mass_kg=72.0,
+        pacing_hz=1.85,
+        duration_s=40.0,
+        natural_frequency_hz=float(rng.uniform(2.0, 3.2)),
+        damping_ratio=float(rng.uniform(0.2, 0.45)),
+        coefficients=double_hump_force(72.0, hump_ratio),
+        step_duration_sd=0.02,
+        amplitude_sd=0.05,
+        phase_sd_rad=0.05,
+        noise_sd_n=5.0,
+        sample_rate_hz=200.0,
+        ground_acc_m_s2=deck,
+        start="steady",
+        seed=seed,
+    ).record
+
+
+def true_event_phase(truth: dict) -> float:
+    """Phase [share of a step] of the peak of the true GRF's first harmonic."""
+    mass, k, c = truth["mass_kg"], truth["stiffness_n_per_m"], truth["damping_ns_per_m"]
+    a1, b1 = truth["force_coefficients"][1:3]
+    w = 2 * np.pi / np.median(truth["step_duration_s"])
+    z = (a1 - 1j * b1) * (-mass * w**2 / (k - mass * w**2 + 1j * c * w))
+    return float((-np.angle(z) / (2 * np.pi)) % 1.0)
+
+
+def boundary_errors(record, steps: Steps) -> np.ndarray:
+    """Each boundary's distance [step] from the true event of its true step."""
+    truth = record.metadata["truth"]
+    starts = np.asarray(truth["step_start_s"])
+    durations = np.asarray(truth["step_duration_s"])
+    t = steps.footfall_times_s - record.time_s[0]
+    k = np.searchsorted(starts, t, side="right") - 1
+    phase = (t - starts[k]) / durations[k]
+    return np.abs((phase - true_event_phase(truth) + 0.5) % 1.0 - 0.5)
+
+
+@pytest.mark.parametrize("hump_ratio", [0.8, 0.9, 1.0, 1.1, 1.25])
+def test_boundaries_stay_on_one_event_whatever_the_hump_heights(hump_ratio: float) -> None:
+    record = double_hump_walk(7, hump_ratio)
+    insp = inspect_record(record.replace(pacing_hz=None))
+    errors = boundary_errors(record, insp.steps)
+    assert np.all(errors < 0.1), errors.max()
+    assert check_split(insp.steps).off_rhythm.size == 0
+    # The per-step pacing of a steady walk stays within 5 % of the true median pacing.
+    true_fp = 1.0 / np.median(record.metadata["truth"]["step_duration_s"])
+    p10, p90 = np.percentile(insp.pacing.instantaneous_hz, [10, 90])
+    assert 0.95 * true_fp < p10 and p90 < 1.05 * true_fp
+    assert not insp.pacing.varies
+    assert insp.pacing.pacing_hz == pytest.approx(true_fp, rel=0.005)
+
+
+@pytest.mark.slow
+def test_double_humped_walks_on_rigid_floors_and_decks() -> None:
+    # Seeds 100-111: hump ratio 0.8-1.25 (log-uniform), every other walk on a 0.1-1 m/s^2
+    # RMS sine deck at 2.3-3.6 Hz, measured.
+    errors, pacing_errors = [], []
+    for seed in range(100, 112):
+        rng = np.random.default_rng(seed)
+        ratio = float(np.exp(rng.uniform(np.log(0.8), np.log(1.25))))
+        deck = float(np.exp(rng.uniform(np.log(0.1), np.log(1.0)))) if seed % 2 else 0.0
+        record = double_hump_walk(seed, ratio, deck)
+        insp = inspect_record(record.replace(pacing_hz=None))
+        errors.append(boundary_errors(record, insp.steps))
+        truth = record.metadata["truth"]["step_duration_s"]
+        true_fp = float(np.median(2.0 / (truth[1:] + truth[:-1])))
+        pacing_errors.append(abs(insp.pacing.pacing_hz - true_fp) / true_fp)
+        p10, p90 = np.percentile(insp.pacing.instantaneous_hz, [10, 90])
+        assert 0.95 * true_fp < p10 and p90 < 1.05 * true_fp, seed
+    within = np.mean(np.concatenate(errors) < 0.1)
+    assert within >= 0.98, within
+    assert np.median(pacing_errors) < 0.005
+
+
+@pytest.mark.parametrize("seed", [200, 201, 202, 203])
+def test_a_measured_deck_does_not_move_the_boundaries(seed: int) -> None:
+    # The same walker and the same draws with and without a 1 m/s^2 RMS deck at 2.7 Hz:
+    # with the deck's acceleration in the record, the boundaries are those of the rigid
+    # floor to within 0.05 step, and the pacing is not the deck's.
+    base = dict(
+        mass_kg=70.0, pacing_hz=1.7, duration_s=30.0, natural_frequency_hz=2.6,
+        damping_ratio=0.3, coefficients=double_hump_force(70.0, 1.05), noise_sd_n=3.0,
+        sample_rate_hz=100.0, start="steady", seed=seed,
+    )  # fmt: skip
+    rigid = inspect_record(simulate_walking(**base).record.replace(pacing_hz=None))
+    deck = simulate_walking(**base, ground_acc_m_s2=SineDeck(1.0, 2.7, 0.4)).record
+    on_deck = inspect_record(deck.replace(pacing_hz=None))
+    # At most one footfall more or fewer at an end (filter edges); every other one is where
+    # it was on the rigid floor.
+    assert abs(on_deck.steps.n_steps - rigid.steps.n_steps) <= 1
+    step_s = np.median(rigid.steps.durations_s)
+    a, b = on_deck.steps.footfall_times_s, rigid.steps.footfall_times_s
+    shift = np.abs(a[:, None] - b[None, :]).min(axis=1) / step_s
+    assert np.sum(shift > 0.05) <= 1 and np.all(shift[1:-1] < 0.05)
+    assert on_deck.pacing.pacing_hz == pytest.approx(rigid.pacing.pacing_hz, rel=0.005)
+    assert on_deck.pacing.spectral_pacing_hz == pytest.approx(1.7, rel=0.03)
+
+
+def test_embedded_synthetic_records_have_no_flipped_step() -> None:
+    for name in ("cubic_stiffness", "population_typical", "seed_individual", "seed_individual_deck"):
+        record = datasets.load(name)
+        insp = inspect_record(record)
+        assert np.all(boundary_errors(record, insp.steps) < 0.1), name
+        assert insp.split is not None and insp.split.off_rhythm.size == 0, name
+
+
+@pytest.mark.parametrize(
+    ("name", "mass_kg", "reader"),
+    [("treadmill", 77.3, read_treadmill_plates), ("insole", 83.0, read_insole_feet)],
+)
+def test_real_records_keep_one_lag_after_heel_strike(name, mass_kg, reader) -> None:
+    # The two feet's forces give every heel strike: each boundary follows the last heel
+    # strike by the same share of the step, none by more than 0.15 step off that lag.
+    insp = inspect_record(datasets.load(name).replace(mass_kg=mass_kg))
+    t, left, right = reader(datasets.embedded_path(name))
+    strikes = np.sort([t[i] for force in (left, right) for i in heel_strike_indices(force)])
+    found = insp.steps.footfall_times_s
+    k = np.searchsorted(strikes, found, side="right") - 1
+    ok = (k >= 0) & (k < strikes.size - 1)
+    span = strikes[k[ok] + 1] - strikes[k[ok]]
+    lag = ((found[ok] - strikes[k[ok]]) / span)[(span > 0.3) & (span < 1.0)]
+    assert lag.size > 0.9 * insp.steps.n_steps
+    assert np.all(np.abs(lag - np.median(lag)) < 0.15)
+    assert 0.0 < np.median(lag) < 0.2  # in double support, just after heel strike
+
+
+def test_check_split_names_a_boundary_on_the_other_hump() -> None:
+    record = double_hump_walk(7, 1.0)
+    steps = inspect_record(record).steps
+    assert check_split(steps).off_rhythm.size == 0
+    times = steps.footfall_times_s.copy()
+    times[20] += 0.45 * np.median(steps.durations_s)  # a jump to the other hump
+    flipped = Steps(
+        boundaries=np.rint(times * steps.sample_rate_hz).astype(np.intp),
+        footfall_times_s=times,
+        durations_s=np.diff(times),
+        sample_rate_hz=steps.sample_rate_hz,
+    )
+    check = check_split(flipped)
+    assert list(check.off_rhythm) == [19, 20]
+    assert check.phase_off_steps[20] == pytest.approx(0.45, abs=0.05)
+    assert np.nanmax(np.delete(check.phase_off_steps, 20)) < OFF_RHYTHM_PHASE_STEPS
+    message = check.warning(flipped, "walk.csv")
+    assert message is not None and message.startswith("walk.csv: 2 of ")
+    assert "steps 20 (" in message and "21 (" in message
+    json = check.to_json(flipped)
+    assert json["off_rhythm_steps"] == [20, 21]
+    assert json["off_rhythm_share"] == pytest.approx(2 / flipped.n_steps, abs=1e-4)
+
+
+def test_inspect_reports_the_split_and_warns_on_a_pause() -> None:
+    insp = inspect_record(datasets.load("insole").replace(mass_kg=83.0))
+    split = insp.to_json()["split"]
+    # The insole walk turns twice; the steps at the turns are named.
+    assert 0 < len(split["off_rhythm_steps"]) < 0.05 * insp.steps.n_steps
+    assert any("off the walker's rhythm" in w for w in insp.warnings)
+    steady = inspect_record(datasets.load("seed_individual"))
+    assert steady.to_json()["split"]["off_rhythm_steps"] == []
+    assert not any("rhythm" in w for w in steady.warnings)
+
+
+def test_inspect_identify_and_diagnose_share_steps_and_pacing() -> None:
+    for name in ("seed_individual", "treadmill"):
+        record = datasets.load(name)
+        if record.mass_kg is None:
+            record = record.replace(mass_kg=77.3)
+        insp = inspect_record(record)
+        problem = build_problem(insp.com, insp.steps, harmonics=3)
+        assert problem.n_pieces == insp.steps.n_steps
+        assert problem.pacing_hz == insp.pacing.pacing_hz == insp.steps.pacing_hz
+        data = prepare_criticism(record)
+        assert data.n_steps == insp.steps.n_steps
+        assert data.pacing_hz == insp.pacing.pacing_hz
+
+
+def test_double_hump_force_has_its_humps_where_and_as_high_as_asked() -> None:
+    theta = np.arange(4000) / 4000
+    for ratio in (0.8, 1.0, 1.25):
+        c = np.asarray(double_hump_force(70.0, ratio, width_step=0.08, harmonics=8))
+        force = sum(
+            c[2 * i - 1] * np.cos(2 * np.pi * i * theta) + c[2 * i] * np.sin(2 * np.pi * i * theta)
+            for i in range(1, 9)
+        )
+        assert c[0] == 0.0
+        assert force.max() == pytest.approx(0.25 * 70.0 * 9.81, rel=1e-4)
+        loading, push_off = (
+            force[int(round(p * theta.size)) % theta.size] - force.min()
+            for p in DOUBLE_HUMP_PHASES_STEP
+        )
+        assert push_off / loading == pytest.approx(ratio, rel=0.05)
+    with pytest.raises(UsageError, match="hump_ratio"):
+        double_hump_force(70.0, 0.0)
+    with pytest.raises(UsageError, match="harmonics"):
+        double_hump_force(70.0, harmonics=1)
