@@ -29,6 +29,10 @@ convention at all). The true pacing is the median of ``2 / (d_j + d_j+1)`` over 
 walking steps (standing steps of an overground walk left out), the statistic the workbench
 reports.
 
+``--replays`` adds a 1 m/s^2 RMS sine deck at 2.9 Hz to the real records: the force of an
+SMD (f_n 3.04 Hz, damping ratio 0.3, the record's body mass) riding the deck is added to
+the measured GRF, and the record is inspected with and without the deck's acceleration.
+
 ``--records`` also inspects the embedded records: the synthetic ones against their truth,
 the real ones (treadmill, insole) against the heel strikes of their two feet's channels
 (each side's force rising through 50 N after having been below 20 N): the lag from each
@@ -321,7 +325,7 @@ def embedded() -> None:
         if record.mass_kg is None and mass is not None:
             record = record.replace(mass_kg=float(mass))
         if record.mass_kg is None:
-            record = record.replace(mass_kg={"treadmill": 77.3, "insole": 83.0}.get(name))
+            record = record.replace(mass_kg=REAL_MASS_KG.get(name))
         insp = inspect_record(record)
         times = np.asarray(insp.steps.footfall_times_s)
         truth = record.metadata.get("truth")
@@ -369,16 +373,70 @@ def embedded() -> None:
         )
 
 
+REAL_MASS_KG = {"treadmill": 77.3, "insole": 83.0}
+
+
+def deck_replay(name: str, with_surface: bool) -> Any:
+    """Return a real record plus the force of an SMD riding a 1 m/s^2 RMS sine deck at 2.9 Hz."""
+    from scipy import signal
+
+    record = datasets.load(name).replace(mass_kg=REAL_MASS_KG[name])
+    fs = record.sample_rate_hz
+    t = np.arange(record.n_samples) / fs
+    deck = np.sqrt(2.0) * np.sin(2.0 * np.pi * 2.9 * t)
+    w, zeta = 2.0 * np.pi * 3.04, 0.3
+    # Body acceleration over deck acceleration of an SMD on a moving base.
+    body = signal.lti([2.0 * zeta * w, w**2], [1.0, 2.0 * zeta * w, w**2])
+    _, acc, _ = signal.lsim(body, deck, t)
+    return record.replace(
+        grf_n=record.grf_n + float(record.mass_kg) * acc,
+        grf_left_n=None,
+        grf_right_n=None,
+        ground_acc_m_s2=deck if with_surface else None,
+    )
+
+
+def replays() -> None:
+    """Inspect the real records with a strong deck added, with and without its channel."""
+    print(
+        "\n| record | deck channel | steps | pacing Hz | spectral Hz | off rhythm |\n"
+        "|---|---|---|---|---|---|"
+    )
+    for name in REAL_MASS_KG:
+        plain = inspect_record(datasets.load(name).replace(mass_kg=REAL_MASS_KG[name]))
+        print(
+            f"| {name} | no deck | {plain.steps.n_steps} | {plain.pacing.pacing_hz:.3f} | "
+            f"{plain.pacing.spectral_pacing_hz:.3f} | "
+            f"{_off_rhythm(plain)} |"
+        )
+        for with_surface in (True, False):
+            insp = inspect_record(deck_replay(name, with_surface))
+            print(
+                f"| {name} + deck 2.9 Hz | {'yes' if with_surface else 'no'} | "
+                f"{insp.steps.n_steps} | {insp.pacing.pacing_hz:.3f} | "
+                f"{insp.pacing.spectral_pacing_hz:.3f} | {_off_rhythm(insp)} |",
+                flush=True,
+            )
+
+
+def _off_rhythm(insp: Any) -> str:
+    split = insp.to_json().get("split")
+    return "-" if split is None else str(len(split["off_rhythm_steps"]))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the study."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="0-71", help="walk seeds, LOW-HIGH")
     ap.add_argument("--records", action="store_true", help="also check the embedded records")
     ap.add_argument("--no-surface", action="store_true", help="drop the deck channel")
+    ap.add_argument("--replays", action="store_true", help="real records plus a strong deck")
     args = ap.parse_args(argv)
     lo, _, hi = args.seeds.partition("-")
     if args.records:
         embedded()
+    if args.replays:
+        replays()
     if args.seeds != "none":
         study(range(int(lo), int(hi or lo) + 1), surface=not args.no_surface)
     return 0

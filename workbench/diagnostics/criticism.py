@@ -508,6 +508,7 @@ def diagnose(
         "folds": cv.n_folds,
         "steps": data.n_steps,
         "pacing_hz": data.pacing_hz,
+        "split": data.split,
         "grf_rms_n": float(np.std(data.target_n)),
         "step_variation": bool(step_variation),
         "response_modulation": bool(response_modulation),

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +30,7 @@ from workbench.records.preprocess import (
     preprocess,
 )
 from workbench.records.record import G_M_S2, Record
-from workbench.records.steps import Steps, estimate_pacing, segment_steps
+from workbench.records.steps import Steps, check_split, estimate_pacing, segment_steps
 
 __all__ = [
     "DEFAULT_HARMONICS",
@@ -85,6 +86,8 @@ class CriticismData:
     surface_coupled : bool
         Whether ``disp_m`` and ``vel_m_s`` are relative to the surface
         (:meth:`coupled_to_surface`).
+    split : dict or None
+        The footfall split's consistency check (``inspect --json``'s ``split``).
     """
 
     time_s: FloatArray
@@ -102,6 +105,7 @@ class CriticismData:
     source: str = "<memory>"
     pacing_local_hz: FloatArray | None = None
     surface_coupled: bool = False
+    split: dict[str, Any] | None = None
 
     def coupled_to_surface(self) -> CriticismData:
         """Return the record with ``disp_m`` and ``vel_m_s`` relative to the walking surface.
@@ -215,6 +219,7 @@ def prepare(
         ground=ground,
         source=record.source,
         # The step rate averaged over a stride, so that left/right alternation is not a change.
+        split=check_split(steps).to_json(steps),
         pacing_local_hz=_moving_average(
             np.gradient(phase) * record.sample_rate_hz / (2.0 * np.pi),
             max(round(2.0 * record.sample_rate_hz / steps.pacing_hz), 1),

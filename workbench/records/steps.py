@@ -320,8 +320,9 @@ class SplitCheck:
             f"{OFF_RHYTHM_PHASE_STEPS:g} step from where its neighbours put it, or a duration "
             f"outside {OFF_RHYTHM_DURATION[0]:g}-{OFF_RHYTHM_DURATION[1]:g} times that of the "
             f"steps around it: steps {named}; these are pauses, turns or irregular steps, or "
-            "footfalls the split could not place, and their force pieces and step-paired "
-            "statistics are less reliable."
+            "footfalls the split could not place (a vibrating floor whose acceleration is not "
+            "in the record can do this), and their force pieces and step-paired statistics "
+            "are less reliable."
         )
 
 

@@ -129,6 +129,9 @@ class IdentificationResult:
         The effects' posterior (a model with effects).
     inspection_warnings : tuple of str
         What inspecting the record found (static balance, body weight, footfalls).
+    split : dict or None
+        The footfall split's consistency check (``inspect --json``'s ``split``; set by
+        ``identify`` on a record cut into steps).
     """
 
     method: str
@@ -148,6 +151,7 @@ class IdentificationResult:
     surface: SurfaceReport | None = None
     effects: EffectPosterior | None = None
     inspection_warnings: tuple[str, ...] = ()
+    split: dict[str, Any] | None = None
 
     def replace(self, **changes: Any) -> IdentificationResult:
         """Return a copy with some fields changed (results are immutable)."""
@@ -611,6 +615,8 @@ class IdentificationResult:
             conditional["blf"] = {"estimate": blf, "posterior_sd": blf_sd}
         out["identifiability"] = self.identifiability
         out["steps"] = int(self.problem.n_pieces)
+        if self.split is not None:
+            out["split"] = self.split
         out["harmonics"] = int(self.problem.harmonics)
         out["time_basis"] = self.problem.time_basis
         out["noise"] = self.noise

@@ -116,6 +116,7 @@ class Prepared:
     steps: Steps | None
     warnings: tuple[str, ...]
     measured_pacing_hz: float | None = None
+    split: dict[str, Any] | None = None
 
     @classmethod
     def of(cls, record: Record | Inspection, settings: IdentifySettings) -> Prepared:
@@ -143,7 +144,15 @@ class Prepared:
                     "that need footfalls."
                 )
                 return cls(record, com, None, (*warnings, note))
-        return cls(insp.record, insp.com, insp.steps, tuple(insp.warnings), insp.pacing.pacing_hz)
+        split = None if insp.split is None else insp.split.to_json(insp.steps)
+        return cls(
+            insp.record,
+            insp.com,
+            insp.steps,
+            tuple(insp.warnings),
+            insp.pacing.pacing_hz,
+            split,
+        )
 
 
 def prepare(record: Record | Inspection, settings: IdentifySettings) -> Prepared:
@@ -462,7 +471,9 @@ def run_route(
                 f"{settings.method.name!r}; choose the route with these settings (choose_route)"
             )
         result = settings.method.run(problem, seed=settings.seed, progress=progress, common=common)
-    result = result.replace(route=route, inspection_warnings=tuple(prepared.warnings))
+    result = result.replace(
+        route=route, inspection_warnings=tuple(prepared.warnings), split=prepared.split
+    )
     if effects is not None:
         from workbench.inference.pipeline.effect_terms import effect_posterior
 
