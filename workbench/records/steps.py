@@ -265,11 +265,12 @@ class SplitCheck:
     ----------
     phase_off_steps : ndarray
         For each footfall, its distance [step] from the time its two neighbours on either
-        side predict (each neighbour ``j`` predicts ``t_j + (k - j) d`` with ``d`` the
-        median duration of the four steps between them; the median prediction is used);
-        NaN where fewer than two neighbours exist.
+        side (four on one side at an end) predict: each neighbour ``j`` predicts
+        ``t_j + (k - j) d``, with ``d`` the median duration of the four steps between them;
+        the median prediction is used. NaN with fewer than two neighbours.
     duration_ratio : ndarray
-        Each step's duration over the median of the nine steps centred on it.
+        Each step's duration over the median of the nine steps around it (centred, shifted
+        inwards at the ends).
     off_rhythm : ndarray of int
         Steps (0-based) off the rhythm: a boundary more than
         :data:`OFF_RHYTHM_PHASE_STEPS` off, or a duration ratio outside
@@ -344,16 +345,25 @@ def check_split(steps: Steps) -> SplitCheck:
     if n_steps == 0:
         empty = np.empty(0)
         return SplitCheck(np.full(times.size, np.nan), empty, np.empty(0, np.intp), 0)
-    local = ndimage.median_filter(durations, size=_RHYTHM_DURATION_STEPS, mode="nearest")
+    # Windows are shifted inwards at the ends rather than padded, so that an odd first or
+    # last step is compared with real neighbours, not with copies of itself.
+    half = _RHYTHM_DURATION_STEPS // 2
+    local = np.empty(n_steps)
+    for j in range(n_steps):
+        lo = min(max(0, j - half), max(0, n_steps - _RHYTHM_DURATION_STEPS))
+        local[j] = np.median(durations[lo : lo + _RHYTHM_DURATION_STEPS])
     ratio = durations / local
     phase_off = np.full(times.size, np.nan)
-    reach = _RHYTHM_NEIGHBOURS
+    reach = 2 * _RHYTHM_NEIGHBOURS
     for k in range(times.size):
-        lo, hi = max(0, k - reach), min(times.size - 1, k + reach)
-        neighbours = [j for j in range(lo, hi + 1) if j != k]
+        # The 2 x 2 nearest footfalls (more on one side at an end) predict footfall k with
+        # the median duration of the four steps between them: one misplaced footfall spoils
+        # two of them, one long and one short, which the median passes over.
+        lo = min(max(0, k - _RHYTHM_NEIGHBOURS), max(0, times.size - 1 - reach))
+        neighbours = [j for j in range(lo, min(times.size, lo + reach + 1)) if j != k]
         if len(neighbours) < 2:
             continue
-        d = float(np.median(durations[lo:hi]))
+        d = float(np.median(durations[lo : lo + reach]))
         predicted = np.median([times[j] + (k - j) * d for j in neighbours])
         phase_off[k] = abs(times[k] - predicted) / d
     lo_ratio, hi_ratio = OFF_RHYTHM_DURATION
