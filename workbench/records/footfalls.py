@@ -43,6 +43,9 @@ _TEMPLATE_HALF_WINDOW_STEPS = 0.6
 _TEMPLATE_MAX_SHIFT_STEPS = 0.3
 _TEMPLATE_PASSES = 3
 _TEMPLATE_MIN_STEPS = 3
+# The first and last boundaries of a record whose step correlates less than this with the
+# median step are dropped (standing at the ends of an overground walk).
+_MIN_EDGE_MATCH = 0.5
 _MIN_INTERVAL_STEPS = 0.6  # closer peaks are one step's double peak
 _EDGE_GUARD_STEPS = 0.25  # a peak this close to an end cannot be told from a filter edge
 _LOCAL_PROMINENCE_PEAKS = 17
@@ -142,7 +145,16 @@ def _detect_in_phase(
         refined = np.delete(refined, drop)
         height = np.delete(height, drop)
     inside = (refined >= _EDGE_GUARD_STEPS) & (refined <= total_steps - _EDGE_GUARD_STEPS)
-    return np.interp(refined[inside], phase, time_s)
+    refined, height = refined[inside], height[inside]
+    # Standing before the first step or after the last: a boundary whose step looks little
+    # like the walker's (the window runs into quiet standing) is not the same event.
+    first = 0
+    while first < refined.size and height[first] < _MIN_EDGE_MATCH:
+        first += 1
+    last = refined.size
+    while last > first and height[last - 1] < _MIN_EDGE_MATCH:
+        last -= 1
+    return np.interp(refined[first:last], phase, time_s)
 
 
 def _align_to_template(shape: FloatArray, peaks: IntArray) -> tuple[FloatArray, FloatArray]:
@@ -354,7 +366,8 @@ def detect_footfalls(
        template's pacing component (its first Fourier coefficient over one step).
     5. Spurious double peaks: while two footfalls are less than 0.6 step apart, the one
        that matches the template worse is dropped. Boundaries within 0.25 step of either
-       end are dropped (filter edges).
+       end are dropped (filter edges), and so are the first and last ones while their step
+       correlates less than 0.5 with the template (standing at the ends).
     6. Steps 2-5 are repeated once with the local pacing taken from the footfalls found
        (pacing of each pair of steps, running median over 5, held within 30 % of the
        spectral track), which follows fast changes of pacing better than 8 s spectra.
