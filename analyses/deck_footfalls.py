@@ -4,12 +4,12 @@ Usage::
 
     python analyses/deck_footfalls.py [--seeds 0-19]
 
-On a rigid floor each footfall sits on the dominant peak of the COM acceleration, the same
-point of every step. On a vibrating deck the acceleration adds the body's response to the
-deck, which shifts that peak from step to step and, on a strong deck, onto the other hump of
-the step. The workbench places footfalls on the acceleration itself (the convention of every
-deck result in the docs); the alternative places them on the acceleration without its
-linear response to the deck (``without_surface``). For the embedded ``seed_individual_deck``
+A boundary is the peak of the walker's pacing component, placed in every step by the step's
+whole shape (docs/science.md 2). On a vibrating deck the acceleration adds the body's
+response to the deck, which would shift that placement from step to step. The workbench
+places footfalls on the acceleration without its linear response to the deck
+(``without_surface``, "on the walker's own"); the alternative places them on the
+acceleration itself. For the embedded ``seed_individual_deck``
 walk and ``deck_walk`` seeds (fixed in advance), both placements are compared with the
 simulation's true step starts: the spread (sd) of each footfall's phase within its true step
 [share of a step], and the share of footfalls more than 0.15 step from the record's median
