@@ -209,6 +209,7 @@ def measure(record: Any) -> dict[str, Any]:
         "varies": bool(insp.pacing.varies),
         "steps": int(insp.steps.n_steps),
         "split": json.get("split"),
+        "richness": richness(insp),
         "warnings": len(insp.warnings),
     }
 
@@ -273,6 +274,12 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"{share(sel, 'within_fund')}; of the GRF peak {share(sel, 'within_peak')}; "
             f"walks with footfalls > {OFF_HUMP_STEP} step off their median phase {flipped}; "
             f"median pacing error {100 * np.median(errors):.2f} % (max {100 * errors.max():.2f} %)"
+        )
+    rich = np.array([r["richness"] for r in ok if "richness" in r])
+    if rich.size:
+        print(
+            f"median step's power above its first harmonic: {100 * rich.min():.1f}-"
+            f"{100 * rich.max():.1f} % over the walks"
         )
     steady = [r for r in ok if r["kind"] == "steady"]
     if steady:
@@ -399,24 +406,37 @@ def deck_replay(name: str, with_surface: bool) -> Any:
 def replays() -> None:
     """Inspect the real records with a strong deck added, with and without its channel."""
     print(
-        "\n| record | deck channel | steps | pacing Hz | spectral Hz | off rhythm |\n"
-        "|---|---|---|---|---|---|"
+        "\n| record | deck channel | steps | pacing Hz | spectral Hz | off rhythm | "
+        "median step above its first harmonic |\n|---|---|---|---|---|---|---|"
     )
     for name in REAL_MASS_KG:
         plain = inspect_record(datasets.load(name).replace(mass_kg=REAL_MASS_KG[name]))
         print(
             f"| {name} | no deck | {plain.steps.n_steps} | {plain.pacing.pacing_hz:.3f} | "
             f"{plain.pacing.spectral_pacing_hz:.3f} | "
-            f"{_off_rhythm(plain)} |"
+            f"{_off_rhythm(plain)} | {100 * richness(plain):.1f} % |"
         )
         for with_surface in (True, False):
             insp = inspect_record(deck_replay(name, with_surface))
             print(
                 f"| {name} + deck 2.9 Hz | {'yes' if with_surface else 'no'} | "
                 f"{insp.steps.n_steps} | {insp.pacing.pacing_hz:.3f} | "
-                f"{insp.pacing.spectral_pacing_hz:.3f} | {_off_rhythm(insp)} |",
+                f"{insp.pacing.spectral_pacing_hz:.3f} | {_off_rhythm(insp)} | "
+                f"{100 * richness(insp):.1f} % |",
                 flush=True,
             )
+
+
+def richness(insp: Any) -> float:
+    """Share of the median step's power above its first harmonic (the lone-line check)."""
+    from workbench.records.footfalls import _step_shape_richness, without_surface
+
+    acc = np.asarray(insp.com.acc_m_s2)
+    if insp.record.ground_acc_m_s2 is not None:
+        acc = without_surface(acc, insp.record.ground_acc_m_s2, insp.com.sample_rate_hz)
+    t0 = float(insp.record.time_s[0])
+    times = np.asarray(insp.steps.footfall_times_s) - t0
+    return _step_shape_richness(acc, insp.com.sample_rate_hz, times)
 
 
 def _off_rhythm(insp: Any) -> str:

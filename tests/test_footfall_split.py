@@ -227,3 +227,25 @@ def test_double_hump_force_has_its_humps_where_and_as_high_as_asked() -> None:
         double_hump_force(70.0, 0.0)
     with pytest.raises(UsageError, match="harmonics"):
         double_hump_force(70.0, harmonics=1)
+
+
+def test_an_unmeasured_deck_is_left_out_and_named() -> None:
+    # Seed 200's walker on a 1 m/s^2 RMS sine deck at 2.9 Hz whose acceleration is not in
+    # the record: the split finds that steps cut at 2.9 Hz average to a pure sinusoid,
+    # notches the line out and follows the walker, and inspect says so.
+    record = simulate_walking(
+        mass_kg=70.0, pacing_hz=1.7, duration_s=30.0, natural_frequency_hz=3.0,
+        damping_ratio=0.3, coefficients=double_hump_force(70.0, 0.9), noise_sd_n=3.0,
+        sample_rate_hz=100.0, start="steady", seed=200, ground_acc_m_s2=SineDeck(1.0, 2.9),
+    ).record.replace(pacing_hz=None, ground_acc_m_s2=None)  # fmt: skip
+    insp = inspect_record(record)
+    assert insp.steps.lone_line_hz == pytest.approx(2.9, rel=0.03)
+    # The notch's filter edges can leave an end boundary off; the split check names it.
+    errors = boundary_errors(record, insp.steps)
+    assert np.mean(errors < 0.1) >= 0.95
+    off = set(insp.split.off_rhythm) | {j + 1 for j in insp.split.off_rhythm}
+    assert set(np.flatnonzero(errors >= 0.1)) <= off
+    assert insp.pacing.pacing_hz == pytest.approx(1.7, rel=0.01)
+    assert insp.pacing.spectral_pacing_hz == pytest.approx(1.7, rel=0.02)
+    line = f"strong line at {insp.steps.lone_line_hz:.3f} Hz"
+    assert any(line in w and "ground_acc" in w for w in insp.warnings)

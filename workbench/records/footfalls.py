@@ -46,6 +46,13 @@ _TEMPLATE_MIN_STEPS = 3
 # The first and last boundaries of a record whose step correlates less than this with the
 # median step are dropped (standing at the ends of an overground walk).
 _MIN_EDGE_MATCH = 0.5
+# A median step with less than this share of its power above the first harmonic is a pure
+# sinusoid, a lone line and not a gait (see _step_shape_richness); the line is then notched
+# out this far either side of it (a narrow-band deck is 3-10 % wide) and the split repeated.
+_LONE_LINE_RICHNESS = 0.02
+_NOTCH_HALF_WIDTH = 0.08
+_RICHNESS_POINTS = 64
+_RICHNESS_HARMONICS = 6
 _MIN_INTERVAL_STEPS = 0.6  # closer peaks are one step's double peak
 _EDGE_GUARD_STEPS = 0.25  # a peak this close to an end cannot be told from a filter edge
 _LOCAL_PROMINENCE_PEAKS = 17
@@ -255,18 +262,95 @@ def locate_footfalls(
     places the steps on the acceleration itself (the deck's response included), for
     ``analyses/deck_footfalls.py``, which compares the two placements against the true steps
     of simulated deck walks.
+
+    A split whose median step is a pure sinusoid (:func:`_step_shape_richness` below
+    :data:`_LONE_LINE_RICHNESS`) has followed a lone line, not a gait: a deck whose
+    acceleration is not in the record, or a machine. That line is then notched out
+    (zero-phase band-stop of +-8 % around it) and the split repeated; the repeat is kept
+    when its median step has the harmonics of a step.
     """
+    return _locate(acc, sample_rate_hz, pacing_hz, surface_acc, place_on_cleaned)[0]
+
+
+def _locate(
+    acc: FloatArray,
+    sample_rate_hz: float,
+    pacing_hz: float | None,
+    surface_acc: FloatArray | None,
+    place_on_cleaned: bool = True,
+) -> tuple[FloatArray, float | None]:
+    """:func:`locate_footfalls`, and the frequency of a lone line it notched out (or None)."""
     n = acc.size
     band = _search_band(pacing_hz)
     if n < 4 or n / sample_rate_hz < 2.0 / band[0]:
-        return np.empty(0)
+        return np.empty(0), None
     detect = acc if surface_acc is None else without_surface(acc, surface_acc, sample_rate_hz)
+    place = detect if place_on_cleaned else acc
+    times = _split(detect, place, sample_rate_hz, band)
+    if times.size < _TEMPLATE_MIN_STEPS + 1:
+        return times, None
+    if _step_shape_richness(place, sample_rate_hz, times) >= _LONE_LINE_RICHNESS:
+        return times, None
+    line_hz = _line_near(detect, sample_rate_hz, float(np.median(_stride_pacing(np.diff(times)))))
+    if line_hz * (1.0 + _NOTCH_HALF_WIDTH) >= 0.5 * sample_rate_hz:
+        return times, None
+    detect_n = notch(detect, sample_rate_hz, line_hz)
+    place_n = detect_n if place is detect else notch(place, sample_rate_hz, line_hz)
+    again = _split(detect_n, place_n, sample_rate_hz, band)
+    if (
+        again.size >= _TEMPLATE_MIN_STEPS + 1
+        and _step_shape_richness(place_n, sample_rate_hz, again) >= _LONE_LINE_RICHNESS
+    ):
+        return again, line_hz
+    return times, None
+
+
+def _line_near(acc: FloatArray, sample_rate_hz: float, near_hz: float) -> float:
+    """Frequency of the highest spectral peak within the notch's width of ``near_hz``."""
+    n_fft = 1 << math.ceil(math.log2(8 * acc.size))
+    freq_hz = np.fft.rfftfreq(n_fft, 1.0 / sample_rate_hz)
+    power = np.abs(np.fft.rfft((acc - acc.mean()) * np.hanning(acc.size), n_fft)) ** 2
+    near = np.flatnonzero(np.abs(freq_hz / near_hz - 1.0) <= _NOTCH_HALF_WIDTH)
+    return float(freq_hz[near[np.argmax(power[near])]]) if near.size else near_hz
+
+
+def notch(acc: ArrayLike, sample_rate_hz: float, line_hz: float) -> FloatArray:
+    """Return ``acc`` without a lone line: zero-phase band-stop of +-8 % around ``line_hz``."""
+    edges = (line_hz * (1.0 - _NOTCH_HALF_WIDTH), line_hz * (1.0 + _NOTCH_HALF_WIDTH))
+    sos = signal.butter(2, edges, btype="bandstop", fs=sample_rate_hz, output="sos")
+    return np.asarray(signal.sosfiltfilt(sos, np.asarray(acc, dtype=np.float64)))
+
+
+def _split(
+    detect: FloatArray, place: FloatArray, sample_rate_hz: float, band: tuple[float, float]
+) -> FloatArray:
+    """Footfall times in a pacing band: two passes (see :func:`detect_footfalls`)."""
+    n = detect.size
     centres_s, track = _pacing_track(detect, sample_rate_hz, band)
     spectral_track = np.interp(np.arange(n) / sample_rate_hz, centres_s, track)
-    place = detect if place_on_cleaned else acc
     first = _detect_in_phase(detect, sample_rate_hz, spectral_track, place)
     refined_track = _track_from_footfalls(first, n, sample_rate_hz, spectral_track)
     return _detect_in_phase(detect, sample_rate_hz, refined_track, place)
+
+
+def _step_shape_richness(acc: FloatArray, sample_rate_hz: float, times_s: FloatArray) -> float:
+    """Share of the median step's power [harmonics 1-6] above its first harmonic.
+
+    Each step between consecutive footfalls is resampled to 64 points and the median taken.
+    A walker's step has a loading and a push-off hump: harmonics 2-6 hold 17-47 % of the
+    power of harmonics 1-6 on the real records, with or without a strong deck added
+    (``analyses/footfall_accuracy.py --replays``; the simulated walks' range is printed by
+    the same script). Steps cut at a deck's line hold a sinusoid, and their median leaves
+    the walker, who is not in step with it, out: close to 0.
+    """
+    t = np.arange(acc.size) / sample_rate_hz
+    points = np.arange(_RICHNESS_POINTS) / _RICHNESS_POINTS
+    starts, ends = times_s[:-1], times_s[1:]
+    grid = starts[:, None] + (ends - starts)[:, None] * points[None, :]
+    shape = np.median(np.interp(grid, t, acc), axis=0)
+    power = np.abs(np.fft.rfft(shape - shape.mean()))[1 : _RICHNESS_HARMONICS + 1] ** 2
+    total = float(power.sum())
+    return float(power[1:].sum() / total) if total > 0 else 0.0
 
 
 #: The filter from the surface's acceleration to the body's spans this window [s]: a little

@@ -216,6 +216,15 @@ def inspect_record(
         warnings.append(message)
     pacing = estimate_pacing(com, steps, surface_acc_m_s2=record.ground_acc_m_s2)
     check_walking(record, steps, pacing)
+    if steps.lone_line_hz is not None:
+        warnings.append(
+            f"{record.name}: a strong line at {steps.lone_line_hz:.3f} Hz has no step shape "
+            "behind it (the steps cut at its period average to a pure sinusoid), so it was "
+            "left out of the footfalls and the pacing; a vibrating floor whose acceleration "
+            "is not in the record, or a machine, makes such a line. If the floor moved, give "
+            "its acceleration (a ground_acc column) so that its response is taken out "
+            "exactly."
+        )
     split = check_split(steps)
     off_rhythm = split.warning(steps, record.name)
     if off_rhythm is not None:

@@ -26,14 +26,16 @@ from scipy import ndimage, signal
 
 from workbench.errors import InputError, UsageError
 from workbench.records.footfalls import (
+    _locate,
     detect_footfalls,
-    locate_footfalls,
+    notch,
     without_surface,
 )
 from workbench.records.pacing import (
     _VARIES_SMOOTH_STEPS,
     WALKING_BAND_HZ,
     _pacing_from_spectrum,
+    _search_band,
     _stride_pacing,
 )
 from workbench.records.preprocess import COMResponse
@@ -101,6 +103,11 @@ class Steps:
         Sample rate of the record [Hz].
     source : str
         Where the record came from.
+    lone_line_hz : float or None
+        A spectral line with no step shape behind it (a vibrating floor whose acceleration
+        is not in the record, a machine) that the split first followed and then notched
+        out (:func:`~workbench.records.footfalls.locate_footfalls`); None when there was
+        none.
     """
 
     boundaries: IntArray
@@ -108,6 +115,7 @@ class Steps:
     durations_s: FloatArray
     sample_rate_hz: float
     source: str = "<memory>"
+    lone_line_hz: float | None = None
 
     def __post_init__(self) -> None:
         boundaries = np.array(self.boundaries, dtype=np.intp)
@@ -220,7 +228,7 @@ def segment_steps(
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
     fs = com.sample_rate_hz
     surface = None if surface_acc_m_s2 is None else np.asarray(surface_acc_m_s2, dtype=np.float64)
-    times = locate_footfalls(acc, fs, pacing_hz, surface)
+    times, lone_line_hz = _locate(acc, fs, pacing_hz, surface)
     indices = np.clip(np.rint(times * fs).astype(np.intp), 0, max(acc.size - 1, 0))
     _, first = np.unique(indices, return_index=True)
     indices, times = indices[first], times[first]
@@ -244,6 +252,7 @@ def segment_steps(
         durations_s=np.diff(footfall_times),
         sample_rate_hz=fs,
         source=com.source,
+        lone_line_hz=lone_line_hz,
     )
 
 
@@ -388,8 +397,11 @@ class PacingEstimate:
         when the pacing varies along the record, where a spectrum smears), else
         ``spectral_pacing_hz``; ``method`` says which.
     spectral_pacing_hz : float
-        From the Welch spectrum of the COM acceleration (16 s Hann segments, half overlap),
-        highest peak in 1.0-3.2 Hz refined by a parabola through the log power, with the
+        From the Welch spectrum of the COM acceleration (16 s Hann segments, half overlap;
+        without the deck's linear response when the deck is measured, and without the lone
+        line the split notched out, if any), highest peak in
+        1.0-3.2 Hz -- half an octave either side of the footfall pacing when there are
+        footfalls -- refined by a parabola through the log power, with the
         octave checks of :func:`detect_footfalls`: the peak moves down an octave when the
         odd half-multiples of its frequency carry at least half the power of its whole
         multiples (it was the second harmonic of slow walking) and up an octave when its
@@ -425,12 +437,19 @@ class PacingEstimate:
     method: str
 
 
-def _welch_pacing(com: COMResponse, surface_acc_m_s2: ArrayLike | None = None) -> float:
+def _welch_pacing(
+    com: COMResponse,
+    surface_acc_m_s2: ArrayLike | None = None,
+    band_hz: tuple[float, float] = WALKING_BAND_HZ,
+    lone_line_hz: float | None = None,
+) -> float:
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
     fs = com.sample_rate_hz
     if surface_acc_m_s2 is not None:
         # The walker's own response: a deck's line is not the walker's pacing.
         acc = without_surface(acc, surface_acc_m_s2, fs)
+    if lone_line_hz is not None:
+        acc = notch(acc, fs, lone_line_hz)
     nperseg = min(acc.size, round(_WELCH_SEGMENT_S * fs))
     if nperseg < 8:
         return float("nan")
@@ -444,7 +463,7 @@ def _welch_pacing(com: COMResponse, surface_acc_m_s2: ArrayLike | None = None) -
         nfft=n_fft,
         detrend="constant",
     )
-    return _pacing_from_spectrum(freq_hz, power, WALKING_BAND_HZ)
+    return _pacing_from_spectrum(freq_hz, power, band_hz)
 
 
 def estimate_pacing(
@@ -472,12 +491,18 @@ def estimate_pacing(
         Global, spectral and footfall-based pacing and the per-step series. The default
         global ``pacing_hz`` is the footfall median.
     """
-    spectral = _welch_pacing(com, surface_acc_m_s2)
     if steps is None:
         try:
             steps = segment_steps(com, surface_acc_m_s2=surface_acc_m_s2)
         except InputError:
             steps = None
+    # With footfalls, the spectrum is searched half an octave either side of their pacing,
+    # as with a stated pacing: the footfalls have settled the octave, and a line elsewhere
+    # in the walking band (a deck, a machine) is not the walker's.
+    band, line = WALKING_BAND_HZ, None
+    if steps is not None and steps.n_steps >= 1 and math.isfinite(steps.pacing_hz):
+        band, line = _search_band(steps.pacing_hz), steps.lone_line_hz
+    spectral = _welch_pacing(com, surface_acc_m_s2, band, line)
     if steps is None or steps.n_steps < 1:
         return PacingEstimate(
             pacing_hz=spectral,
