@@ -132,7 +132,12 @@ def test_a_measured_deck_does_not_move_the_boundaries(seed: int) -> None:
 
 
 def test_embedded_synthetic_records_have_no_flipped_step() -> None:
-    for name in ("cubic_stiffness", "population_typical", "seed_individual", "seed_individual_deck"):
+    for name in (
+        "cubic_stiffness",
+        "population_typical",
+        "seed_individual",
+        "seed_individual_deck",
+    ):
         record = datasets.load(name)
         insp = inspect_record(record)
         assert np.all(boundary_errors(record, insp.steps) < 0.1), name
@@ -219,8 +224,7 @@ def test_double_hump_force_has_its_humps_where_and_as_high_as_asked() -> None:
         assert c[0] == 0.0
         assert force.max() == pytest.approx(0.25 * 70.0 * 9.81, rel=1e-4)
         loading, push_off = (
-            force[int(round(p * theta.size)) % theta.size] - force.min()
-            for p in DOUBLE_HUMP_PHASES_STEP
+            force[round(p * theta.size) % theta.size] - force.min() for p in DOUBLE_HUMP_PHASES_STEP
         )
         assert push_off / loading == pytest.approx(ratio, rel=0.05)
     with pytest.raises(UsageError, match="hump_ratio"):
