@@ -279,7 +279,7 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"walks with footfalls > {OFF_HUMP_STEP} step off their median phase {flipped}; "
             f"median pacing error {100 * np.median(errors):.2f} % (max {100 * errors.max():.2f} %)"
         )
-    rich = np.array([r["richness"] for r in ok if "richness" in r])
+    rich = np.array([r["richness"] for r in ok if np.isfinite(r.get("richness", np.nan))])
     if rich.size:
         print(
             f"median step's power above its first harmonic: {100 * rich.min():.1f}-"
@@ -432,8 +432,15 @@ def replays() -> None:
 
 
 def richness(insp: Any) -> float:
-    """Share of the median step's power above its first harmonic (the lone-line check)."""
-    from workbench.records.footfalls import _step_shape_richness, without_surface
+    """Share of the median step's power above its first harmonic (the lone-line check).
+
+    NaN with a workbench that has no such check (the split before it), so that the study
+    also measures that one.
+    """
+    try:
+        from workbench.records.footfalls import _step_shape_richness, without_surface
+    except ImportError:
+        return float("nan")
 
     acc = np.asarray(insp.com.acc_m_s2)
     if insp.record.ground_acc_m_s2 is not None:
