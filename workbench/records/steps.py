@@ -61,6 +61,7 @@ IntArray = NDArray[np.intp]
 # --- pacing estimate -------------------------------------------------------------------
 _WELCH_SEGMENT_S = 16.0
 _VARIES_SPREAD = 0.05
+_GAIT_TRANSITION_STEPS = 3  # strides left out at either end of the "varies" test
 
 # --- consistency of the split -----------------------------------------------------------
 #: A footfall further than this from where its four neighbours put it is off the rhythm
@@ -420,7 +421,8 @@ class PacingEstimate:
         Whether the pacing changes materially along the record: the stride-wise pacing
         ``2 / (d_j + d_j+1)``, smoothed by a running median over 5 values (which removes
         single odd steps, e.g. at a turn), has a 10th-90th percentile spread above 5 % of
-        its median.
+        its median. On records of more than 12 strides the first and last three are left
+        out (starting from standing and stopping, not a change of pace).
     spread : float
         That spread, as a fraction of the median (NaN without steps).
     method : str
@@ -519,6 +521,12 @@ def estimate_pacing(
     footfall = steps.pacing_hz
     size = min(_VARIES_SMOOTH_STEPS, stride_hz.size)
     smoothed = ndimage.median_filter(stride_hz, size=size, mode="nearest")
+    # Starting from standing and stopping take about three steps each (slower, lighter
+    # steps); they are not a change of the walk's pace, so on a record long enough the first
+    # and last three strides do not count.
+    ends = _GAIT_TRANSITION_STEPS
+    if smoothed.size > 4 * ends:
+        smoothed = smoothed[ends:-ends]
     p10, p50, p90 = np.percentile(smoothed, [10, 50, 90])
     spread = float((p90 - p10) / p50)
     return PacingEstimate(
