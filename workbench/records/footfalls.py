@@ -34,7 +34,7 @@ IntArray = NDArray[np.intp]
 # --- footfall detection (time warped to step units) -------------------------------------
 _SAMPLES_PER_STEP = 128
 _DETECT_BAND_CYCLES_PER_STEP = (0.7, 1.4)  # keeps the pacing component only
-_REFINE_CUTOFF_CYCLES_PER_STEP = 6.0  # keeps the shape of the peak, not impact ringing
+_REFINE_CUTOFF_CYCLES_PER_STEP = 6.0  # keeps the shape of the step, not impact ringing
 # Template matching: each step's window (0.6 step either side of its candidate, so both
 # humps of the step and a little of its neighbours) is compared with the median step at
 # shifts up to 0.3 step (less than the 0.35-0.65 step between the humps, so a match cannot
@@ -140,7 +140,8 @@ def _detect_in_phase(
     refined, height = _align_to_template(shape, peaks)
     refined = grid[0] + refined / _SAMPLES_PER_STEP
 
-    # Spurious double peaks: while two footfalls are closer than 0.6 step, drop the lower.
+    # Spurious double peaks: while two footfalls are closer than 0.6 step, drop the one
+    # that matches the median step worse.
     order = np.argsort(refined)
     refined, height = refined[order], height[order]
     while refined.size > 1:
@@ -148,7 +149,7 @@ def _detect_in_phase(
         k = int(np.argmin(gaps))
         if gaps[k] >= _MIN_INTERVAL_STEPS:
             break
-        drop = k if height[k] < height[k + 1] else k + 1  # the worse match goes
+        drop = k if height[k] < height[k + 1] else k + 1
         refined = np.delete(refined, drop)
         height = np.delete(height, drop)
     inside = (refined >= _EDGE_GUARD_STEPS) & (refined <= total_steps - _EDGE_GUARD_STEPS)
