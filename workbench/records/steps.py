@@ -312,6 +312,7 @@ class SplitCheck:
             else None,
             "phase_tolerance_steps": OFF_RHYTHM_PHASE_STEPS,
             "duration_band": list(OFF_RHYTHM_DURATION),
+            "lone_line_hz": None if steps.lone_line_hz is None else round(steps.lone_line_hz, 4),
         }
 
     def warning(self, steps: Steps, name: str) -> str | None:
