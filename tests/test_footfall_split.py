@@ -251,5 +251,7 @@ def test_an_unmeasured_deck_is_left_out_and_named() -> None:
     assert set(np.flatnonzero(errors >= 0.1)) <= off
     assert insp.pacing.pacing_hz == pytest.approx(1.7, rel=0.01)
     assert insp.pacing.spectral_pacing_hz == pytest.approx(1.7, rel=0.02)
+    assert insp.to_json()["split"]["lone_line_hz"] == pytest.approx(2.9, rel=0.03)
+    assert inspect_record(double_hump_walk(7, 1.0)).to_json()["split"]["lone_line_hz"] is None
     line = f"strong line at {insp.steps.lone_line_hz:.3f} Hz"
     assert any(line in w and "ground_acc" in w for w in insp.warnings)
