@@ -438,7 +438,7 @@ def richness(insp: Any) -> float:
     also measures that one.
     """
     try:
-        from workbench.records.footfalls import _step_shape_richness, without_surface
+        from workbench.records.footfalls import step_shape_richness, without_surface
     except ImportError:
         return float("nan")
 
@@ -447,7 +447,7 @@ def richness(insp: Any) -> float:
         acc = without_surface(acc, insp.record.ground_acc_m_s2, insp.com.sample_rate_hz)
     t0 = float(insp.record.time_s[0])
     times = np.asarray(insp.steps.footfall_times_s) - t0
-    return _step_shape_richness(acc, insp.com.sample_rate_hz, times)
+    return step_shape_richness(acc, insp.com.sample_rate_hz, times)
 
 
 def _off_rhythm(insp: Any) -> str:

@@ -26,7 +26,7 @@ from workbench.records.pacing import (
 )
 from workbench.records.preprocess import COMResponse
 
-__all__ = ["detect_footfalls", "without_surface"]
+__all__ = ["detect_footfalls", "notch", "step_shape_richness", "without_surface"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -47,7 +47,7 @@ _TEMPLATE_MIN_STEPS = 3
 # median step are dropped (standing at the ends of an overground walk).
 _MIN_EDGE_MATCH = 0.5
 # A median step with less than this share of its power above the first harmonic is a pure
-# sinusoid, a lone line and not a gait (see _step_shape_richness); the line is then notched
+# sinusoid, a lone line and not a gait (see step_shape_richness); the line is then notched
 # out this far either side of it (a narrow-band deck is 3-10 % wide) and the split repeated.
 _LONE_LINE_RICHNESS = 0.02
 _NOTCH_HALF_WIDTH = 0.08
@@ -264,7 +264,7 @@ def locate_footfalls(
     ``analyses/deck_footfalls.py``, which compares the two placements against the true steps
     of simulated deck walks.
 
-    A split whose median step is a pure sinusoid (:func:`_step_shape_richness` below
+    A split whose median step is a pure sinusoid (:func:`step_shape_richness` below
     :data:`_LONE_LINE_RICHNESS`) has followed a lone line, not a gait: a deck whose
     acceleration is not in the record, or a machine. That line is then notched out
     (zero-phase band-stop of +-8 % around it) and the split repeated; the repeat is kept
@@ -290,7 +290,7 @@ def _locate(
     times = _split(detect, place, sample_rate_hz, band)
     if times.size < _TEMPLATE_MIN_STEPS + 1:
         return times, None
-    if _step_shape_richness(place, sample_rate_hz, times) >= _LONE_LINE_RICHNESS:
+    if step_shape_richness(place, sample_rate_hz, times) >= _LONE_LINE_RICHNESS:
         return times, None
     line_hz = _line_near(detect, sample_rate_hz, float(np.median(_stride_pacing(np.diff(times)))))
     if line_hz * (1.0 + _NOTCH_HALF_WIDTH) >= 0.5 * sample_rate_hz:
@@ -300,7 +300,7 @@ def _locate(
     again = _split(detect_n, place_n, sample_rate_hz, band)
     if (
         again.size >= _TEMPLATE_MIN_STEPS + 1
-        and _step_shape_richness(place_n, sample_rate_hz, again) >= _LONE_LINE_RICHNESS
+        and step_shape_richness(place_n, sample_rate_hz, again) >= _LONE_LINE_RICHNESS
     ):
         return again, line_hz
     return times, None
@@ -316,7 +316,19 @@ def _line_near(acc: FloatArray, sample_rate_hz: float, near_hz: float) -> float:
 
 
 def notch(acc: ArrayLike, sample_rate_hz: float, line_hz: float) -> FloatArray:
-    """Return ``acc`` without a lone line: zero-phase band-stop of +-8 % around ``line_hz``."""
+    """Return ``acc`` without a lone line: zero-phase band-stop of +-8 % around ``line_hz``.
+
+    Parameters
+    ----------
+    acc : array_like
+        A signal sampled at ``sample_rate_hz`` [Hz].
+    sample_rate_hz, line_hz : float
+        Sample rate and the line's frequency [Hz].
+
+    Returns
+    -------
+    ndarray
+    """
     edges = (line_hz * (1.0 - _NOTCH_HALF_WIDTH), line_hz * (1.0 + _NOTCH_HALF_WIDTH))
     sos = signal.butter(2, edges, btype="bandstop", fs=sample_rate_hz, output="sos")
     return np.asarray(signal.sosfiltfilt(sos, np.asarray(acc, dtype=np.float64)))
@@ -334,7 +346,7 @@ def _split(
     return _detect_in_phase(detect, sample_rate_hz, refined_track, place)
 
 
-def _step_shape_richness(acc: FloatArray, sample_rate_hz: float, times_s: FloatArray) -> float:
+def step_shape_richness(acc: FloatArray, sample_rate_hz: float, times_s: FloatArray) -> float:
     """Share of the median step's power [harmonics 1-6] above its first harmonic.
 
     Each step between consecutive footfalls is resampled to 64 points and the median taken.
@@ -343,6 +355,20 @@ def _step_shape_richness(acc: FloatArray, sample_rate_hz: float, times_s: FloatA
     (``analyses/footfall_accuracy.py --replays``; the simulated walks' range is printed by
     the same script). Steps cut at a deck's line hold a sinusoid, and their median leaves
     the walker, who is not in step with it, out: close to 0.
+
+    Parameters
+    ----------
+    acc : ndarray
+        COM acceleration [m/s^2].
+    sample_rate_hz : float
+        Sample rate [Hz].
+    times_s : ndarray
+        Footfall times [s from the first sample], increasing.
+
+    Returns
+    -------
+    float
+        The share, 0-1 (0 for a flat median step).
     """
     t = np.arange(acc.size) / sample_rate_hz
     points = np.arange(_RICHNESS_POINTS) / _RICHNESS_POINTS
