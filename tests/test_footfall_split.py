@@ -255,3 +255,40 @@ def test_an_unmeasured_deck_is_left_out_and_named() -> None:
     assert inspect_record(double_hump_walk(7, 1.0)).to_json()["split"]["lone_line_hz"] is None
     line = f"strong line at {insp.steps.lone_line_hz:.3f} Hz"
     assert any(line in w and "ground_acc" in w for w in insp.warnings)
+
+
+@pytest.mark.parametrize("seed", [300, 301])
+def test_overground_and_speed_change_walks(seed: int) -> None:
+    # Double-humped steps (humps 0.9 and 1.1) on an overground walk from standing to
+    # standing (30 steps) and on a walk that speeds up by 20 % after 18 steps: the
+    # boundaries sit on the true event; starting and stopping is not a change of pace, the
+    # speed change is.
+    from workbench.synth import GaitProfile
+
+    base = dict(
+        mass_kg=75.0, pacing_hz=1.8, natural_frequency_hz=2.4, damping_ratio=0.3,
+        noise_sd_n=5.0, sample_rate_hz=200.0, seed=seed,
+    )  # fmt: skip
+    overground = GaitProfile.overground(walking_steps=30, standing_steps=3)
+    speed_change = GaitProfile.speed_change(1.8, 1.2, 18, 4, 30)
+    for gait, ratio, start, varies in (
+        (overground, 0.9, "rest", False),
+        (speed_change, 1.1, "steady", True),
+    ):
+        sim = simulate_walking(
+            **base,
+            duration_s=gait.relative_length() / 1.8,
+            coefficients=double_hump_force(75.0, ratio),
+            start=start,
+            gait=gait,
+        )
+        record = sim.record.replace(pacing_hz=None)
+        insp = inspect_record(record)
+        errors = boundary_errors(record, insp.steps)
+        assert np.mean(errors < 0.1) >= 0.95, gait.label
+        assert insp.pacing.varies is varies, gait.label
+        truth = np.asarray(sim.truth["step_duration_s"])
+        amplitude = np.asarray(sim.truth["step_amplitude_factor"])
+        walking = (amplitude[1:] > 0) & (amplitude[:-1] > 0)
+        true_fp = np.median((2.0 / (truth[1:] + truth[:-1]))[walking])
+        assert insp.pacing.pacing_hz == pytest.approx(true_fp, rel=0.005), gait.label
