@@ -307,21 +307,31 @@ def test_current_effects_join_the_baseline() -> None:
 
 # -- extension point -----------------------------------------------------------------------
 class BreathingModulation(Effect):
-    """User-written effect: breathing at 0.3 Hz modulates the force's first harmonic."""
+    """User-written effect: breathing at 0.3 Hz modulates the force's first harmonic.
+
+    Both quadratures of the first harmonic (cos and sin of the step phase) are modulated:
+    the criticism's step phase starts at the record's step boundaries, not at the
+    simulator's step starts (docs/guide/criticise.md), so an effect on one quadrature only
+    would be measured partly in the other one, by an amount that depends on where the
+    boundary falls in the simulated step.
+    """
 
     name = "breathing_modulation"
     reason = "the force's size rises and falls with breath"
     breathing_hz = 0.3
     parameters = (
-        Parameter("mod_cos_n", "N", 0.0, "modulation in phase with cos(2 pi f_b t)"),
-        Parameter("mod_sin_n", "N", 0.0, "modulation in phase with sin(2 pi f_b t)"),
+        Parameter("mod_cos_n", "N", 0.0, "cos(2 pi f_b t) times the cos(step phase) term"),
+        Parameter("mod_sin_n", "N", 0.0, "sin(2 pi f_b t) times the cos(step phase) term"),
+        Parameter("mod_cos_q_n", "N", 0.0, "cos(2 pi f_b t) times the sin(step phase) term"),
+        Parameter("mod_sin_q_n", "N", 0.0, "sin(2 pi f_b t) times the sin(step phase) term"),
     )
 
     def regressors(self, u, v, t_s, context=None):  # type: ignore[no-untyped-def]
         _, _, t = self.broadcast(u, v, t_s)
-        carrier = np.cos(context.step_phase_rad(t))
+        phase = context.step_phase_rad(t)
         w = 2 * np.pi * self.breathing_hz * t
-        return -np.stack([np.cos(w) * carrier, np.sin(w) * carrier], axis=-1)
+        c, s = np.cos(phase), np.sin(phase)
+        return -np.stack([np.cos(w) * c, np.sin(w) * c, np.cos(w) * s, np.sin(w) * s], axis=-1)
 
 
 @pytest.fixture
