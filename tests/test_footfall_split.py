@@ -97,7 +97,7 @@ def test_double_humped_walks_on_rigid_floors_and_decks() -> None:
         record = double_hump_walk(seed, ratio, deck)
         insp = inspect_record(record.replace(pacing_hz=None))
         errors.append(boundary_errors(record, insp.steps))
-        truth = record.metadata["truth"]["step_duration_s"]
+        truth = np.asarray(record.metadata["truth"]["step_duration_s"])
         true_fp = float(np.median(2.0 / (truth[1:] + truth[:-1])))
         pacing_errors.append(abs(insp.pacing.pacing_hz - true_fp) / true_fp)
         p10, p90 = np.percentile(insp.pacing.instantaneous_hz, [10, 90])
