@@ -1,7 +1,7 @@
 """A record prepared for model criticism, and the baseline's columns.
 
-:func:`prepare` turns a record into :class:`CriticismData`: its whole steps (the footfall
-split every command uses), their step phase, the preprocessed COM response and the
+:func:`prepare` turns a record into :class:`CriticismData`: its whole steps, the step phase
+of the pacing component of the COM acceleration, the preprocessed COM response and the
 measured ground motion. The criticism baseline's columns (:func:`baseline_columns`) and the
 helpers the candidates' columns share (the state without its steady stride lines, the
 shared force shape's phase slope, the slow pacing change) are here; an effect reaches the
@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import signal
 
 from workbench.models.effect_context import CRITICISM_HARMONICS, phase_harmonics
 from workbench.models.force import step_phase_rad
@@ -73,10 +74,9 @@ class CriticismData:
     step : ndarray of int
         Index of the step each sample belongs to.
     mass_kg, pacing_hz, sample_rate_hz : float
-        Body mass, pacing (:attr:`Steps.pacing_hz <workbench.records.steps.Steps.pacing_hz>`,
-        as every command reports it) and sample rate.
+        Body mass, mean pacing (from the footfalls) and sample rate.
     footfall_times_s : ndarray
-        Step boundaries of the kept steps [s]: the record's footfalls.
+        Step boundaries of the kept steps [s] (where the step phase crosses ``2 pi k``).
     ground : tuple of ndarray or None
         Ground displacement [m], velocity [m/s], acceleration [m/s^2], when measured.
     source : str
@@ -192,7 +192,7 @@ def prepare(
     check_walking(
         record, steps, estimate_pacing(com, steps, surface_acc_m_s2=record.ground_acc_m_s2)
     )
-    lo, hi, phase, footfalls = _footfall_phase(com, steps)
+    lo, hi, phase, footfalls = _fundamental_phase(com, steps)
     t = np.asarray(record.time_s[lo:hi], dtype=np.float64)
     n_steps = footfalls.size - 1
     step = np.clip(np.floor(phase / (2.0 * np.pi)).astype(np.int64), 0, n_steps - 1)
@@ -213,56 +213,71 @@ def prepare(
         phase_rad=phase,
         step=step,
         mass_kg=mass,
-        pacing_hz=steps.pacing_hz,
+        pacing_hz=float(1.0 / np.mean(np.diff(footfalls))),
         sample_rate_hz=record.sample_rate_hz,
         footfall_times_s=footfalls,
         ground=ground,
         source=record.source,
-        # The step rate averaged over a stride, so that left/right alternation is not a change.
+        pacing_local_hz=np.gradient(phase) * record.sample_rate_hz / (2.0 * np.pi),
         split=check_split(steps).to_json(steps),
-        pacing_local_hz=_moving_average(
-            np.gradient(phase) * record.sample_rate_hz / (2.0 * np.pi),
-            max(round(2.0 * record.sample_rate_hz / steps.pacing_hz), 1),
-        ),
     )
 
 
-def _footfall_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatArray, FloatArray]:
-    """Step phase from the record's footfall split, smoothed over a stride.
+def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatArray, FloatArray]:
+    """Step phase from the pacing component of the COM acceleration.
 
-    The boundaries are the same gait event of every step (the peak of the walker's pacing
-    component, placed by the whole step's shape: docs/science.md 2), so the steps, their
-    count and the pacing are those of ``inspect`` and ``identify``. The phase
-    ``2 pi (j + (t - t_j) / d_j)`` through them
-    (:func:`~workbench.models.force.step_phase_rad`) has its rate averaged over two steps
-    (one stride) and is scaled to advance ``2 pi`` per split step over the record: the
-    step-to-step jitter of the boundaries and the alternation of left and right steps
-    would otherwise enter the criticism as a timing error of the force, and
-    ``gait_asymmetry`` is what tests that alternation.
+    Peaks of the acceleration mark footfalls, but with a double-humped force they can jump
+    between the humps from step to step, and where the response changes (stiffness drift, a
+    nonlinear spring) they shift against the force. Both would enter the criticism as an
+    error of the force's timing. The phase of the acceleration's pacing component (a
+    zero-phase band-pass of 0.7-1.4 f_p, then the angle of its analytic signal) advances
+    smoothly by ``2 pi`` per step and is set so that its circular mean at the detected
+    footfalls is 0: step phase 0 is, on average, the footfall peak.
 
     Returns
     -------
     lo, hi : int
-        Sample span of the whole steps.
+        Sample span of the whole steps kept.
     phase_rad : ndarray
-        Phase on that span, 0 at the first footfall.
+        Phase on that span, starting in ``[0, 2 pi)``.
     boundaries_s : ndarray
-        Times where the phase crosses multiples of ``2 pi`` [s], one per footfall.
+        Times where the phase crosses multiples of ``2 pi`` (step boundaries) [s].
     """
-    footfalls = np.asarray(steps.footfall_times_s, dtype=np.float64)
-    lo, hi = steps.start, steps.stop
-    t = np.asarray(com.time_s[lo:hi], dtype=np.float64)
-    raw = step_phase_rad(t, footfalls)
-    rate = np.diff(raw)
-    if rate.size < 2:
-        return lo, hi, raw, footfalls
-    width = max(round(2.0 * com.sample_rate_hz / steps.pacing_hz), 1)
-    smooth = _moving_average(rate, width)
-    smooth *= rate.sum() / smooth.sum()
-    phase = raw[0] + np.concatenate([[0.0], np.cumsum(smooth)])
-    crossings = 2.0 * np.pi * np.arange(footfalls.size)
-    boundaries = np.interp(crossings, phase, t)
-    boundaries[0], boundaries[-1] = footfalls[0], footfalls[-1]
+    fs = com.sample_rate_hz
+    fp = float(1.0 / np.median(steps.durations_s))
+    band = np.array([0.7, 1.4]) * fp / (0.5 * fs)
+    sos = signal.butter(4, np.clip(band, 1e-6, 0.99), btype="bandpass", output="sos")
+    acc = np.asarray(com.acc_m_s2, dtype=np.float64)
+    pacing = signal.sosfiltfilt(sos, acc - acc.mean())
+    unwrapped = np.unwrap(np.angle(signal.hilbert(pacing)))
+    # Average the phase rate over two steps (one stride): left/right asymmetry leaks into the
+    # band as an alternating timing, which would otherwise hide it in the phase.
+    width = max(round(2.0 * fs / fp), 1)
+    smooth = _moving_average(np.diff(unwrapped), width)
+    unwrapped = unwrapped[0] + np.concatenate([[0.0], np.cumsum(smooth)])
+    # Footfall peaks of the acceleration sit near the maxima of its pacing component, where
+    # the analytic signal's angle is 0.
+    at_footfalls = np.exp(1j * np.interp(steps.footfall_times_s, com.time_s, unwrapped))
+    unwrapped = unwrapped - float(np.angle(np.mean(at_footfalls)))
+    # Keep whole cycles away from the band-pass's edge effects (one step at either end).
+    first = steps.start
+    last = steps.stop
+    k0 = int(np.ceil(unwrapped[first] / (2.0 * np.pi)))
+    k1 = int(np.floor(unwrapped[last - 1] / (2.0 * np.pi)))
+    if k1 - k0 < 6 or np.any(np.diff(unwrapped[first:last]) <= 0):
+        # An irregular record (stops, turns): fall back to the detected footfalls.
+        t = com.time_s[first:last]
+        return (
+            first,
+            last,
+            step_phase_rad(t, steps.footfall_times_s),
+            np.asarray(steps.footfall_times_s, dtype=np.float64),
+        )
+    crossings = 2.0 * np.pi * np.arange(k0, k1 + 1)
+    lo = int(np.searchsorted(unwrapped, crossings[0]))
+    hi = int(np.searchsorted(unwrapped, crossings[-1]))
+    boundaries = np.interp(crossings, unwrapped, com.time_s)
+    phase = unwrapped[lo:hi] - crossings[0]
     return lo, hi, np.asarray(phase, dtype=np.float64), np.asarray(boundaries, dtype=np.float64)
 
 
