@@ -30,7 +30,7 @@ How it works:
    quoted. The exit status is 0 only if everything compared is identical or equal to
    rounding.
 
-Running every default case (25) takes 10-15 minutes on two cores (the first command on each
+Running every default case (26) takes 10-15 minutes on two cores (the first command on each
 side also compiles the numba kernels of that tree).
 """
 
@@ -138,8 +138,9 @@ RECORDS: dict[str, RecordSpec] = {
 
 #: Effects `compare` adds in turn (its --effects is required).
 COMPARE_EFFECTS = "gait_asymmetry,cubic_stiffness"
-#: crosscheck costs 10-45 s per record and side: by default on one short record, few steps.
-DEFAULT_CROSSCHECK_RECORDS = ("seed_individual",)
+#: crosscheck costs 10-45 s per record and side: by default on a few steps of one rigid-floor
+#: record and of the deck record (whose check takes the transmissibility route's own path).
+DEFAULT_CROSSCHECK_RECORDS = ("seed_individual", "seed_individual_deck")
 CROSSCHECK_ARGS = ("--max-steps", "4")
 #: The batch's manifest: short records, as files in the shared data folder.
 DEFAULT_BATCH_RECORDS = ("seed_individual", "seed_individual_deck", "insole_20s")

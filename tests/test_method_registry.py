@@ -181,3 +181,51 @@ def test_a_method_class_that_cannot_work_is_refused(cls: Any, words: str) -> Non
 def test_re_registering_the_same_class_keeps_its_place() -> None:
     register_method(method_class("rbpf"))
     assert method_names() == ("rbpf", "pf", "exact")
+
+
+@dataclasses.dataclass(frozen=True)
+class CautiousFilter(wb.RBPF):
+    """An rbpf with other resampling defaults: the settings must keep them."""
+
+    name: ClassVar[str] = "cautious_filter"
+    resampling: str = "multinomial"
+    ess_threshold: float = 0.8
+
+
+@pytest.fixture
+def cautious() -> Iterator[type[CautiousFilter]]:
+    register_method(CautiousFilter)
+    try:
+        yield CautiousFilter
+    finally:
+        unregister_method(CautiousFilter.name)
+
+
+def test_the_settings_keep_a_registered_methods_own_option_defaults(
+    cautious: type[CautiousFilter],
+) -> None:
+    own = (cautious.resampling, cautious.ess_threshold)
+    named = IdentifySettings.from_flat(method="cautious_filter").method
+    assert (named.resampling, named.ess_threshold) == own  # type: ignore[attr-defined]
+    switched = IdentifySettings().replace(method="cautious_filter").method
+    assert (switched.resampling, switched.ess_threshold) == own  # type: ignore[attr-defined]
+    # An option the caller sets wins over the class's default.
+    set_ = IdentifySettings.from_flat(method="cautious_filter", resampling="systematic").method
+    assert set_.resampling == "systematic"  # type: ignore[attr-defined]
+    # Switching away from it: the new method takes its own defaults for options the old one
+    # held at its class's defaults, and keeps those the caller moved.
+    back = IdentifySettings.from_flat(method="cautious_filter").replace(method="rbpf").method
+    assert (back.resampling, back.ess_threshold) == ("systematic", 0.5)  # type: ignore[attr-defined]
+    moved = IdentifySettings.from_flat(method="rbpf", resampling="stratified").replace(method="pf")
+    assert moved.method.resampling == "stratified"  # type: ignore[attr-defined]
+
+
+def test_crosscheck_refuses_a_grid_result_naming_the_registered_filters(
+    cautious: type[CautiousFilter],
+) -> None:
+    from workbench.inference.crosscheck import crosscheck
+
+    rec = wb.datasets.load("seed_individual").slice(0, 6)
+    exact = wb.identify(rec, wb.SMDModel(harmonics=3), method="exact", force_check=False)
+    with pytest.raises(UsageError, match="cross-check rbpf or pf or cautious_filter"):
+        crosscheck(exact.problem, exact, seed=0)

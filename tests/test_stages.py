@@ -76,10 +76,9 @@ def test_the_stages_by_hand_give_what_identify_gives(case: str) -> None:
     assert hand.identifiability == res.identifiability
     assert list(hand.identifiability) == list(res.identifiability)
     assert json.dumps(hand.to_json(), default=float) == json.dumps(res.to_json(), default=float)
-    # Batch work sends results between processes. (A model with effects holds their values
-    # in a read-only mapping proxy, which pickle refuses: that is the model's, not the
-    # result's parts, so the check leaves it out.)
-    back = pickle.loads(pickle.dumps(res if res.effects is None else res.replace(model=None)))
+    # Batch work sends results between processes, models with effects included.
+    back = pickle.loads(pickle.dumps(res))
+    assert back.model == res.model
     assert json.dumps(back.to_json(), default=float) == json.dumps(res.to_json(), default=float)
     # The typed parts say what ran and where C and K came from.
     assert res.route is not None and res.surface is not None

@@ -52,6 +52,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from _revision import Revision
+
 HERE = Path(__file__).resolve()
 REPO = HERE.parents[2]
 REFERENCE_REVISION = "9bef909"
@@ -147,31 +149,6 @@ def _spawn(tree: Path, cache: Path, repeats: int) -> dict[str, Any]:
     if proc.returncode != 0:
         raise SystemExit(f"child on {tree} failed:\n{proc.stderr[-3000:]}")
     return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
-
-
-class Revision:
-    """A detached git worktree of a revision, removed on exit."""
-
-    def __init__(self, revision: str) -> None:
-        self.revision = revision
-        self.path = Path(tempfile.mkdtemp(prefix="workbench-ref-")) / "tree"
-
-    def __enter__(self) -> Revision:
-        subprocess.run(
-            ["git", "-C", str(REPO), "worktree", "add", "--detach", str(self.path), self.revision],
-            check=True,
-            capture_output=True,
-        )
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        subprocess.run(
-            ["git", "-C", str(REPO), "worktree", "remove", "--force", str(self.path)],
-            check=False,
-            capture_output=True,
-        )
-        shutil.rmtree(self.path.parent, ignore_errors=True)
-        subprocess.run(["git", "-C", str(REPO), "worktree", "prune"], check=False)
 
 
 def _measure(tree: Path, repeats: int) -> dict[str, Any]:

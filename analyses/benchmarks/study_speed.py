@@ -62,6 +62,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from _revision import Revision
+
 HERE = Path(__file__).resolve()
 REPO = HERE.parents[2]
 STUDY_RECORDS = 1528
@@ -247,31 +249,6 @@ def _child_command(args: argparse.Namespace) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- references
-
-
-class Revision:
-    """A detached git worktree of a revision, removed on exit."""
-
-    def __init__(self, revision: str) -> None:
-        self.revision = revision
-        self.path = Path(tempfile.mkdtemp(prefix="workbench-ref-")) / "tree"
-
-    def __enter__(self) -> Revision:
-        subprocess.run(
-            ["git", "-C", str(REPO), "worktree", "add", "--detach", str(self.path), self.revision],
-            check=True,
-            capture_output=True,
-        )
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        subprocess.run(
-            ["git", "-C", str(REPO), "worktree", "remove", "--force", str(self.path)],
-            check=False,
-            capture_output=True,
-        )
-        shutil.rmtree(self.path.parent, ignore_errors=True)
-        subprocess.run(["git", "-C", str(REPO), "worktree", "prune"], check=False)
 
 
 # --------------------------------------------------------------------------- part (a)

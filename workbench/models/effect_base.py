@@ -109,6 +109,11 @@ class Effect:
             resolved[p.name] = value
         self._values = MappingProxyType(resolved)
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # The read-only view of the values does not pickle; rebuild from the values, so a
+        # model with effects (and a result holding it) travels between processes.
+        return (_rebuild_effect, (type(self), dict(self._values)))
+
     # -- values -------------------------------------------------------------------------
     @property
     def values(self) -> Mapping[str, float]:
@@ -774,3 +779,8 @@ def parse_effect_specs(
             raise
         shown = specs if isinstance(specs, str) else ",".join(map(str, items))
         raise UsageError(f"{where} {shown}: {err}") from None
+
+
+def _rebuild_effect(cls: type[Effect], values: dict[str, float]) -> Effect:
+    """Rebuild an effect from its class and values (unpickling, :meth:`Effect.__reduce__`)."""
+    return cls(**values)

@@ -58,8 +58,17 @@ def filter_traces(output: FilterRun) -> ParticleFilterOutput | FilterResults:
     if not isinstance(output, IdentificationResult):
         return output
     if output.filter_results is None:
-        raise UsageError(f"a {output.method} result has no per-step values; cross-check rbpf or pf")
+        raise UsageError(
+            f"a {output.method} result has no per-step values; cross-check {_registered_filters()}"
+        )
     return output.filter_results
+
+
+def _registered_filters() -> str:
+    """Name the registered particle filters as a user would (``rbpf or pf``)."""
+    from workbench.inference.methods import particle_filter_names
+
+    return " or ".join(particle_filter_names())
 
 
 def pf_step_stats(
@@ -67,11 +76,11 @@ def pf_step_stats(
 ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Smallest ESS inside every piece and distinct values of C, K at its end."""
     p = problem.n_pieces
-    if isinstance(out, IdentificationResult) and out.filter_results is None:
-        raise UsageError(f"a {out.method} result has no filter traces; cross-check rbpf or pf")
     traces = filter_traces(out)
     if traces.ess is None or traces.unique_values is None or traces.trace_time_s is None:
-        raise UsageError(f"a {out.method} result has no filter traces; cross-check rbpf or pf")
+        raise UsageError(
+            f"a {out.method} result has no filter traces; cross-check {_registered_filters()}"
+        )
     if traces.trace_time_s.size == p:
         return np.asarray(traces.ess, dtype=float), np.asarray(traces.unique_values)
     # Per-sample traces (pf): the piece's rows by time.

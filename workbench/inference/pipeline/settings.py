@@ -271,7 +271,14 @@ def _model_from_flat(flat: dict[str, Any]) -> SMDModel:
     )
 
 
-def _method_from_flat(flat: dict[str, Any]) -> Method:
+def _method_from_flat(
+    flat: dict[str, Any], given: set[str] | frozenset[str] = frozenset()
+) -> Method:
+    """Build the method of the flat keys; options not in ``given`` keep the class's defaults.
+
+    A registered method may have its own defaults (another resampling scheme, say): a flat
+    default must not override them, only a key the caller set.
+    """
     name = flat["method"]
     if name not in method_names():
         raise UsageError(
@@ -291,12 +298,11 @@ def _method_from_flat(flat: dict[str, Any]) -> Method:
             f"'force_proposal' must be 'regression' or 'prior', got {flat['force_proposal']!r}",
             parameter="force_proposal",
         )
+    options = {key: flat[key] for key in ("resampling", "ess_threshold", "force_proposal")}
     return as_method(
         name,
         n_particles=int(particles) if particles else None,
-        resampling=flat["resampling"],
-        ess_threshold=flat["ess_threshold"],
-        force_proposal=flat["force_proposal"],
+        **{key: value for key, value in options.items() if key in given},
     )
 
 
@@ -362,8 +368,9 @@ class IdentifySettings:
                 f"identification setting {unknown[0]!r} is not known; use only "
                 f"{', '.join(FLAT_KEYS)}"
             )
-        values = {**_FLAT_DEFAULTS, **{k: v for k, v in flat.items() if v is not None}}
-        method = _method_from_flat(values)
+        given = {k for k, v in flat.items() if v is not None}
+        values = {**_FLAT_DEFAULTS, **{k: flat[k] for k in given}}
+        method = _method_from_flat(values, given)
         carried = tuple(
             (key, values[key])
             for key, attribute in _METHOD_OPTION.items()
@@ -448,7 +455,13 @@ class IdentifySettings:
             flat = self.flat()
             switching = changes.get("method", flat["method"]) != flat["method"]
             if switching:
+                # The new method takes its own defaults, except for options set away from
+                # the old method's defaults, which carry over.
                 flat["particles"] = None
+                for key in ("resampling", "ess_threshold", "force_proposal"):
+                    attribute = _METHOD_OPTION[key]
+                    if flat[key] == getattr(type(self.method), attribute, _FLAT_DEFAULTS[key]):
+                        flat[key] = None
             rebuilt = IdentifySettings.from_flat(**{**flat, **changes})
             touched = set(changes)
             model = self.model

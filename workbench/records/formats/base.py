@@ -12,11 +12,13 @@ Detection order (:func:`workbench.records.io.detect_format`)
 ------------------------------------------------------------
 1. The file extension, if a registered format claims it (an extension belongs to one
    format only).
-2. :meth:`RecordFormat.sniff_bytes` of every format on the file's bytes, in registration
-   order, before the file is decoded as text (C3D is binary).
-3. :meth:`RecordFormat.sniff_text` of every format on the decoded lines, in registration
-   order, the generic formats (``generic = True``: CSV, which reads any text table with a
-   header line) after all the others.
+2. :meth:`RecordFormat.sniff_bytes` of every format on the file's bytes, before the file
+   is decoded as text (C3D is binary).
+3. :meth:`RecordFormat.sniff_text` of every format on the decoded lines.
+
+   In steps 2 and 3 the specific formats are asked first, in registration order, and the
+   generic ones (``generic = True``: CSV, which reads any text table with a header line)
+   after all the others.
 4. Nothing claims the file: an error that says so.
 
 The built-in formats register in the order ``csv``, ``mot``, ``insole``, ``c3d``, so the
