@@ -251,11 +251,12 @@ def test_force_coefficients_mix_by_the_law_of_total_variance(problem) -> None:
     weight = problem.mass_kg * G_M_S2
     m, p = problem.n_coefficients, problem.n_pieces
     slope_c, slope_k, s = 2.0, -0.05, 40.0
+    slope_a1 = 0.5  # a1 follows C too, so BLF1's sd holds the spread across (C, K)
 
     def moments(_p, c, k):
         mu = np.zeros((c.size, p, m))
         mu[:, :, 0] = (slope_c * c + slope_k * k)[:, None]  # a0 follows C and K
-        mu[:, :, 1] = 0.4 * weight  # a1: BLF1 = 0.4 exactly
+        mu[:, :, 1] = (0.4 * weight + slope_a1 * (c - mean[0]))[:, None]  # BLF1 0.4 at mean C
         cov_theta = np.broadcast_to(np.eye(m) * s**2, (c.size, p, m, m)).copy()
         return mu, cov_theta
 
@@ -267,11 +268,18 @@ def test_force_coefficients_mix_by_the_law_of_total_variance(problem) -> None:
     np.testing.assert_allclose(f.sd[:, 0], math.sqrt(expected_var), rtol=0.01)
     np.testing.assert_allclose(f.sd[:, 2], s, rtol=1e-9)  # b1 does not follow (C, K)
     np.testing.assert_allclose(f.map_mean[:, 0], g @ post.map, rtol=1e-12)
-    np.testing.assert_allclose(f.blf_piece[:, 0], 0.4, rtol=1e-12)
-    np.testing.assert_allclose(f.blf, np.r_[0.4, np.zeros(problem.harmonics - 1)], atol=1e-12)
-    assert f.blf_step_sd[0] == pytest.approx(0.0, abs=1e-12)
-    # BLF1 of the mean over pieces: within-piece sd s / (M g), pieces independent.
-    assert f.blf_sd[0] == pytest.approx(s / weight / math.sqrt(p), rel=1e-6)
+    lf = f.load_factors
+    # The grid's mean of C is the Gaussian's to the grid's accuracy (as a0's above).
+    np.testing.assert_allclose(lf.piece[:, 0], 0.4, rtol=1e-4)
+    np.testing.assert_allclose(lf.mean, np.r_[0.4, np.zeros(problem.harmonics - 1)], atol=1e-4)
+    assert lf.step_sd[0] == pytest.approx(0.0, abs=1e-12)
+    assert lf.mixed_over == "grid"
+    # BLF1 of the mean over pieces: within-piece sd s / (M g), pieces independent given
+    # (C, K), plus the spread of a1 across C (law of total variance); the grid resolves the
+    # Gaussian's sd to about 1 %.
+    within = s**2 / p
+    between = (slope_a1 * sd[0]) ** 2
+    assert lf.sd[0] == pytest.approx(math.sqrt(within + between) / weight, rel=0.01)
     # Identifiability uses the joint correlation of C with a0: Cov(C, a0) / (sd_C sd_a0).
     expected_corr = (g @ cov[:, 0]) / (sd[0] * math.sqrt(expected_var))
     assert post.identifiability.max_force_correlation_damping == pytest.approx(

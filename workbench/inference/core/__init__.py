@@ -12,6 +12,11 @@ from workbench.inference.core.identifiability import (
     force_correlation,
     identifiability_report,
 )
+from workbench.inference.core.load_factors import (
+    LoadFactorPosterior,
+    mix_load_factors,
+    realised_load_factors,
+)
 from workbench.inference.core.outputs import PARAMETER_NAMES, ParticleFilterOutput
 from workbench.inference.core.problem import (
     KALMAN_STATE_FRACTION,
@@ -64,6 +69,7 @@ __all__ = [
     "IdentifiabilityReport",
     "IdentificationProblem",
     "IdentificationResult",
+    "LoadFactorPosterior",
     "NoiseModel",
     "ParticleFilterOutput",
     "Route",
@@ -74,7 +80,9 @@ __all__ = [
     "ess",
     "force_correlation",
     "identifiability_report",
+    "mix_load_factors",
     "normalise_log_weights",
+    "realised_load_factors",
     "resample",
     "weighted_quantile",
 ]

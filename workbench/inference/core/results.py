@@ -32,6 +32,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from workbench.fileutil import atomic_path
+from workbench.inference.core.load_factors import LoadFactorPosterior
 from workbench.inference.core.problem import IdentificationProblem
 from workbench.inference.core.result_parts import (
     EffectPosterior,
@@ -132,6 +133,10 @@ class IdentificationResult:
     split : dict or None
         The footfall split's consistency check (``inspect --json``'s ``split``; set by
         ``identify`` on a record cut into steps).
+    load_factors : LoadFactorPosterior or None
+        The walk's load factors mixed over the (C, K) posterior (every built-in method sets
+        it; without it the BLFs are those of the mean coefficients and their sd is the
+        step-to-step standard error, which leaves out C and K).
     """
 
     method: str
@@ -152,6 +157,7 @@ class IdentificationResult:
     effects: EffectPosterior | None = None
     inspection_warnings: tuple[str, ...] = ()
     split: dict[str, Any] | None = None
+    load_factors: LoadFactorPosterior | None = None
 
     def replace(self, **changes: Any) -> IdentificationResult:
         """Return a copy with some fields changed (results are immutable)."""
@@ -383,19 +389,29 @@ class IdentificationResult:
 
     @property
     def piece_blf(self) -> FloatArray:
-        """BLF_i of every piece from its posterior-mean coefficients, shape (P, n)."""
+        """BLF_i of every piece, shape (P, n): mixed over (C, K) where the result has them."""
+        if self.load_factors is not None:
+            return self.load_factors.piece
         coef = self.piece_coefficients_mean[:, : 2 * self.problem.harmonics + 1]
         a, b = coef[:, 1::2], coef[:, 2::2]
         return np.sqrt(a**2 + b**2) / (self.mass_kg * G_M_S2)
 
     @property
     def blf(self) -> FloatArray:
-        """BLF_1..n: mean over steps of the per-step load factors."""
+        """BLF_1..n: posterior mean of the walk's mean load factors over its steps."""
+        if self.load_factors is not None:
+            return self.load_factors.mean
         return self.piece_blf.mean(axis=0)
 
     @property
     def blf_sd(self) -> FloatArray:
-        """Standard error of :attr:`blf` (step-to-step sd over the square root of the count)."""
+        """Posterior sd of :attr:`blf`, C and K's uncertainty included.
+
+        A result without :attr:`load_factors` (a method that does not mix them) falls back
+        to the step-to-step sd over the square root of the count, given C and K.
+        """
+        if self.load_factors is not None:
+            return self.load_factors.sd
         pb = self.piece_blf
         if pb.shape[0] < 2:
             return np.full(pb.shape[1], np.nan)
@@ -403,9 +419,14 @@ class IdentificationResult:
 
     @property
     def blf_step_sd(self) -> FloatArray:
-        """Step-to-step standard deviation of the BLFs (variability, not uncertainty)."""
+        """Step-to-step standard deviation of the BLFs (variability, not uncertainty).
+
+        NaN for a one-piece identification: a single step shows no spread.
+        """
+        if self.load_factors is not None:
+            return self.load_factors.step_sd
         pb = self.piece_blf
-        return pb.std(axis=0, ddof=1) if pb.shape[0] > 1 else np.zeros(pb.shape[1])
+        return pb.std(axis=0, ddof=1) if pb.shape[0] > 1 else np.full(pb.shape[1], np.nan)
 
     def biomechanical_force_n(self) -> FloatArray:
         """Reconstructed biomechanical force at every sample (seed fig. 9) [N]."""
@@ -597,11 +618,14 @@ class IdentificationResult:
         conditional: dict[str, Any] = {}
         out.update({k: None if k in hidden else float(est[k]) for k in SCALAR_KEYS})
         blf = [float(x) for x in self.blf]
-        # One piece has no step-to-step spread: null, not NaN, which strict JSON lacks.
+        # NaN (one piece, no spread to measure) is null: strict JSON lacks NaN.
         blf_sd = [float(x) if np.isfinite(x) else None for x in self.blf_sd]
         out["blf"] = None if force_hidden else blf
         out["posterior_sd"] = {k: None if k in hidden else float(sd[k]) for k in SCALAR_KEYS}
         out["posterior_sd"]["blf"] = None if force_hidden else blf_sd
+        # The walk's variability, not an uncertainty (docs/science.md section 4).
+        blf_step_sd = [float(x) if np.isfinite(x) else None for x in self.blf_step_sd]
+        out["blf_step_sd"] = None if force_hidden else blf_step_sd
         out["interval_95"] = {k: None if k in hidden else list(ci[k]) for k in SCALAR_KEYS}
         for k in SCALAR_KEYS:
             if k in hidden:
@@ -612,7 +636,11 @@ class IdentificationResult:
                     "prior_range": list(self.prior_range(k)),
                 }
         if force_hidden:
-            conditional["blf"] = {"estimate": blf, "posterior_sd": blf_sd}
+            conditional["blf"] = {
+                "estimate": blf,
+                "posterior_sd": blf_sd,
+                "step_sd": blf_step_sd,
+            }
         out["identifiability"] = self.identifiability
         out["steps"] = int(self.problem.n_pieces)
         if self.split is not None:
@@ -706,8 +734,12 @@ class IdentificationResult:
                 "on them"
             )
         else:
-            for i, (b, s) in enumerate(zip(self.blf[:5], self.blf_sd[:5], strict=True), start=1):
-                lines.append(f"{'BLF' + str(i):<24}{b:>12.3f}{s:>12.3f}")
+            z95 = 1.959963984540054
+            rows = zip(self.blf[:5], self.blf_sd[:5], self.blf_step_sd[:5], strict=True)
+            for i, (b, s, step) in enumerate(rows, start=1):
+                band = f"[{b - z95 * s:.3f}, {b + z95 * s:.3f}]" if np.isfinite(s) else ""
+                spread = f"   step-to-step sd {step:.3f}" if np.isfinite(step) else ""
+                lines.append(f"{'BLF' + str(i):<24}{b:>12.3f}{s:>12.3f}{band:>26}{spread}")
         lb = self.test_serial_correlation()
         sentence = self.identifiability.get("sentence", "not assessed")  # not again as a warning
         lines += [

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from workbench.errors import UsageError
 from workbench.inference.core import (
@@ -50,9 +51,12 @@ from workbench.inference.core import (
     force_correlation,
     identifiability_report,
 )
+from workbench.inference.core.load_factors import LoadFactorPosterior, mix_load_factors
 from workbench.inference.kalman import record_loglik
 from workbench.inference.methods.pf import PF_PARTICLES
 from workbench.inference.methods.rbpf import RBPF_PARTICLES, REJUVENATE
+
+FloatArray = NDArray[np.float64]
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -61,6 +65,7 @@ __all__ = [
     "Exact",
     "Method",
     "as_method",
+    "load_factors_at_draws",
     "method_class",
     "method_names",
     "particle_filter_names",
@@ -300,6 +305,7 @@ def _filter_result(
     collapse_on_few_ancestors: bool,
 ) -> IdentificationResult:
     w = np.exp(out.log_weights - np.max(out.log_weights))
+    identifiability, load_factors = _filter_posterior_checks(problem, out, seed)
     filtered = FilterResults(
         n_particles=out.n_particles,
         settings=out.settings,
@@ -320,16 +326,41 @@ def _filter_result(
         piece_coefficients_mean=out.piece_coefficients_mean,
         piece_coefficients_sd=out.piece_coefficients_sd,
         loglik=float(out.loglik),
-        identifiability=_filter_identifiability(problem, out, seed),
+        identifiability=identifiability,
         filter_results=filtered,
+        load_factors=load_factors,
         problem=problem,
         **common,
     )
 
 
-def _filter_identifiability(
+def load_factors_at_draws(
+    problem: IdentificationProblem, damping: FloatArray, stiffness: FloatArray
+) -> tuple[LoadFactorPosterior, FloatArray, FloatArray]:
+    """Mix the walk's load factors over equally weighted (C, K) draws.
+
+    Returns the load factors and the conditional mean and variance of every piece's
+    coefficients at the draws (shape (B, P, m)), which the identifiability report reuses.
+    """
+    res = record_loglik(problem, damping, stiffness, return_pieces=True)
+    if res.theta_cov is None or res.theta_mean is None:  # pragma: no cover - contract
+        raise RuntimeError("record_loglik(return_pieces=True) returned no coefficients")
+    mean = np.asarray(res.theta_mean)
+    var = np.diagonal(np.asarray(res.theta_cov), axis1=-2, axis2=-1)
+    lf = mix_load_factors(
+        mean, var, np.ones(mean.shape[0]), problem.mass_kg, problem.harmonics, "draws"
+    )
+    return lf, mean, var
+
+
+def _filter_posterior_checks(
     problem: IdentificationProblem, out: ParticleFilterOutput, seed: int
-) -> dict[str, Any]:
+) -> tuple[dict[str, Any], LoadFactorPosterior]:
+    """Grade a filter's final cloud and mix its load factors.
+
+    Both rest on the force coefficients given (C, K) at the same weighted subsample of the
+    cloud, so one Kalman pass serves the two.
+    """
     w = np.exp(out.log_weights - np.max(out.log_weights))
     w /= w.sum()
     draws = out.particles
@@ -341,23 +372,22 @@ def _filter_identifiability(
     corr = float(cov[0, 1] / (sd[0] * sd[1])) if np.all(sd > 0) else float("nan")
     rng = np.random.default_rng(seed)
     idx = rng.choice(draws.shape[0], size=min(CORRELATION_DRAWS, draws.shape[0]), p=w)
+    load_factors, theta_mean, theta_var = load_factors_at_draws(
+        problem, draws[idx, 0], draws[idx, 1]
+    )
     force_max = (float("nan"), float("nan"))
     if np.all(sd > 0):
-        res = record_loglik(problem, draws[idx, 0], draws[idx, 1], return_pieces=True)
-        if res.theta_cov is None or res.theta_mean is None:  # pragma: no cover - contract
-            raise RuntimeError("record_loglik(return_pieces=True) returned no coefficients")
-        var = np.diagonal(res.theta_cov, axis1=-2, axis2=-1)
         fc = force_correlation(
             draws[idx, 0],
             draws[idx, 1],
             np.ones(idx.size),
-            res.theta_mean,
-            var,
+            theta_mean,
+            theta_var,
             problem.coefficient_names,
         )
         force_max = (fc.max_damping, fc.max_stiffness)
     report = identifiability_report(sd, problem.prior.sd, corr, force_max)
-    return report.to_json()
+    return report.to_json(), load_factors
 
 
 @dataclass(frozen=True)
@@ -570,6 +600,7 @@ def exact_result(
         loglik=float(post.log_evidence),
         identifiability=report.to_json() if report is not None else {},
         grid_results=GridResults(post.to_json()),
+        load_factors=force.load_factors,
         problem=problem,
         **(common or {}),
     )

@@ -77,8 +77,8 @@ Force coefficients
 Given (C, K) the Kalman filter gives the Gaussian posterior of each piece's coefficients
 (``record_loglik(..., return_pieces=True)``). Reported: at the MAP, and mixed over the grid
 posterior (mean and covariance by the law of total variance, over the nodes holding all but
-``1e-3`` of the mass), then ``BLF_i = sqrt(a_i^2 + b_i^2) / (M g)`` per piece (delta-method sd)
-and its mean over pieces.
+``1e-3`` of the mass); the walk's load factors ``BLF_i = sqrt(a_i^2 + b_i^2) / (M g)`` are
+mixed over the same nodes (:mod:`workbench.inference.core.load_factors`).
 """
 
 from __future__ import annotations

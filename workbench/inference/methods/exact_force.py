@@ -2,8 +2,8 @@
 
 Given (C, K) the Kalman filter gives the Gaussian posterior of every piece's force
 coefficients; :func:`_force_posterior` mixes these over the grid nodes that hold nearly all
-the posterior mass (law of total variance) and derives the BLFs with their sd
-(:mod:`workbench.inference.methods.exact`, "Force coefficients"). :class:`ForcePosterior` holds the
+the posterior mass (law of total variance), and the walk's load factors are mixed over the
+same nodes (:mod:`workbench.inference.core.load_factors`). :class:`ForcePosterior` holds the
 result.
 
 Its own idea: a second posterior (of the force, not of C and K) computed from the first,
@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.inference.core import IdentificationProblem
-from workbench.records.record import G_M_S2
+from workbench.inference.core.load_factors import LoadFactorPosterior, mix_load_factors
 
 __all__ = ["ForceMoments", "ForcePosterior"]
 
@@ -51,16 +51,9 @@ class ForcePosterior:
         Conditional posterior at the MAP (C, K).
     mean, cov, sd : ndarray, shapes (P, m), (P, m, m), (P, m)
         Mixed over the grid posterior (law of total variance).
-    blf_piece, blf_piece_sd : ndarray, shape (P, n)
-        ``BLF_i`` of every piece from the mixed mean coefficients, and its delta-method sd.
-    blf : ndarray, shape (n,)
-        Mean of ``blf_piece`` over pieces (BLF1 first).
-    blf_sd : ndarray, shape (n,)
-        Posterior sd of that mean (within-(C, K) spread of each piece, treated as
-        independent across pieces, plus the spread across (C, K)).
-    blf_step_sd : ndarray, shape (n,)
-        Standard deviation of ``blf_piece`` across pieces (step-to-step variability; NaN
-        for a single piece).
+    load_factors : LoadFactorPosterior
+        The walk's load factors mixed over the same nodes
+        (:mod:`workbench.inference.core.load_factors`).
     node_damping, node_stiffness, node_weights : ndarray, shape (B,)
         Grid nodes used for the mixture and their renormalised weights.
     node_theta_mean, node_theta_var : ndarray, shape (B, P, m)
@@ -74,11 +67,7 @@ class ForcePosterior:
     mean: FloatArray
     cov: FloatArray
     sd: FloatArray
-    blf_piece: FloatArray
-    blf_piece_sd: FloatArray
-    blf: FloatArray
-    blf_sd: FloatArray
-    blf_step_sd: FloatArray
+    load_factors: LoadFactorPosterior
     node_damping: FloatArray
     node_stiffness: FloatArray
     node_weights: FloatArray
@@ -132,36 +121,9 @@ def _force_posterior(
     cov_mix = 0.5 * (cov_mix + np.swapaxes(cov_mix, -1, -2))
     sd = np.sqrt(np.maximum(np.diagonal(cov_mix, axis1=-2, axis2=-1), 0.0))
 
-    weight_n = problem.mass_kg * G_M_S2
-    n_h = problem.harmonics
-    ia = 2 * np.arange(1, n_h + 1) - 1
-    ib = ia + 1
-
-    def blf_of(theta: FloatArray) -> FloatArray:
-        return np.hypot(theta[..., ia], theta[..., ib]) / weight_n
-
-    blf_piece = blf_of(mean)
-    # Delta method per piece with the mixed covariance of (a_i, b_i).
-    amp = np.maximum(np.hypot(mean[:, ia], mean[:, ib]), 1e-300)
-    ga, gb = mean[:, ia] / amp, mean[:, ib] / amp
-    var_piece = (
-        ga**2 * cov_mix[:, ia, ia] + gb**2 * cov_mix[:, ib, ib] + 2 * ga * gb * cov_mix[:, ia, ib]
-    ) / weight_n**2
-    blf_piece_sd = np.sqrt(np.maximum(var_piece, 0.0))
-    n_pieces = mean.shape[0]
-    blf = blf_piece.mean(axis=0)
-    # Posterior sd of the mean over pieces: spread of the per-node mean across (C, K) plus
-    # the within-node delta-method variance (pieces independent given C, K).
-    node_blf_mean = blf_of(node_mean).mean(axis=1)  # (B, n)
-    between = w @ (node_blf_mean - w @ node_blf_mean) ** 2
-    node_amp = np.maximum(np.hypot(node_mean[..., ia], node_mean[..., ib]), 1e-300)
-    within_node = (
-        (node_mean[..., ia] / node_amp) ** 2 * node_var[..., ia]
-        + (node_mean[..., ib] / node_amp) ** 2 * node_var[..., ib]
-    ) / weight_n**2  # (B, P, n); the a-b cross term is dropped (diagonal kept per node)
-    within = w @ within_node.sum(axis=1) / n_pieces**2
-    blf_sd = np.sqrt(np.maximum(between + within, 0.0))
-    blf_step_sd = blf_piece.std(axis=0, ddof=1) if n_pieces > 1 else np.full(n_h, np.nan)
+    load_factors = mix_load_factors(
+        node_mean, node_var, w, problem.mass_kg, problem.harmonics, mixed_over="grid"
+    )
     return ForcePosterior(
         coefficient_names=problem.coefficient_names,
         map_mean=map_mu,
@@ -169,11 +131,7 @@ def _force_posterior(
         mean=mean,
         cov=cov_mix,
         sd=sd,
-        blf_piece=blf_piece,
-        blf_piece_sd=blf_piece_sd,
-        blf=blf,
-        blf_sd=blf_sd,
-        blf_step_sd=blf_step_sd,
+        load_factors=load_factors,
         node_damping=c_sel.copy(),
         node_stiffness=k_sel.copy(),
         node_weights=w,

@@ -331,8 +331,8 @@ class ExactPosterior:
             "notes": list(self.notes),
         }
         if self.force is not None:
-            out["blf"] = r(self.force.blf)
-            out["blf_sd"] = r(self.force.blf_sd)
+            out["blf"] = r(self.force.load_factors.mean)
+            out["blf_sd"] = r(self.force.load_factors.sd)
         if self.identifiability is not None:
             out["identifiability"] = self.identifiability.to_json()
         return out
