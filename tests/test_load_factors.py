@@ -115,7 +115,7 @@ COVERAGE_SEEDS = range(20)
 
 @pytest.mark.slow
 def test_blf_bands_hold_the_realised_load_factors_on_deck_walks():
-    held, identified = 0, 0
+    misses, identified = np.zeros(3, dtype=int), 0
     for seed in COVERAGE_SEEDS:
         sim = deck_walk(seed)
         res = wb.identify(sim.record, seed=0)
@@ -125,9 +125,10 @@ def test_blf_bands_hold_the_realised_load_factors_on_deck_walks():
         p = res.problem
         truth = realised_load_factors(p, np.interp(p.time_s, sim.time_s, sim.force_n))
         truth = truth.mean(axis=0)[:3]
-        held += int(np.all(np.abs(res.blf[:3] - truth) <= 1.96 * res.blf_sd[:3]))
-    # At 95 % per band the three hold together in about 86-95 % of walks (between the
-    # bands' independence and their full dependence). The bound allows binomial noise over
-    # this many walks: at least 75 % of them.
-    assert identified >= 8, f"only {identified} of 20 deck walks identified C and K"
-    assert held >= 0.75 * identified, f"BLF1-3 bands held on {held} of {identified} walks"
+        misses += np.abs(res.blf[:3] - truth) > 1.96 * res.blf_sd[:3]
+    # About half the deck walks identify C and K (analyses/blf_coverage.py: 47 of 100).
+    assert identified >= 6, f"only {identified} of 20 deck walks identified C and K"
+    # A calibrated 95 % band misses 3 or more of 8 walks with probability 0.006 (binomial);
+    # the bound scales with the walks identified (at least 2 misses allowed).
+    allowed = max(2, int(np.ceil(0.25 * identified)))
+    assert np.all(misses <= allowed), f"BLF1-3 bands missed {misses} of {identified} walks"
