@@ -23,6 +23,7 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "pacing_hz",
     "method",
     "steps",
+    "steps_off_rhythm_share",
     *(c for s in SCALARS for c in (s, f"{s}_sd")),
     *(c for i in (1, 2, 3) for c in (f"blf{i}", f"blf{i}_sd")),
     "identifiability",
@@ -84,6 +85,11 @@ def result_row(result: Any, path: str, subject: str | None, seed: int) -> dict[s
         "pacing_hz": _num(result.problem.pacing_hz),
         "method": result.method,
         "steps": int(result.problem.n_pieces),
+        # The split's consistency check (inspect's "split"); NaN for a record not cut into
+        # footfall steps.
+        "steps_off_rhythm_share": _num(
+            result.split.get("off_rhythm_share", math.nan) if result.split else math.nan
+        ),
     }
     for s in SCALARS:
         row[s] = _num(est[s])
