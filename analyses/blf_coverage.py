@@ -1,6 +1,10 @@
 """Coverage of the load factors' 95 % bands on simulated deck walks where C and K are identified.
 
-Run: ``python analyses/blf_coverage.py [--workers 2] [--out blf_coverage.csv]``.
+Run: ``python analyses/blf_coverage.py [--workers 2] [--out blf_coverage.csv]``, or
+``python analyses/blf_coverage.py --demo-record`` for the embedded ``seed_individual_deck``
+walk alone (the demo's individual, identified as ``workbench demo`` does, with seed
+20261122): its load factors beside its realised ones, the simulation rebuilt from
+``analyses/make_demo_data.py``.
 
 The walks are ``deck_walk`` seeds 0-99, fixed before any result was seen (masses 50-100 kg,
 f_n 1.8-3.4 Hz, zeta 0.2-0.5, decks of 0.05-1 m/s^2 RMS at 1.5-4 Hz, 20-60 s, the
@@ -101,11 +105,41 @@ def summary(rows: list[dict[str, Any]]) -> None:
         )
 
 
+def demo_record() -> None:
+    import sys
+    from pathlib import Path
+
+    import workbench as wb
+    from workbench.inference.core import realised_load_factors
+    from workbench.synth import simulate_walking
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from make_demo_data import records
+
+    sim = simulate_walking(**records()["seed_individual_deck"])
+    record = wb.datasets.load("seed_individual_deck")
+    # The embedded file is the simulation written to CSV: the same samples to rounding.
+    assert np.allclose(sim.record.grf_n, record.grf_n, rtol=0, atol=1e-6)
+    res = wb.identify(record, seed=20261122)
+    p = res.problem
+    truth = realised_load_factors(p, np.interp(p.time_s, sim.time_s, sim.force_n)).mean(axis=0)
+    print(f"seed_individual_deck: {p.n_pieces} steps, C and K identified: {res.force_identified}")
+    for i in HARMONICS:
+        b, s = float(res.blf[i - 1]), float(res.blf_sd[i - 1])
+        print(
+            f"  BLF{i} {b:.3f} [{b - Z95 * s:.3f}, {b + Z95 * s:.3f}], realised {truth[i - 1]:.3f}"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", default="blf_coverage.csv")
+    ap.add_argument("--demo-record", action="store_true", help="the demo's deck walk alone")
     args = ap.parse_args()
+    if args.demo_record:
+        demo_record()
+        return
     done: dict[int, dict[str, Any]] = {}
     if os.path.exists(args.out):
         with open(args.out, newline="") as fh:
