@@ -105,6 +105,8 @@ def test_netcdf_round_trip(short_record, tmp_path):
     nc = res.to_netcdf(tmp_path / "r.nc")
     with xr.open_dataset(nc, engine="scipy") as ds:
         assert ds["piece_coefficients_mean"].shape == (res.problem.n_pieces, 7)
+        # The per-step load factors the reported BLFs average (mixed over C and K).
+        np.testing.assert_allclose(ds["piece_load_factors"].mean("piece"), res.blf, rtol=1e-12)
         stored = json.loads(ds.attrs["workbench_result_json"])
     assert stored == json.loads(json.dumps(res.to_json(), default=float))
 

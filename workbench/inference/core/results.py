@@ -824,6 +824,8 @@ class IdentificationResult:
             "piece_coefficients_sd": (("piece", "coefficient"), self.piece_coefficients_sd),
             "biomechanical_force_n": (("time",), self.biomechanical_force_n()),
             "observations": (("time", "response"), p.absolute_y),
+            # Per step, mixed over the (C, K) posterior like the reported BLFs.
+            "piece_load_factors": (("piece", "harmonic"), self.piece_blf),
         }
         coords: dict[str, Any] = {
             "parameter": ["damping_ns_per_m", "stiffness_n_per_m"],
@@ -831,6 +833,7 @@ class IdentificationResult:
             "piece": np.arange(p.n_pieces),
             "time": p.time_s,
             "response": ["u_m", "u_dot_m_s", "u_ddot_m_s2"],
+            "harmonic": np.arange(1, p.harmonics + 1),
         }
         f = self.filter_results
         if f is not None:
