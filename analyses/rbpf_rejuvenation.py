@@ -18,12 +18,16 @@ the filter's sd over the exact sd, and the share of the exact moves' proposals t
 delayed-acceptance screen let through to the exact filter.
 
 ``--surprising-step`` measures instead the record of ``tests/test_rbpf.py``'s surprising-step
-test (70 kg at 1.8 Hz, 8 s at 100 Hz, 3 N force noise, from rest, seed 4; n = 4), 128
-particles, seeds 0-9, with the exact moves screened (``delayed_acceptance=True``, the
-default) and plain (``False``): the same statistics, and the mean ``z`` of the ten runs,
-against the test's own reference (its zooming grids, ``tests/test_rbpf.py``
-``grid_posterior``, imported from the test so that the figures are the test's;
-``--exact-reference`` compares with ``exact_posterior`` instead).
+test (``stumbling_walk_problem``: 70 kg at 1.8 Hz, 8 s at 100 Hz, 3 N force noise, from
+rest, seed 4, one quick, heavy step; n = 4; in the simulator's own steps), 128 particles,
+seeds 0-9, with the exact moves screened (``delayed_acceptance=True``, the default) and
+plain (``False``): the same statistics, the mean ``z`` of the ten runs and the fewest and
+most tempering steps of the stumble's piece, against the test's own reference (its zooming
+grids, ``tests/test_rbpf.py`` ``grid_posterior``, imported from the test so that the
+figures are the test's; ``--exact-reference`` compares with ``exact_posterior`` instead).
+It also prints the reference posterior of the pieces before the stumble and with it (how
+far the stumble moves it, in the earlier posterior's sd), and how far the footfall split's
+boundaries around the stumble lie from the simulator's step starts.
 """
 
 from __future__ import annotations
@@ -43,12 +47,10 @@ pin_cores(sys.argv)
 import numpy as np  # noqa: E402
 
 import workbench as wb  # noqa: E402
-from workbench.inference.core.problem import build_problem  # noqa: E402
 from workbench.inference.methods.exact import exact_posterior  # noqa: E402
 from workbench.inference.methods.rbpf import run_rbpf  # noqa: E402
 from workbench.inference.pipeline.identification import Prepared, compile_problem, set_noise  # noqa: E402
 from workbench.inference.pipeline.settings import IdentifySettings  # noqa: E402
-from workbench.records.inspection import inspect_record  # noqa: E402
 from workbench.synth.simulate import simulate_walking  # noqa: E402
 
 
@@ -66,19 +68,44 @@ def _record(name: str) -> Any:
     return wb.datasets.load(name)
 
 
+def _tests_on_path() -> None:
+    """Put the repository root on the path so that the rbpf tests' helpers import."""
+    root = str(Path(__file__).resolve().parents[1])
+    if root not in sys.path:
+        sys.path.insert(0, root)
+
+
 def _surprising_step_problem() -> Any:
-    """Return the rbpf tests' surprising-step record, compiled as those tests compile it."""
-    sim = simulate_walking(
-        mass_kg=70.0,
-        pacing_hz=1.8,
-        duration_s=8.0,
-        sample_rate_hz=100,
-        noise_sd_n=3.0,
-        start="rest",
-        seed=4,
-    )
-    insp = inspect_record(sim.record, highpass_hz=0.15)
-    return build_problem(insp.com, insp.steps, harmonics=4)
+    """Return the rbpf tests' surprising-step record, as those tests build it."""
+    _tests_on_path()
+    from tests.test_rbpf import stumbling_walk_problem
+
+    return stumbling_walk_problem()
+
+
+def _stumble_report(problem: Any) -> dict[str, Any]:
+    """Return the reference posterior before and with the stumble, and the split's offsets."""
+    _tests_on_path()
+    from tests.test_rbpf import STUMBLE_PIECE, first_pieces, stumbling_walk
+
+    before = _test_grid_reference(first_pieces(problem, STUMBLE_PIECE))
+    after = _test_grid_reference(first_pieces(problem, STUMBLE_PIECE + 1))
+    # The split of the same record: its boundaries near the stumble against the steps'.
+    sim, insp = stumbling_walk()
+    split_s = insp.com.time_s[insp.steps.boundaries]
+    steps_s = problem.time_s[problem.piece_starts[:-1]]
+    near = steps_s[STUMBLE_PIECE - 1 : STUMBLE_PIECE + 3]
+    offsets = [float(np.min(np.abs(split_s - t))) for t in near]
+    return {
+        "stumble_piece": STUMBLE_PIECE,
+        "before_mean": before.mean.tolist(),
+        "before_sd": before.sd.tolist(),
+        "with_mean": after.mean.tolist(),
+        "with_sd": after.sd.tolist(),
+        "move_in_earlier_sd": ((after.mean - before.mean) / before.sd).tolist(),
+        "split_offsets_s": offsets,
+        "truth": [sim.truth["damping_ns_per_m"], sim.truth["stiffness_n_per_m"]],
+    }
 
 
 def _test_grid_reference(problem: Any) -> Any:
@@ -92,9 +119,22 @@ def _test_grid_reference(problem: Any) -> Any:
     return SimpleNamespace(mean=mean, sd=sd)
 
 
-def _runs(problem: Any, exact: Any, seeds: int, particles: int, **options: Any) -> dict[str, Any]:
-    """Run the rbpf over seeds 0..seeds-1 and summarise its distance from the exact posterior."""
+def _runs(
+    problem: Any,
+    exact: Any,
+    seeds: int,
+    particles: int,
+    piece: int | None = None,
+    **options: Any,
+) -> dict[str, Any]:
+    """Run the rbpf over seeds 0..seeds-1 and summarise its distance from the exact posterior.
+
+    With ``piece``, also the fewest and most tempering steps that piece took (and the most
+    of any other piece), and per run the Metropolis acceptance and the share of proposals
+    filtered exactly (their ranges).
+    """
     cpu, z, ratio, evaluated, proposed = [], [], [], 0, 0
+    steps, others, acceptance, shares = [], [], [], []
     for seed in range(seeds):
         t0 = time.process_time()
         out = run_rbpf(problem, n_particles=particles, seed=seed, **options)
@@ -103,8 +143,16 @@ def _runs(problem: Any, exact: Any, seeds: int, particles: int, **options: Any) 
         ratio.append(out.sd[-1] / exact.sd)
         evaluated += out.settings["metropolis_exact_evaluations"]
         proposed += out.settings["metropolis_proposals"]
+        if piece is not None:
+            per_piece = list(out.settings["tempering_steps"])
+            steps.append(per_piece.pop(piece))
+            others.append(max(per_piece))
+            acceptance.append(out.settings["metropolis_acceptance"])
+            shares.append(
+                out.settings["metropolis_exact_evaluations"] / out.settings["metropolis_proposals"]
+            )
     za, ra = np.array(z), np.array(ratio)
-    return {
+    row = {
         "cpu_s_mean": float(np.mean(cpu)),
         "cpu_s_max": float(np.max(cpu)),
         "rms_z": np.sqrt(np.mean(za**2, axis=0)).tolist(),
@@ -114,6 +162,12 @@ def _runs(problem: Any, exact: Any, seeds: int, particles: int, **options: Any) 
         "sd_ratio_max": ra.max(axis=0).tolist(),
         "exact_share": evaluated / proposed if proposed else None,
     }
+    if piece is not None:
+        row["piece_tempering_steps"] = [min(steps), max(steps)]
+        row["other_pieces_most_steps"] = max(others)
+        row["acceptance"] = [min(acceptance), max(acceptance)]
+        row["exact_share_per_run"] = [min(shares), max(shares)]
+    return row
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -137,15 +191,18 @@ def main(argv: list[str] | None = None) -> int:
     else:
         cases = [(rule, {"rejuvenate": rule}) for rule in ("surprise", "always")]
     for name in args.records:
+        piece = None
         if args.surprising_step:
             problem = _surprising_step_problem()
+            stumble = _stumble_report(problem)
+            piece = stumble["stumble_piece"]
         else:
             prepared = Prepared.of(_record(name), settings)
             problem, _ = set_noise(compile_problem(prepared, settings), settings)
         test_grid = args.surprising_step and not args.exact_reference
         exact = _test_grid_reference(problem) if test_grid else exact_posterior(problem)
         rows = {
-            label: _runs(problem, exact, args.seeds, args.particles, **options)
+            label: _runs(problem, exact, args.seeds, args.particles, piece, **options)
             for label, options in cases
         }
         report[name] = {
@@ -155,6 +212,8 @@ def main(argv: list[str] | None = None) -> int:
             "exact_sd": exact.sd.tolist(),
             "rules": rows,
         }
+        if args.surprising_step:
+            report[name]["stumble"] = stumble
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
@@ -170,6 +229,29 @@ def main(argv: list[str] | None = None) -> int:
                 f" {r['sd_ratio_min'][1]:.2f}-{r['sd_ratio_max'][1]:.2f}"
                 f"  exact share {r['exact_share'] or 0.0:.2f}"
             )
+            if "piece_tempering_steps" in r:
+                print(
+                    f"{'':<16} {'':<9} stumble's piece: {r['piece_tempering_steps'][0]}-"
+                    f"{r['piece_tempering_steps'][1]} tempering steps (any other piece at most "
+                    f"{r['other_pieces_most_steps']}); acceptance "
+                    f"{r['acceptance'][0]:.2f}-{r['acceptance'][1]:.2f}; exact share per run "
+                    f"{r['exact_share_per_run'][0]:.2f}-{r['exact_share_per_run'][1]:.2f}"
+                )
+        if "stumble" in rec:
+            st = rec["stumble"]
+            print(
+                f"{name}: {rec['n_pieces']} pieces; reference posterior of (C, K) before the "
+                f"stumble ({st['stumble_piece']} pieces) {st['before_mean'][0]:.0f} +- "
+                f"{st['before_sd'][0]:.0f}, {st['before_mean'][1]:.0f} +- "
+                f"{st['before_sd'][1]:.0f}; with it {st['with_mean'][0]:.0f} +- "
+                f"{st['with_sd'][0]:.0f}, {st['with_mean'][1]:.0f} +- {st['with_sd'][1]:.0f} "
+                f"(moved {st['move_in_earlier_sd'][0]:.2f}, {st['move_in_earlier_sd'][1]:.2f} "
+                f"earlier sd); whole record {rec['exact_mean'][0]:.0f} +- "
+                f"{rec['exact_sd'][0]:.0f}, {rec['exact_mean'][1]:.0f} +- {rec['exact_sd'][1]:.0f}"
+                f" (the simulated walker's {st['truth'][0]:.0f}, {st['truth'][1]:.0f})"
+            )
+            offsets = ", ".join(f"{v:.3f}" for v in st["split_offsets_s"])
+            print(f"{'':<16} footfall split vs the steps around the stumble: {offsets} s")
     return 0
 
 

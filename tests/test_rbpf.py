@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -15,8 +17,10 @@ from workbench.inference.core.problem import (
 )
 from workbench.inference.kalman import filter as kf
 from workbench.inference.methods.rbpf import _quadratic_screen, liu_west_move, run_rbpf
-from workbench.records.inspection import inspect_record
-from workbench.synth.simulate import simulate_walking
+from workbench.records.inspection import Inspection, inspect_record
+from workbench.records.steps import Steps
+from workbench.synth.gait import GaitProfile
+from workbench.synth.simulate import Simulation, simulate_walking
 
 
 def _walking_problem(seed: int, duration_s: float, harmonics: int) -> IdentificationProblem:
@@ -26,6 +30,61 @@ def _walking_problem(seed: int, duration_s: float, harmonics: int) -> Identifica
 @pytest.fixture(scope="module")
 def short_problem() -> IdentificationProblem:
     return _walking_problem(seed=4, duration_s=8.0, harmonics=4)
+
+
+#: The stumble of the surprising-step record: the walk's tenth step (index 9 of the
+#: simulator's steps, the ninth piece) lasts 0.6 of a steady step and pushes 1.5 times as hard.
+STUMBLE_STEP = 9
+STUMBLE_PIECE = STUMBLE_STEP - 1
+
+
+def stumbling_walk() -> tuple[Simulation, Inspection]:
+    """An 8 s walk with one quick, heavy step (a stumble), simulated and inspected.
+
+    70 kg at 1.8 Hz, 100 Hz, 3 N force noise, from rest, seed 4 (the record of
+    ``short_problem``) with the gait profile of the stumble.
+    """
+    factors = (1.0,) * STUMBLE_STEP
+    gait = GaitProfile((*factors, 0.6, 1.0), (*factors, 1.5, 1.0), label="one stumble")
+    sim = simulate_walking(
+        mass_kg=70.0,
+        pacing_hz=1.8,
+        duration_s=8.0,
+        sample_rate_hz=100,
+        noise_sd_n=3.0,
+        start="rest",
+        seed=4,
+        gait=gait,
+    )
+    return sim, inspect_record(sim.record, highpass_hz=0.15)
+
+
+def stumbling_walk_problem() -> IdentificationProblem:
+    """The stumbling walk (n = 4) in the simulator's own steps.
+
+    The steady steps before the stumble tell about C and K only through their small
+    step-to-step variations (a periodic response is absorbed by each step's force
+    coefficients); the stumble changes the force's rhythm and size at once, and the body's
+    transient response to that change pins C and K. The pieces are the simulator's step
+    starts from its second step (the first starts at the record's first sample, where no
+    split places a footfall): the footfall split expects a steady rhythm and places the two
+    boundaries after the stumble 0.04 and 0.08 s from the steps' (0.01 s elsewhere; ``python
+    analyses/rbpf_rejuvenation.py --surprising-step``), which would move the posterior by
+    itself; here the move is the stumble's alone.
+    """
+    sim, insp = stumbling_walk()
+    fs = sim.record.sample_rate_hz
+    times = np.asarray(sim.truth["step_start_s"])[1:]
+    bounds = np.round(times * fs).astype(np.intp)
+    inside = bounds < insp.com.time_s.size
+    times, bounds = times[inside], bounds[inside]
+    steps = Steps(bounds, times, np.diff(times), fs, source=sim.record.source)
+    return build_problem(insp.com, steps, harmonics=4)
+
+
+@pytest.fixture(scope="module")
+def stumbling_problem() -> IdentificationProblem:
+    return stumbling_walk_problem()
 
 
 def _tiny_box(c: float, k: float, half_width: float = 1e-9) -> StiffnessDampingPrior:
@@ -92,7 +151,8 @@ def test_determinism_and_seed_dependence(short_problem) -> None:
     a = run_rbpf(short_problem, seed=7, **kwargs)
     b = run_rbpf(short_problem, seed=7, **kwargs)
     c = run_rbpf(short_problem, seed=8, **kwargs)
-    # The record has a surprising step, so both kinds of move are exercised.
+    # Exact moves at the first resamplings (the exact budget) and Liu-West moves later: both
+    # kinds of move are exercised.
     assert a.settings["liu_west_moves"] > 0
     assert a.settings["exact_move_events"] > 0
     for name in (
@@ -172,38 +232,64 @@ def test_rbpf_matches_the_exact_posterior_on_a_walking_record() -> None:
     assert np.all(out.sd[-1] < 0.2 * problem.prior.sd)
 
 
+def first_pieces(problem: IdentificationProblem, pieces: int) -> IdentificationProblem:
+    """The problem cut after its first ``pieces`` pieces (same noise model and prior)."""
+    end = int(problem.piece_starts[pieces])
+    return dataclasses.replace(
+        problem,
+        time_s=problem.time_s[:end],
+        y=problem.y[:end],
+        basis=problem.basis[:end],
+        piece_starts=problem.piece_starts[: pieces + 1],
+        piece_pacing_hz=problem.piece_pacing_hz[:pieces],
+    )
+
+
 @pytest.mark.slow
-def test_exact_moves_follow_a_surprising_step(short_problem) -> None:
-    # In this 8 s record the tenth step moves the posterior of C from about 1900 to about
-    # 60 N s/m, far outside the cloud: tempering with exact Metropolis moves follows it.
-    # One run of 128 particles is one Monte Carlo draw whose error on this hard record is
-    # about 0.25 posterior sd (rms over seeds 0-5): each run must be in the right place,
-    # and the runs of four seeds together (about 512 particles) close to the exact mean.
-    # The posterior of C sits 1.3 sd above the lower edge of the prior box, where the
-    # Liu-West kernel's reflection widens the cloud: over seeds 0-9 its sd of C is 1.08-1.50
-    # times the exact one with the delayed-acceptance moves and 1.21-1.50 with plain
-    # Metropolis moves (the same spread; `python analyses/rbpf_rejuvenation.py
-    # --surprising-step`), hence the sd bound of 1.6 below.
-    mean, sd = grid_posterior(short_problem)
+def test_exact_moves_follow_a_surprising_step(stumbling_problem) -> None:
+    # The stumble moves the exact posterior far outside the cloud of the steps before it:
+    # C from 1584 +- 255 to 889 +- 143 N s/m (-2.7 earlier sd) and K from 6096 +- 1992 to
+    # 10235 +- 1701 N/m (+2.1) at once, onto the simulated walker's 831 and 10143, where
+    # the whole record's posterior stays (879 +- 105, 11777 +- 1583; `python
+    # analyses/rbpf_rejuvenation.py --surprising-step`, which prints all figures below).
+    problem = stumbling_problem
+    before, sd_before = grid_posterior(first_pieces(problem, STUMBLE_PIECE))
+    with_stumble, _ = grid_posterior(first_pieces(problem, STUMBLE_PIECE + 1))
+    move = (with_stumble - before) / sd_before
+    # No Monte Carlo here: the bounds guard that the record keeps its surprise.
+    assert move[0] < -2.0 and move[1] > 1.5, move
+    mean, sd = grid_posterior(problem)
     means = []
     for seed in range(4):
-        out = run_rbpf(short_problem, n_particles=128, seed=seed)
-        assert max(out.settings["tempering_steps"]) > 5
+        out = run_rbpf(problem, n_particles=128, seed=seed)
+        # The stumble's piece alone would take the ESS below the threshold three or four
+        # times (4-5 tempering steps over seeds 0-9, no other piece more than 3): the second
+        # and later resamplings inside it move the particles by exact Metropolis steps.
+        steps = out.settings["tempering_steps"]
+        assert steps[STUMBLE_PIECE] >= 4 and steps[STUMBLE_PIECE] == max(steps), steps
+        assert out.settings["exact_move_events"] >= steps[STUMBLE_PIECE] - 2
+        # One run of 128 particles is one Monte Carlo draw whose error is about 0.25
+        # posterior sd (rms |z| 0.23 and 0.25 over seeds 0-9, largest 0.45 and 0.51): each
+        # run must be in the right place, and its sd close to the exact one (0.77-1.11 of
+        # it over seeds 0-9 with the delayed-acceptance moves, 0.74-1.21 with plain
+        # Metropolis moves).
         z = (out.mean[-1] - mean) / sd
         assert np.all(np.abs(z) < 0.75), (seed, out.mean[-1], out.sd[-1], mean, sd)
-        assert np.all(np.abs(out.sd[-1] / sd - 1.0) < 0.6), (seed, out.sd[-1], sd)
-        assert 0.1 < out.settings["metropolis_acceptance"] < 0.9
-        # The screen spares the exact filter most of the proposals Metropolis rejects (35 %
-        # of them reach it over seeds 0-9, 71 % of plain Metropolis's are inside the box).
+        assert np.all(np.abs(out.sd[-1] / sd - 1.0) < 0.4), (seed, out.sd[-1], sd)
+        # Random-walk Metropolis with the 2.38^2 / 2 scaling accepts about a third on a
+        # near-Gaussian target (0.31-0.39 over seeds 0-9).
+        assert 0.2 < out.settings["metropolis_acceptance"] < 0.6
+        # The screen spares the exact filter most of the proposals Metropolis rejects
+        # (0.32-0.40 of them reach it per run over seeds 0-9; 0.82-0.86 of plain
+        # Metropolis's are inside the box and filtered).
         settings = out.settings
-        assert settings["metropolis_exact_evaluations"] < 0.7 * settings["metropolis_proposals"]
+        assert settings["metropolis_exact_evaluations"] < 0.5 * settings["metropolis_proposals"]
         means.append(out.mean[-1])
-    # Together the runs sit about 0.35 sd above the exact mean of C: over seeds 0-9 the mean
-    # z of C is 0.34 with the delayed-acceptance moves and 0.40 with plain Metropolis moves,
-    # the bias of the reflection at the box's edge rather than Monte Carlo error (the same
-    # command).
+    # Together the four runs (about 512 particles) sit close to the exact mean: one run's
+    # rms |z| is at most 0.25, so their mean has a Monte Carlo sd of about 0.13, and the
+    # mean z over seeds 0-9 is 0.00 and -0.05 (no bias to speak of).
     z = (np.mean(means, axis=0) - mean) / sd
-    assert np.all(np.abs(z) < 0.5), (means, mean, sd)
+    assert np.all(np.abs(z) < 0.4), (means, mean, sd)
 
 
 def test_quadratic_screen_fits_a_concave_target_and_declines_otherwise() -> None:
