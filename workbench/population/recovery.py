@@ -39,9 +39,11 @@ walks whose C and K are identified too (the load factors are estimated with them
 Two fits are reported: the pipeline's (records whose C or K is flagged "not identified" are
 excluded, as ``workbench population`` does) and, beside it, the fit of every record with the
 flags ignored -- what a pipeline without identifiability checks, such as the seed's, would
-have printed. The records' own truths give a third line, the law a perfect identification
-would fit to these very records (``sample``), which separates the method's error from the
-population's sampling scatter.
+have printed. The records' own truths give a third line (``sample``): the law a perfect
+identification of each record's parameters would fit to these very records, against the
+pacing the pipeline identified for each, which separates the error in the parameters from
+the population's sampling scatter and from an error in the pacing (a law whose records'
+truths come back biased too is biased by the pacing the laws are regressed on).
 
 Files in ``out_dir``: ``plan.csv`` (the truth of every record), ``records/`` (CSV and JSON
 sidecar each) and ``manifest.csv``, ``batch/`` (the batch's files), ``recovery.json``.
@@ -176,7 +178,9 @@ def _fit(results: pd.DataFrame, keep: bool, source: str) -> tuple[dict[str, Any]
 
 
 def _sample_law(plan: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:
-    """Fit the laws a perfect identification would fit: the records' truths on their pacing.
+    """Fit the laws a perfect identification of the parameters would fit.
+
+    The records' true parameters, regressed on the pacing the pipeline identified for each.
 
     Returns ``{"laws": ..., "lognormal": ...}`` as a pipeline fit has them.
     """

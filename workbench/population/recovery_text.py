@@ -78,7 +78,8 @@ def recovery_text(obj: dict[str, Any]) -> str:
     if pacing:  # every law is regressed on it, so a record with the wrong pacing misleads all
         lines.append(
             f"pacing: {pacing['off_by_over_5pct']} records identified more than 5 % off their "
-            f"true pacing ({pacing['off_by_over_5pct_identified']} of those with C and K identified)"
+            f"true pacing ({pacing['off_by_over_5pct_identified']} of those with C and K "
+            "identified)"
         )
     for law, name in {**LAW_NAMES, **LOAD_FACTOR_NAMES}.items():
         tl = truth["laws"].get(law)

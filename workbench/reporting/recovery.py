@@ -112,7 +112,8 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
         "truth, 'manufactured' when the truth has no slope and the interval excludes zero, "
         "'biased' otherwise. 'flags ignored' is the fit of every record, as a pipeline "
         "without identifiability checks would make it; 'records' truth' is the law a perfect "
-        "identification would fit to the same records."
+        "identification of the parameters would fit to the same records, against the pacing "
+        "the pipeline identified for each (biased too when the pacing is)."
     )
     rows = []
     for obj in runs:
