@@ -14,6 +14,7 @@ import pytest
 
 from workbench.errors import UsageError
 from workbench.inference.pipeline.settings import IdentifySettings
+from workbench.population.laws import LinearLaw
 from workbench.population.recovery import (
     RecoveryDesign,
     law_verdicts,
@@ -49,6 +50,183 @@ def test_verdicts_follow_the_intervals():
     assert v["natural_frequency_hz"]["slope"] == "biased"
     assert v["damping_ratio"] == {"slope": "recovered", "intercept": "recovered"}
     assert law_verdicts(seed, None)["damping_ratio"]["slope"] == "not fitted"
+
+
+def _load_factor_fit(blf1_slope_ci, blf1_int_ci, blf2_mu_ci, blf2_sigma_ci):
+    """A fit whose f_n and zeta are beside the point, with the load-factor intervals given."""
+    laws = _fit((0.0, 1.0), (0.0, 3.0), (-1.0, 1.0), (0.0, 1.0))
+    laws["blf1"] = {"slope_ci": list(blf1_slope_ci), "intercept_ci": list(blf1_int_ci)}
+    lognormal = {
+        "blf2": {"mu_ci": list(blf2_mu_ci), "sigma_ci": list(blf2_sigma_ci)},
+        # BLF3's truth: mu log(0.05) = -2.9957, sigma 0.4.
+        "blf3": {"mu_ci": [-3.1, -2.9], "sigma_ci": [0.41, 0.6]},
+    }
+    return laws, lognormal
+
+
+def test_load_factor_verdicts_follow_the_intervals():
+    # The documented truth: BLF1 = 0.41 f_p - 0.3895, log BLF2 ~ N(log 0.055 = -2.9004, 0.4).
+    seed = truth_laws("seed")
+    laws, lognormal = _load_factor_fit((0.3, 0.5), (-0.5, -0.4), (-2.95, -2.85), (0.3, 0.5))
+    v = law_verdicts(seed, laws, lognormal)
+    assert v["blf1"] == {"slope": "recovered", "intercept": "biased"}  # -0.3895 > -0.4
+    assert v["blf2"] == {"mu": "recovered", "sigma": "recovered"}
+    assert v["blf3"] == {"mu": "recovered", "sigma": "biased"}  # 0.4 below [0.41, 0.6]
+    # Intervals beside the truth on either side are biased, whatever the parameter.
+    laws, lognormal = _load_factor_fit((0.42, 0.6), (-0.39, 0.0), (-2.9, -2.8), (0.1, 0.39))
+    v = law_verdicts(seed, laws, lognormal)
+    assert v["blf1"] == {"slope": "biased", "intercept": "recovered"}
+    assert v["blf2"] == {"mu": "biased", "sigma": "biased"}
+
+
+def test_a_load_factor_slope_made_from_nothing_is_manufactured():
+    # Walkers whose first load factor does not depend on pacing: BLF1 0.3 at every pacing.
+    flat = truth_laws("seed").replace(blf1=LinearLaw(slope=0.0, intercept=0.3, residual_sd=0.04))
+    laws, lognormal = _load_factor_fit((0.05, 0.2), (0.1, 0.2), (-3.0, -2.8), (0.3, 0.5))
+    assert law_verdicts(flat, laws, lognormal)["blf1"] == {
+        "slope": "manufactured",
+        "intercept": "biased",
+    }
+    laws, lognormal = _load_factor_fit((-0.05, 0.2), (0.25, 0.35), (-3.0, -2.8), (0.3, 0.5))
+    assert law_verdicts(flat, laws, lognormal)["blf1"] == {
+        "slope": "recovered",
+        "intercept": "recovered",
+    }
+    # A lognormal law has no slope: an interval beside its mu is biased, never manufactured.
+    assert law_verdicts(flat, laws, lognormal)["blf3"]["sigma"] == "biased"
+
+
+def test_load_factor_laws_a_fit_does_not_hold_are_not_fitted():
+    seed = truth_laws("seed")
+    laws, _ = _load_factor_fit((0.3, 0.5), (-0.5, -0.3), (-3.0, -2.8), (0.3, 0.5))
+    v = law_verdicts(seed, laws)  # no lognormal fit given
+    assert v["blf1"] == {"slope": "recovered", "intercept": "recovered"}
+    assert v["blf2"] == v["blf3"] == {"mu": "not fitted", "sigma": "not fitted"}
+    # An f_n and zeta fit alone (a fit of an earlier version) judges no load factor.
+    v = law_verdicts(seed, _fit((0.2, 0.4), (1.0, 1.5), (-0.3, -0.1), (0.8, 0.9)))
+    assert v["natural_frequency_hz"] == {"slope": "recovered", "intercept": "recovered"}
+    assert v["blf1"] == {"slope": "not fitted", "intercept": "not fitted"}
+    v = law_verdicts(seed, None)
+    assert {par for law in v.values() for par in law.values()} == {"not fitted"}
+    assert set(v) == {"natural_frequency_hz", "damping_ratio", "blf1", "blf2", "blf3"}
+
+
+def _recovery_json(with_load_factors: bool = True) -> dict:
+    """A recovery.json object by hand: a deck run of the seed truth, every fit the same."""
+    laws = {
+        "natural_frequency_hz": {
+            "slope": 0.29, "intercept": 1.36, "slope_ci": [0.06, 0.52],
+            "intercept_ci": [0.93, 1.79], "residual_sd": 0.15, "n": 58,
+        },
+        "damping_ratio": {
+            "slope": -0.245, "intercept": 0.963, "slope_ci": [-0.328, -0.162],
+            "intercept_ci": [0.807, 1.12], "residual_sd": 0.05, "n": 58,
+        },
+    }  # fmt: skip
+    truth = truth_laws("seed")
+    fit = {"laws": laws, "records_used": 58, "records_excluded": 2}
+    obj = {
+        "truth": {"source": truth.source, "floor": "deck", "laws": {}},
+        "settings": {"method": "exact", "obs_noise": "auto"},
+        "records": {"simulated": 60, "processed": 60, "failed": 0, "not_identified": 2},
+        "recovered": {"pipeline": fit, "flags_ignored": fit, "sample": {"laws": laws}},
+    }
+    for law in ("natural_frequency_hz", "damping_ratio", "blf1"):
+        tl = getattr(truth, law)
+        obj["truth"]["laws"][law] = {"slope": tl.slope, "intercept": tl.intercept}
+    if with_load_factors:
+        laws["blf1"] = {
+            "slope": 0.9, "intercept": -1.2, "slope_ci": [0.7, 1.1],
+            "intercept_ci": [-1.6, -0.8], "residual_sd": 0.05, "n": 58,
+        }  # fmt: skip
+        fit["lognormal"] = {
+            law: {"mu": -2.95, "sigma": 0.42, "mu_ci": [-3.06, -2.84], "sigma_ci": [0.35, 0.51],
+                  "n": 58}
+            for law in ("blf2", "blf3")
+        }  # fmt: skip
+        obj["recovered"]["sample"]["lognormal"] = fit["lognormal"]
+        obj["truth"]["lognormal"] = {
+            law: {"mu": getattr(truth, law).mu, "sigma": getattr(truth, law).sigma}
+            for law in ("blf2", "blf3")
+        }
+    else:
+        del obj["truth"]["laws"]["blf1"]
+    verdict = law_verdicts(truth, laws, fit.get("lognormal"))
+    obj["verdict"] = {which: verdict for which in ("pipeline", "flags_ignored", "sample")}
+    return obj
+
+
+def test_recovery_text_report_and_conclusions_carry_the_load_factor_verdicts(tmp_path):
+    from workbench.population.recovery_text import recovery_text
+
+    obj = _recovery_json()
+    obj["records"]["errors"] = {
+        "pacing_hz": {"off_by_over_5pct": "3/60", "off_by_over_5pct_identified": "2/58"}
+    }
+    text = recovery_text(obj)
+    assert "pacing: 3/60 records identified more than 5 % off" in text
+    assert "(2/58 of those with C and K identified)" in text
+    # BLF1 0.41 f_p - 0.3895 came back as 0.9 [0.7, 1.1]: biased; BLF3's mu -2.9957 is held.
+    assert "BLF1: truth slope 0.41, intercept -0.3895" in text
+    assert (
+        "pipeline        n=58   slope 0.9 [0.7, 1.1] biased; intercept -1.2 [-1.6, -0.8] biased"
+        in text
+    )
+    assert "BLF3 lognormal: truth mu -2.996, sigma 0.4" in text
+    assert "mu -2.95 [-3.06, -2.84] recovered; sigma 0.42 [0.35, 0.51] recovered" in text
+    # The Table-2 report's section gains a load-factor table; its conclusions a BLF1 sentence.
+    tables = [b for b in recovery_section([obj]).blocks if not isinstance(b, str | list)]
+    assert [tables[0].columns[-2:], tables[1].columns[-3:]] == [
+        ["f_n slope", "zeta slope"], ["BLF1 slope", "BLF2 mu", "BLF3 mu"]
+    ]  # fmt: skip
+    assert tables[1].rows[0][3:] == [
+        "truth 0.41; 0.9 [0.7, 1.1] biased",
+        "truth -2.9; -2.95 [-3.06, -2.84] recovered",
+        "truth -2.996; -2.95 [-3.06, -2.84] recovered",
+    ]
+    lines = recovery_conclusions([obj], {"blf1": {"slope": 0.8}})
+    assert "The BLF1 slope is biased on deck floors" in lines[2]
+    assert "came back as 0.9 [0.7, 1.1] (this report: slope 0.8)" in lines[2]
+    # A recovery written before the load factors were judged reads and words as before.
+    old = _recovery_json(with_load_factors=False)
+    assert "BLF" not in recovery_text(old)
+    assert len(recovery_conclusions([old], {})) == 2
+    assert len([b for b in recovery_section([old]).blocks if not isinstance(b, str)]) == 1
+    # A load-factor truth that is not a number is refused, as an f_n one is.
+    from workbench.errors import InputError
+    from workbench.reporting.recovery import read_recovery
+
+    obj["truth"]["lognormal"]["blf2"]["sigma"] = None
+    (tmp_path / "recovery.json").write_text(json.dumps(obj), encoding="utf-8")
+    with pytest.raises(InputError, match=r"key truth\.lognormal\.blf2\.sigma"):
+        read_recovery(tmp_path)
+
+
+def test_record_errors_count_the_records_whose_pacing_is_wrong():
+    from workbench.population.recovery import _record_errors
+
+    laws = ("natural_frequency_hz", "damping_ratio", "blf1", "blf2", "blf3")
+    plan = pd.DataFrame({"path": ["a", "b", "c", "d"], "pacing_hz": [1.5, 1.8, 2.0, 2.25]})
+    for i, law in enumerate(laws):
+        plan[law] = 0.1 * (i + 1)
+    results = plan.copy()
+    # b's pacing is the deck's (1.3 times its own), c's is 4 % off; d is not identified.
+    results["pacing_hz"] = [1.5, 2.34, 2.08, 2.25]
+    results["blf1"] = [0.33, 0.05, 0.3, 0.3]  # errors +0.03, -0.25, 0, 0
+    for law in laws[:2]:
+        results[f"{law}_sd"] = 0.01
+    results["natural_frequency_hz"] += [0.0, 0.05, 0.0, 0.0]  # b's band misses its truth
+    results["identified_damping"] = [True, True, True, False]
+    results["identified_stiffness"] = True
+    err = _record_errors(plan, results)
+    assert err["pacing_hz"]["off_by_over_5pct"] == "1/4"
+    assert err["pacing_hz"]["off_by_over_5pct_identified"] == "1/3"
+    assert err["pacing_hz"]["median_error"] == pytest.approx(0.04)
+    assert err["blf1"]["median_error_identified"] == pytest.approx(0.0)
+    assert err["blf1"]["median_error"] == pytest.approx(0.0)
+    assert "band_holds_truth_identified" not in err["blf1"]
+    assert err["natural_frequency_hz"]["band_holds_truth_identified"] == "2/3"
+    assert err["damping_ratio"]["band_holds_truth_identified"] == "3/3"
 
 
 def test_truths_and_bad_names():
@@ -175,6 +353,17 @@ def test_small_recovery_on_decks_recovers_the_seed_law(tmp_path):
     assert fit["records_used"] >= 12
     assert obj["verdict"]["pipeline"]["natural_frequency_hz"]["slope"] == "recovered"
     assert obj["verdict"]["pipeline"]["damping_ratio"]["slope"] == "recovered"
+    # The load-factor laws are judged on the same records, against the documented truth.
+    assert obj["truth"]["laws"]["blf1"]["slope"] == 0.41
+    assert obj["truth"]["lognormal"]["blf3"]["sigma"] == 0.4
+    for law, pars in (("blf1", ("slope", "intercept")), ("blf2", ("mu", "sigma"))):
+        assert set(obj["verdict"]["pipeline"][law]) == set(pars), law
+        assert fit["laws" if law == "blf1" else "lognormal"][law]["n"] == fit["records_used"]
+    print(
+        json.dumps(
+            {w: {k: obj["verdict"][w][k] for k in ("blf1", "blf2", "blf3")} for w in obj["verdict"]}
+        )
+    )
     # Written atomically, and a resumed run identifies nothing again and gives the same.
     stored = json.loads((tmp_path / "r" / "recovery.json").read_text())
     assert stored["verdict"] == obj["verdict"]

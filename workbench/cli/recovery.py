@@ -105,8 +105,9 @@ def add_recovery_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         parents=[out_opts],
         help="simulate walkers with a known law, identify them in batch, fit the laws back",
         description="Simulation-based calibration of the population pipeline: a population "
-        "of realistic walks (20-30 s, step-to-step variability, GRF noise) whose f_n and zeta "
-        "follow a known law against pacing, on a rigid floor or a measured vibrating deck, "
+        "of realistic walks (20-30 s, step-to-step variability, GRF noise) whose f_n, zeta and "
+        "BLF1 follow a known law against pacing (BLF2-3 lognormal), on a rigid floor or a "
+        "measured vibrating deck, "
         "identified in batch with the settings given (the same flags as 'workbench batch'), "
         "the laws fitted as 'workbench population' does, and each law parameter judged: "
         "recovered, biased, or a slope the method manufactures. Writes DIR/recovery.json, "

@@ -9,10 +9,23 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["FIT_LABELS", "LAW_NAMES", "interval_text", "recovery_text", "settings_text"]
+__all__ = [
+    "FIT_LABELS",
+    "LAW_NAMES",
+    "LOAD_FACTOR_NAMES",
+    "LOGNORMAL_NAMES",
+    "interval_text",
+    "recovery_text",
+    "settings_text",
+]
 
-#: Short names of the judged laws.
+#: Short names of the judged laws of the SMD parameters (their slope against pacing is what
+#: a report's conclusions turn on).
 LAW_NAMES = {"natural_frequency_hz": "f_n", "damping_ratio": "zeta"}
+#: Short names of the judged linear load-factor law (slope and intercept against pacing).
+LOAD_FACTOR_NAMES = {"blf1": "BLF1"}
+#: Short names of the judged lognormal load-factor laws (``mu`` and ``sigma`` of log BLF).
+LOGNORMAL_NAMES = {"blf2": "BLF2", "blf3": "BLF3"}
 #: Labels of the three fits of a recovery.
 FIT_LABELS = {"pipeline": "pipeline", "flags_ignored": "flags ignored", "sample": "records' truth"}
 
@@ -24,10 +37,32 @@ def settings_text(obj: dict[str, Any]) -> str:
 
 
 def interval_text(fit: dict[str, Any], law: str, par: str) -> str:
-    """Write a fitted law parameter with its 95 % interval: ``value [low, high]``."""
-    fl = fit["laws"][law]
+    """Write a fitted law parameter with its 95 % interval: ``value [low, high]``.
+
+    ``law`` is a linear law of ``fit["laws"]`` or a lognormal one of ``fit["lognormal"]``.
+    """
+    fl = fit["laws"][law] if law in fit["laws"] else fit["lognormal"][law]
     lo, hi = fl[f"{par}_ci"]
     return f"{fl[par]:.4g} [{lo:.4g}, {hi:.4g}]"
+
+
+def _fit_lines(obj: dict[str, Any], law: str, pars: tuple[str, str], group: str) -> list[str]:
+    """One line per fit of a law: its parameters with intervals and verdicts."""
+    lines = []
+    for which, label in FIT_LABELS.items():
+        fit = obj["recovered"].get(which, {})
+        if "laws" not in fit:
+            lines.append(f"  {label:15s} not fitted: {fit.get('error', '')}")
+            continue
+        if law not in fit.get(group, {}):  # a recovery written before the law was judged
+            lines.append(f"  {label:15s} not judged in this recovery")
+            continue
+        verdicts = obj["verdict"].get(which, {}).get(law, {})
+        parts = [
+            f"{par} {interval_text(fit, law, par)} {verdicts.get(par, '')}".rstrip() for par in pars
+        ]
+        lines.append(f"  {label:15s} n={fit[group][law]['n']:<4d} " + "; ".join(parts))
+    return lines
 
 
 def recovery_text(obj: dict[str, Any]) -> str:
@@ -39,20 +74,25 @@ def recovery_text(obj: dict[str, Any]) -> str:
         f"({rec['not_identified']} of them flagged C or K not identified), {rec['failed']} "
         "failed",
     ]
-    for law, name in LAW_NAMES.items():
-        tl = truth["laws"][law]
+    pacing = rec.get("errors", {}).get("pacing_hz")
+    if pacing:  # every law is regressed on it, so a record with the wrong pacing misleads all
+        lines.append(
+            f"pacing: {pacing['off_by_over_5pct']} records identified more than 5 % off their "
+            f"true pacing ({pacing['off_by_over_5pct_identified']} of those with C and K "
+            "identified)"
+        )
+    for law, name in {**LAW_NAMES, **LOAD_FACTOR_NAMES}.items():
+        tl = truth["laws"].get(law)
+        if tl is None:  # a recovery written before the load factors were judged
+            continue
         lines.append(f"{name}: truth slope {tl['slope']:.4g}, intercept {tl['intercept']:.4g}")
-        for which, label in FIT_LABELS.items():
-            fit = obj["recovered"].get(which, {})
-            if "laws" not in fit:
-                lines.append(f"  {label:15s} not fitted: {fit.get('error', '')}")
-                continue
-            verdicts = obj["verdict"].get(which, {}).get(law, {})
-            parts = [
-                f"{par} {interval_text(fit, law, par)} {verdicts.get(par, '')}".rstrip()
-                for par in ("slope", "intercept")
-            ]
-            lines.append(f"  {label:15s} n={fit['laws'][law]['n']:<4d} " + "; ".join(parts))
+        lines += _fit_lines(obj, law, ("slope", "intercept"), "laws")
+    for law, name in LOGNORMAL_NAMES.items():
+        tl = truth.get("lognormal", {}).get(law)
+        if tl is None:
+            continue
+        lines.append(f"{name} lognormal: truth mu {tl['mu']:.4g}, sigma {tl['sigma']:.4g}")
+        lines += _fit_lines(obj, law, ("mu", "sigma"), "lognormal")
     for row in obj.get("sensitivity", []):
         change = row["slope_change"]
         parts = []

@@ -20,6 +20,8 @@ from workbench.errors import InputError
 from workbench.population.recovery_text import (
     FIT_LABELS,
     LAW_NAMES,
+    LOAD_FACTOR_NAMES,
+    LOGNORMAL_NAMES,
     interval_text,
     recovery_text,
     settings_text,
@@ -70,36 +72,48 @@ def _refuse_constant(token: str) -> Any:
 
 
 def _check_truth(obj: dict[str, Any], file: Path) -> None:
-    """Refuse a truth law without a finite slope or intercept: its verdicts judge nothing."""
+    """Refuse a truth law without finite parameters: its verdicts judge nothing.
+
+    The f_n and zeta laws must be there; the load-factor laws are checked when present (a
+    recovery written before they were judged has none).
+    """
     import math
 
-    laws = obj["truth"].get("laws") if isinstance(obj["truth"], dict) else None
-    for law in LAW_NAMES:
-        for par in ("slope", "intercept"):
-            value = laws.get(law, {}).get(par) if isinstance(laws, dict) else None
-            number = isinstance(value, int | float) and not isinstance(value, bool)
-            if not (number and math.isfinite(float(value or 0))):
-                raise InputError(
-                    file,
-                    f"key truth.laws.{law}.{par}",
-                    f"the true value {value!r} is not a finite number, so no fit can be "
-                    "judged against it",
-                    "run the recovery again (it writes the truth it simulated)",
-                )
+    truth = obj["truth"] if isinstance(obj["truth"], dict) else {}
+    checks = [("laws", law, par, True) for law in LAW_NAMES for par in ("slope", "intercept")]
+    checks += [
+        ("laws", law, par, False) for law in LOAD_FACTOR_NAMES for par in ("slope", "intercept")
+    ]
+    checks += [("lognormal", law, par, False) for law in LOGNORMAL_NAMES for par in ("mu", "sigma")]
+    for group, law, par, required in checks:
+        laws = truth.get(group)
+        if not required and not (isinstance(laws, dict) and law in laws):
+            continue
+        value = laws.get(law, {}).get(par) if isinstance(laws, dict) else None
+        number = isinstance(value, int | float) and not isinstance(value, bool)
+        if not (number and math.isfinite(float(value or 0))):
+            raise InputError(
+                file,
+                f"key truth.{group}.{law}.{par}",
+                f"the true value {value!r} is not a finite number, so no fit can be "
+                "judged against it",
+                "run the recovery again (it writes the truth it simulated)",
+            )
 
 
 def recovery_section(runs: list[dict[str, Any]]) -> Section:
     """Return the report section "What this pipeline recovers" for one or more runs."""
     sec = Section("What this pipeline recovers")
     sec.paragraph(
-        "Each run below simulated a population of realistic walks whose natural frequency "
-        "and damping ratio follow a known law against pacing, identified every record with "
-        "the settings named, and fitted the laws as this report does. A law parameter is "
-        "'recovered' when its 95 % interval holds the truth, 'manufactured' when the truth "
-        "has no slope and the interval excludes zero, 'biased' otherwise. 'flags ignored' is "
-        "the fit of every record, as a pipeline without identifiability checks would make "
-        "it; 'records' truth' is the law a perfect identification would fit to the same "
-        "records."
+        "Each run below simulated a population of realistic walks whose natural frequency, "
+        "damping ratio and first load factor follow a known law against pacing (BLF2 and BLF3 "
+        "lognormal), identified every record with the settings named, and fitted the laws as "
+        "this report does. A law parameter is 'recovered' when its 95 % interval holds the "
+        "truth, 'manufactured' when the truth has no slope and the interval excludes zero, "
+        "'biased' otherwise. 'flags ignored' is the fit of every record, as a pipeline "
+        "without identifiability checks would make it; 'records' truth' is the law a perfect "
+        "identification of the parameters would fit to the same records, against the pacing "
+        "the pipeline identified for each (biased too when the pacing is)."
     )
     rows = []
     for obj in runs:
@@ -131,6 +145,17 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
             "Recovered slopes with 95 % intervals and verdicts (intercepts in recovery.json).",
         )
     )
+    load_rows = [row for obj in runs for row in _load_factor_rows(obj)]
+    if load_rows:
+        sec.table(
+            Table(
+                ["truth, floor", "settings", "fit", "BLF1 slope", "BLF2 mu", "BLF3 mu"],
+                load_rows,
+                "Recovered load-factor laws with 95 % intervals and verdicts: BLF1's slope "
+                "against pacing, the mean of log BLF2 and log BLF3 (intercept and sigma in "
+                "recovery.json).",
+            )
+        )
     sens = [
         [f"{obj['truth']['source'].split(' (')[0]}, {obj['truth']['floor']}", row["point"]]
         + [_change_text(row["slope_change"].get(law)) for law in LAW_NAMES]
@@ -147,6 +172,28 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
             )
         )
     return sec
+
+
+def _load_factor_rows(obj: dict[str, Any]) -> list[list[str]]:
+    """Rows of the load-factor table for one run (none for a run that did not judge them)."""
+    truth = obj["truth"]
+    judged = [("blf1", "slope", truth["laws"].get("blf1", {}).get("slope"))] + [
+        (law, "mu", truth.get("lognormal", {}).get(law, {}).get("mu")) for law in LOGNORMAL_NAMES
+    ]
+    if any(true is None for _, _, true in judged):
+        return []
+    rows = []
+    for which, label in FIT_LABELS.items():
+        fit = obj["recovered"].get(which, {})
+        cells = [f"{truth['source'].split(' (')[0]}, {truth['floor']}", settings_text(obj), label]
+        for law, par, true in judged:
+            if "laws" not in fit:
+                cells.append(f"truth {true:.4g}; not fitted")
+                continue
+            v = obj["verdict"].get(which, {}).get(law, {}).get(par, "")
+            cells.append(f"truth {true:.4g}; {interval_text(fit, law, par)} {v}".rstrip())
+        rows.append(cells)
+    return rows
 
 
 def _change_text(change: dict[str, Any] | None) -> str:
@@ -175,7 +222,9 @@ def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]
         where = f"on {truth['floor']} floors with {settings_text(obj)}"
         name = truth["source"].split(" (")[0]
         fit = obj["recovered"].get("pipeline", {})
-        for law, short in LAW_NAMES.items():
+        for law, short in {**LAW_NAMES, **LOAD_FACTOR_NAMES}.items():
+            if law not in truth["laws"]:  # a recovery written before BLF1 was judged
+                continue
             mine = fitted_laws.get(law)
             own = f" (this report: slope {mine['slope']:.4g})" if mine else ""
             true_slope = truth["laws"][law]["slope"]
