@@ -54,7 +54,10 @@ def test_identify_runs_the_numerical_example_by_name(capsys):
     text = capsys.readouterr().out
     out = json.loads(text, parse_constant=lambda name: pytest.fail(f"{name} is not JSON"))
     assert code == 0
-    assert out["posterior_sd"]["blf"][0] is None  # one piece: no spread over steps
+    # One piece: no spread over steps, but the load factor's band is the posterior of that
+    # piece's load factor given the data, mixed over (C, K).
+    assert out["blf_step_sd"][0] is None
+    assert all(sd is not None and sd > 0.0 for sd in out["posterior_sd"]["blf"])
     truth = datasets.load("seed_numerical_example").metadata["truth"]
     for key in ("stiffness_n_per_m", "damping_ns_per_m"):
         lo, hi = out["interval_95"][key]

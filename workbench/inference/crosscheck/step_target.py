@@ -344,6 +344,11 @@ class StepTarget:
             if self.prior_logit:
                 with np.errstate(divide="ignore", invalid="ignore"):
                     point, log_jac = box_logit(self.box, point)
+                # On the box's edge the logit is infinite and a logit-normal density is zero
+                # (its Jacobian's +inf would meet the normal's -inf as NaN): outside.
+                on_edge = inside & ~(np.all(np.isfinite(point), axis=1) & np.isfinite(log_jac))
+                out = np.where(on_edge, -np.inf, out)
+                inside = inside & ~on_edge
                 out = out + np.where(inside, log_jac, 0.0)
                 point = np.where(inside[:, None], point, 0.0)
             white = np.linalg.solve(self.prior_chol, (point - self.prior_mean).T).T
