@@ -350,8 +350,16 @@ def test_user_written_effect_is_a_candidate(breathing: None, seed: int) -> None:
     assert diag.candidates[0].effect == "breathing_modulation"
     assert diag.candidates[0].significant
     assert "breath" in diag.verdict
-    # Without the hidden effect the new candidate raises no alarm.
-    assert not any(c.significant for c in diagnose(_record(seed)).candidates)
+    # Without the hidden effect the new candidate raises no alarm. Only the new candidate is
+    # asserted on: the catalogue's false-alarm rate on records without an effect is
+    # calibrated over many records (docs/validation/criticism.md, "Family-wise control"),
+    # and one record may carry a real chance pattern. Seed 0's does: its simulator drew the
+    # step-by-step force coefficients independently, yet their odd/even contrast is 7.3 N
+    # on the first harmonic's cosine and -3.4 N on its sine (the truth's
+    # step_coefficients), and gait_asymmetry calls it (p 0.006).
+    quiet = diagnose(_record(seed)).candidates
+    assert not next(c for c in quiet if c.effect == "breathing_modulation").significant
+    assert all(c.effect == "gait_asymmetry" for c in quiet if c.significant)
 
 
 @pytest.mark.slow
