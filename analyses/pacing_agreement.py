@@ -19,8 +19,11 @@ command's result is appended to the CSV as soon as it is known and a run resumes
 (delete the file to measure again).
 
 Agreement: the three step counts are equal, and the three pacings are equal to the
-rounding of ``inspect``'s JSON (4 decimals; ``identify`` rounds to 5). A record that all
-three refuse agrees (it has no steps to count).
+rounding of ``inspect``'s JSON (4 decimals; ``identify`` rounds to 5). A record that
+``inspect`` refuses has no footfall steps (the seed's numerical example is no walk): it
+agrees when ``diagnose`` refuses it too and ``identify`` either refuses it or identifies it
+as one piece at its stated pacing (``pieces = "whole"`` in the record's own settings), which
+counts no steps.
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ import workbench
 from workbench import datasets
 
 COMMANDS = ("inspect", "identify", "diagnose")
-FIELDS = ("record", "command", "status", "steps", "pacing_hz", "seconds", "message")
+FIELDS = ("record", "command", "status", "steps", "pacing_hz", "pieces", "seconds", "message")
 #: Pacings agree within the rounding of inspect's JSON (4 decimals) and identify's (5).
 PACING_TOLERANCE_HZ = 0.5e-4 + 0.5e-5
 
@@ -72,7 +75,14 @@ def run_command(name: str, command: str, one_step: bool) -> dict[str, Any]:
     if out.returncode != 0:
         lines = out.stderr.strip().splitlines() or ["(no message)"]
         status = "refused" if out.returncode == 2 else f"failed ({out.returncode})"
-        return {**row, "status": status, "steps": "", "pacing_hz": "", "message": lines[-1]}
+        return {
+            **row,
+            "status": status,
+            "steps": "",
+            "pacing_hz": "",
+            "pieces": "",
+            "message": lines[-1],
+        }
     obj = json.loads(out.stdout)
     where = obj["baseline"] if command == "diagnose" else obj
     return {
@@ -80,6 +90,8 @@ def run_command(name: str, command: str, one_step: bool) -> dict[str, Any]:
         "status": "ok",
         "steps": where["steps"],
         "pacing_hz": where["pacing_hz"],
+        # What identify cut the record into; the others always count footfall steps.
+        "pieces": obj["settings"]["pieces"] if command == "identify" else "steps",
         "message": "",
     }
 
@@ -116,8 +128,10 @@ def measure(names: list[str], path: Path, one_step: bool) -> dict[tuple[str, str
 
 def agree(rows: list[dict[str, str]]) -> bool:
     """Whether the three commands report one step count and one pacing (module docstring)."""
-    if all(r["status"] == "refused" for r in rows):
-        return True
+    seen, identified, diagnosed = rows
+    if seen["status"] == "refused":
+        no_steps = identified["status"] == "refused" or identified["pieces"] == "whole"
+        return diagnosed["status"] == "refused" and no_steps
     if any(r["status"] != "ok" for r in rows):
         return False
     steps = {int(r["steps"]) for r in rows}
@@ -133,10 +147,14 @@ def table(names: list[str], done: dict[tuple[str, str], dict[str, str]]) -> list
         rows = [done[(name, c)] for c in COMMANDS]
         cells = []
         for r in rows:
-            if r["status"] == "ok":
-                cells += [r["steps"], f"{float(r['pacing_hz']):.5f}"]
-            else:
+            if r["status"] != "ok":
                 cells += [r["status"], "-"]
+            elif r["pieces"] == "whole":
+                cells += ["one piece", f"{float(r['pacing_hz']):g} (stated)"]
+            else:
+                # As the JSON gives it: inspect rounds to 4 decimals, identify to 5.
+                digits = 4 if r["command"] == "inspect" else 5
+                cells += [r["steps"], f"{float(r['pacing_hz']):.{digits}f}"]
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {'yes' if agree(rows) else 'no'} |")
     return lines
 
