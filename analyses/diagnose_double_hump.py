@@ -19,8 +19,10 @@ command line adds nothing to the candidates). A walk *calls* an effect when any 
 is significant. Every walk's result is appended to the CSV as soon as it is known, and a
 run resumes from it (delete the file to measure again).
 
-Prints one line per walk (hump ratio, steps, the effects called, the smallest p-value and
-its candidate) and the count of walks that call anything.
+Prints one line per walk (hump ratio, the walker's natural frequency over its pacing, steps,
+each effect called with its p-value, the share of the held-out squared error it removes and
+the share of its columns' variation outside the baseline's span, the smallest p-value and its
+candidate) and the count of walks that call anything.
 """
 
 from __future__ import annotations
@@ -37,7 +39,16 @@ from workbench.diagnostics.criticism import diagnose, prepare
 from workbench.synth import simulate_walking
 from workbench.synth.gait import double_hump_force
 
-FIELDS = ("seed", "hump_ratio", "steps", "called", "smallest_p", "smallest_p_effect")
+FIELDS = (
+    "seed",
+    "hump_ratio",
+    "fn_over_fp",
+    "steps",
+    "called",
+    "evidence",
+    "smallest_p",
+    "smallest_p_effect",
+)
 
 
 def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
@@ -83,11 +94,20 @@ def measure(seed: int) -> dict[str, Any]:
     diag = diagnose(prepare(record))
     testable = [c for c in diag.candidates if c.testable]
     low = min(testable, key=lambda c: c.p_value)
+    called = [c for c in diag.candidates if c.significant]
     return {
         "seed": seed,
         "hump_ratio": round(drawn["hump_ratio"], 4),
+        "fn_over_fp": round(drawn["natural_frequency_hz"] / drawn["pacing_hz"], 3),
         "steps": diag.baseline["steps"],
-        "called": "+".join(c.effect for c in diag.candidates if c.significant),
+        "called": "+".join(c.effect for c in called),
+        # What made each call: its p-value, the share of the held-out squared error it
+        # removes, and the share of its columns' variation outside the baseline's span.
+        "evidence": "; ".join(
+            f"{c.effect} p {c.p_value:.2g}, removes {100 * c.score:.1f} %, "
+            f"separable {100 * c.separable_fraction:.2g} %"
+            for c in called
+        ),
         "smallest_p": f"{low.p_value:.4g}",
         "smallest_p_effect": low.effect,
     }
@@ -119,12 +139,13 @@ def main(argv: list[str] | None = None) -> int:
                 writer.writeheader()
             writer.writerow(rows[seed])
         print(f"walk {seed}: {rows[seed]}", file=sys.stderr, flush=True)
-    print("| walk | hump ratio | steps | called | smallest p (candidate) |")
-    print("|---|---|---|---|---|")
+    print("| walk | hump ratio | f_n / f_p | steps | called | smallest p (candidate) |")
+    print("|---|---|---|---|---|---|")
     for seed in seeds:
         r = rows[seed]
         print(
-            f"| {seed} | {float(r['hump_ratio']):.3f} | {r['steps']} | {r['called'] or '-'} | "
+            f"| {seed} | {float(r['hump_ratio']):.3f} | {r['fn_over_fp']} | {r['steps']} | "
+            f"{r['evidence'] or '-'} | "
             f"{r['smallest_p']} ({r['smallest_p_effect']}) |"
         )
     calling = [s for s in seeds if rows[s]["called"]]
