@@ -7,13 +7,18 @@ ratios 0.8, 0.9, 1.0, 1.1, 1.25 (seed 7); the deck-off comparison seeds 200-203.
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from workbench import datasets
 from workbench.diagnostics.criticism_data import prepare as prepare_criticism
-from workbench.errors import UsageError
-from workbench.inference.core.problem import build_problem
+from workbench.errors import InputError, UsageError
+from workbench.inference.pipeline.identification import compile_problem
+from workbench.inference.pipeline.identification import prepare as prepare_identification
 from workbench.records.inspection import inspect_record
 from workbench.records.steps import (
     OFF_RHYTHM_PHASE_STEPS,
@@ -199,18 +204,34 @@ def test_inspect_reports_the_split_and_warns_on_a_pause() -> None:
     assert not any("rhythm" in w for w in steady.warnings)
 
 
-def test_inspect_and_identify_share_steps_and_pacing_and_diagnose_the_check() -> None:
-    for name in ("seed_individual", "treadmill"):
-        record = datasets.load(name)
-        if record.mass_kg is None:
-            record = record.replace(mass_kg=77.3)
+@pytest.mark.parametrize("name", datasets.names())
+def test_inspect_identify_and_diagnose_use_one_set_of_steps_and_one_pacing(name: str) -> None:
+    """Each command's own first stages on every embedded record, as its command line runs them.
+
+    ``identify``: the embedded record's settings, :func:`prepare` and :func:`compile_problem`
+    (the problem's pieces and pacing are what its JSON reports); ``diagnose``: the
+    criticism's :func:`prepare`, whose steps and pacing its baseline reports.
+    """
+    record = datasets.load(name)
+    settings = datasets.settings(name)
+    try:
         insp = inspect_record(record)
-        problem = build_problem(insp.com, insp.steps, harmonics=3)
-        assert problem.n_pieces == insp.steps.n_steps
-        assert problem.pacing_hz == insp.pacing.pacing_hz == insp.steps.pacing_hz
-        # The criticism keeps its own step phase (docs/science.md 2) but reports the
-        # split's check of the same footfalls.
-        assert prepare_criticism(record).split == insp.to_json()["split"]
+    except InputError:
+        # Not a walk (the seed's numerical example): no command finds steps in it.
+        with pytest.raises(InputError):
+            prepare_criticism(record)
+        assert settings.model.pieces == "whole"
+        return
+    report = insp.to_json()
+    problem = compile_problem(prepare_identification(record, settings), settings)
+    data = prepare_criticism(record)
+    assert report["steps"] == insp.steps.n_steps == problem.n_pieces == data.n_steps
+    assert insp.pacing.pacing_hz == insp.steps.pacing_hz == problem.pacing_hz == data.pacing_hz
+    assert data.split == report["split"]
+    # The criticism's boundaries are the split's footfalls, up to the jitter its smooth phase
+    # leaves out (a quarter of a step would be another footfall's).
+    off = np.abs(data.footfall_times_s - insp.steps.footfall_times_s)
+    assert np.max(off) < 0.25 * np.median(insp.steps.durations_s)
 
 
 def test_double_hump_force_has_its_humps_where_and_as_high_as_asked() -> None:
@@ -292,3 +313,28 @@ def test_overground_and_speed_change_walks(seed: int) -> None:
         walking = (amplitude[1:] > 0) & (amplitude[:-1] > 0)
         true_fp = np.median((2.0 / (truth[1:] + truth[:-1]))[walking])
         assert insp.pacing.pacing_hz == pytest.approx(true_fp, rel=0.005), gait.label
+
+
+@pytest.mark.slow
+def test_the_three_commands_print_one_step_count_and_one_pacing() -> None:
+    """End to end on a short record: what each command's JSON says (analyses/pacing_agreement.py
+    runs all the embedded records with the default settings)."""
+
+    def run(*args: str) -> dict:
+        out = subprocess.run(
+            [sys.executable, "-m", "workbench", *args, "seed_individual", "--json"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout)
+
+    seen = run("inspect")
+    # The force check identifies the record again with other force models; it adds nothing
+    # to the steps and pacing and would double the time.
+    identified = run("identify", "--no-force-check")
+    diagnosed = run("diagnose", "--no-one-step")["baseline"]
+    assert seen["steps"] == identified["steps"] == diagnosed["steps"] == 51
+    assert identified["pacing_hz"] == pytest.approx(seen["pacing_hz"], abs=0.5e-4)
+    assert diagnosed["pacing_hz"] == pytest.approx(seen["pacing_hz"], abs=0.5e-4)

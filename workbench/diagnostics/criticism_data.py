@@ -74,9 +74,11 @@ class CriticismData:
     step : ndarray of int
         Index of the step each sample belongs to.
     mass_kg, pacing_hz, sample_rate_hz : float
-        Body mass, mean pacing (from the footfalls) and sample rate.
+        Body mass, pacing (:attr:`Steps.pacing_hz <workbench.records.steps.Steps.pacing_hz>`,
+        as every command reports it) and sample rate.
     footfall_times_s : ndarray
-        Step boundaries of the kept steps [s] (where the step phase crosses ``2 pi k``).
+        Step boundaries [s] (where the step phase crosses ``2 pi k``), one per footfall of
+        the split, so that there are as many steps as ``inspect`` and ``identify`` count.
     ground : tuple of ndarray or None
         Ground displacement [m], velocity [m/s], acceleration [m/s^2], when measured.
     source : str
@@ -213,7 +215,7 @@ def prepare(
         phase_rad=phase,
         step=step,
         mass_kg=mass,
-        pacing_hz=float(1.0 / np.mean(np.diff(footfalls))),
+        pacing_hz=steps.pacing_hz,
         sample_rate_hz=record.sample_rate_hz,
         footfall_times_s=footfalls,
         ground=ground,
@@ -224,27 +226,37 @@ def prepare(
 
 
 def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatArray, FloatArray]:
-    """Step phase from the pacing component of the COM acceleration.
+    """Step phase from the pacing component of the COM acceleration, one cycle per split step.
 
     Peaks of the acceleration mark footfalls, but with a double-humped force they can jump
     between the humps from step to step, and where the response changes (stiffness drift, a
     nonlinear spring) they shift against the force. Both would enter the criticism as an
     error of the force's timing. The phase of the acceleration's pacing component (a
-    zero-phase band-pass of 0.7-1.4 f_p, then the angle of its analytic signal) advances
-    smoothly by ``2 pi`` per step and is set so that its circular mean at the detected
-    footfalls is 0: step phase 0 is, on average, the footfall peak.
+    zero-phase band-pass of 0.7-1.4 f_p, then the angle of its analytic signal, its rate
+    averaged over a stride) advances smoothly by ``2 pi`` per step and is set so that its
+    circular mean at the split's footfalls is 0.
+
+    The criticism's steps are the split's pieces (docs/science.md 2), so that ``diagnose``
+    counts the steps ``inspect`` and ``identify`` count: each footfall of the split is
+    matched with the crossing of ``2 pi k`` nearest to it, and the criticism's boundaries
+    are those crossings, one per footfall (they differ from the footfalls by the
+    step-to-step jitter the smoothing leaves out). Where the smooth phase does not keep the
+    split's rhythm (a footfall's nearest crossing is not the one after its predecessor's:
+    pauses, turns), or where it does not advance, the phase is the split's own, linear in
+    time between footfalls.
 
     Returns
     -------
     lo, hi : int
-        Sample span of the whole steps kept.
+        Sample span of the steps.
     phase_rad : ndarray
         Phase on that span, starting in ``[0, 2 pi)``.
     boundaries_s : ndarray
-        Times where the phase crosses multiples of ``2 pi`` (step boundaries) [s].
+        Times where the phase crosses multiples of ``2 pi`` (step boundaries) [s], one per
+        footfall of the split.
     """
     fs = com.sample_rate_hz
-    fp = float(1.0 / np.median(steps.durations_s))
+    fp = steps.pacing_hz
     band = np.array([0.7, 1.4]) * fp / (0.5 * fs)
     sos = signal.butter(4, np.clip(band, 1e-6, 0.99), btype="bandpass", output="sos")
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
@@ -255,17 +267,29 @@ def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatA
     width = max(round(2.0 * fs / fp), 1)
     smooth = _moving_average(np.diff(unwrapped), width)
     unwrapped = unwrapped[0] + np.concatenate([[0.0], np.cumsum(smooth)])
-    # Footfall peaks of the acceleration sit near the maxima of its pacing component, where
-    # the analytic signal's angle is 0.
-    at_footfalls = np.exp(1j * np.interp(steps.footfall_times_s, com.time_s, unwrapped))
-    unwrapped = unwrapped - float(np.angle(np.mean(at_footfalls)))
-    # Keep whole cycles away from the band-pass's edge effects (one step at either end).
-    first = steps.start
-    last = steps.stop
-    k0 = int(np.ceil(unwrapped[first] / (2.0 * np.pi)))
-    k1 = int(np.floor(unwrapped[last - 1] / (2.0 * np.pi)))
-    if k1 - k0 < 6 or np.any(np.diff(unwrapped[first:last]) <= 0):
-        # An irregular record (stops, turns): fall back to the detected footfalls.
+    # The split's boundaries sit at the maxima of the walker's pacing component, where the
+    # analytic signal's angle is 0.
+    at_footfalls = np.interp(steps.footfall_times_s, com.time_s, unwrapped)
+    anchor = float(np.angle(np.mean(np.exp(1j * at_footfalls))))
+    unwrapped = unwrapped - anchor
+    cycle = np.rint((at_footfalls - anchor) / (2.0 * np.pi))
+    # Search the crossings up to one step outside the split's span (the smooth phase need
+    # not advance further out, at the band-pass's edges).
+    reach = round(fs / fp)
+    a = max(steps.start - reach, 0)
+    b = min(steps.stop + reach, unwrapped.size)
+    span = unwrapped[a:b]
+    crossings = 2.0 * np.pi * cycle
+    keeps_rhythm = (
+        steps.n_steps >= 6
+        and bool(np.all(np.diff(cycle) == 1))
+        and bool(np.all(np.diff(span) > 0))
+        and span[0] <= crossings[0]
+        and crossings[-1] <= span[-1]
+    )
+    if not keeps_rhythm:
+        # An irregular record (stops, turns): the split's own phase.
+        first, last = steps.start, steps.stop
         t = com.time_s[first:last]
         return (
             first,
@@ -273,10 +297,9 @@ def _fundamental_phase(com: COMResponse, steps: Steps) -> tuple[int, int, FloatA
             step_phase_rad(t, steps.footfall_times_s),
             np.asarray(steps.footfall_times_s, dtype=np.float64),
         )
-    crossings = 2.0 * np.pi * np.arange(k0, k1 + 1)
-    lo = int(np.searchsorted(unwrapped, crossings[0]))
-    hi = int(np.searchsorted(unwrapped, crossings[-1]))
-    boundaries = np.interp(crossings, unwrapped, com.time_s)
+    lo = a + int(np.searchsorted(span, crossings[0]))
+    hi = a + int(np.searchsorted(span, crossings[-1]))
+    boundaries = np.interp(crossings, span, com.time_s[a:b])
     phase = unwrapped[lo:hi] - crossings[0]
     return lo, hi, np.asarray(phase, dtype=np.float64), np.asarray(boundaries, dtype=np.float64)
 
