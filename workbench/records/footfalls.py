@@ -415,12 +415,13 @@ def step_harmonic_locking(acc: FloatArray, sample_rate_hz: float, times_s: Float
     For each harmonic h = 2-6 of the steps (each resampled to 64 points), with ``c_jh`` its
     Fourier coefficient in step j of N: ``N |mean_j c_jh|^2 / mean_j |c_jh - mean c_h|^2``,
     summed over h. A walker's harmonics have the same phase in every step, so their mean
-    stands far above its scatter even when they are weak: 170-2600 on the seed study's
-    nearly sinusoidal walkers (second and third harmonics 1-2 % of the power). Steps cut at
-    a lone line's period hold, above its first harmonic, only the walker and the noise, which
-    are not in step with it: each term is then about 1, the sum about 5 (3.6 and 4.8 with a
-    strong deck added to the two real records and its channel left out;
-    ``analyses/footfall_accuracy.py --recovery-decks`` prints the walkers' range).
+    stands far above its scatter even when they are weak: at least 123 on the population
+    recovery's walkers, whose second and third harmonics hold 1-2 % of the power
+    (``analyses/footfall_accuracy.py --recovery-decks --recovery-rigid``), 3350 and 5301 on
+    the two real records. Steps cut at a lone line's period hold, above its first harmonic,
+    only the walker and the noise, which are not in step with it: each term is then about 1
+    or less (2.7 and 1.0 in all on the real records cut at the period of a strong deck added
+    to them, ``--replays``).
 
     Parameters
     ----------
