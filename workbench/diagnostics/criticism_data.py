@@ -404,8 +404,9 @@ def _step_force_shifts(data: CriticismData) -> FloatArray:
     by each of :data:`STEP_TIMING_GRID` phases within :data:`STEP_TIMING_REACH` steps either
     way; the step's shift is the one whose shifted shape explains most of that step's force
     (with its own size, and the spring and damper's share taken out), refined by a parabola
-    through the best three. A search rather than the first-order ``S'`` coefficient: at the
-    first and last steps of a walk the phase can be 20 ms off, where the linearisation
+    through the best three; a step whose best shift is at the end of the range keeps shift
+    0 (no fit within reach). A search rather than the first-order ``S'`` coefficient: at
+    the first and last steps of a walk the phase can be 20 ms off, where the linearisation
     overshoots.
 
     Returns
@@ -432,11 +433,14 @@ def _step_force_shifts(data: CriticismData) -> FloatArray:
         # Explained power with a positive size (a negative one is the shape turned over).
         fit = np.where(proj > 0, proj**2 / np.maximum(np.sum(shape**2, axis=1), 1e-300), 0.0)
         k = int(np.argmax(fit))
+        if not 0 < k < grid.size - 1:
+            # No best shift within reach (a first or last step of another shape, a stop):
+            # the smooth phase is kept there.
+            continue
         step = 0.0
-        if 0 < k < grid.size - 1:
-            curve = fit[k - 1] - 2.0 * fit[k] + fit[k + 1]
-            if curve < 0:
-                step = 0.5 * (fit[k - 1] - fit[k + 1]) / curve
+        curve = fit[k - 1] - 2.0 * fit[k] + fit[k + 1]
+        if curve < 0:
+            step = 0.5 * (fit[k - 1] - fit[k + 1]) / curve
         shifts[j] = grid[k] + step * (grid[1] - grid[0])
     return np.asarray(shifts, dtype=np.float64)
 
