@@ -587,9 +587,9 @@ class HeelImpact(Effect):
         """Harmonics above the baseline's default ones (up to three times as many).
 
         Harmonics of the step phase re-timed to each step's force (class Notes): of the
-        smooth step phase, the jitter of the strikes against it (7-9 ms sd on simulated
-        overground walks, up to 25 ms at their first and last steps) is as wide as the
-        pulse. None when the sample rate leaves no room above the default harmonics (orders
+        smooth step phase, the jitter of the strikes against it (7-10 ms sd on simulated
+        overground walks, up to 28 ms at their first and last steps,
+        ``analyses/heel_impact_timing.py``) is as wide as the pulse. None when the sample rate leaves no room above the default harmonics (orders
         above 0.45 of the sample rate would alias).
         """
         max_order = 0.45 * data.sample_rate_hz / data.pacing_hz
