@@ -589,8 +589,9 @@ class HeelImpact(Effect):
         Harmonics of the step phase re-timed to each step's force (class Notes): of the
         smooth step phase, the jitter of the strikes against it (7-10 ms sd on simulated
         overground walks, up to 28 ms at their first and last steps,
-        ``analyses/heel_impact_timing.py``) is as wide as the pulse. None when the sample rate leaves no room above the default harmonics (orders
-        above 0.45 of the sample rate would alias).
+        ``analyses/heel_impact_timing.py``) is as wide as the pulse. None when the sample
+        rate leaves no room above the default harmonics (orders above 0.45 of the sample
+        rate would alias).
         """
         max_order = 0.45 * data.sample_rate_hz / data.pacing_hz
         top = int(min(3 * CRITICISM_HARMONICS, math.floor(max_order)))
