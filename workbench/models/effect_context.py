@@ -226,6 +226,9 @@ class CriticismRecord(Protocol):
     def slow_pacing_change(self) -> FloatArray | None:
         """Slow change of the pacing along the record [Hz], or None without a local pacing."""
 
+    def force_timed_phase(self) -> FloatArray:
+        """Step phase with each step re-timed to its own force [rad]."""
+
 
 def phase_harmonics(phi: FloatArray, orders: Iterable[float]) -> FloatArray:
     """Columns ``cos(k phi), sin(k phi)`` for each order ``k``, interleaved.

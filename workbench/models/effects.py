@@ -540,6 +540,17 @@ class HeelImpact(Effect):
     -----
     Statistic that reveals it: residual localised just after footfall, broadband (power at
     step harmonics above those of the force model). Needs ``context.step_start_s``.
+
+    In the criticism the step boundaries are not the heel strikes: the footfall split's
+    boundary is the peak of the walker's pacing component (docs/science.md 2), 0.08-0.13
+    step after the heel strike on the real records, and the criticism's smooth step phase
+    leaves out the strikes' step-to-step jitter. The columns (step-phase harmonics 11-30)
+    do not depend on a constant lag, but the pulse is only a few milliseconds wide, so they
+    use the phase re-timed step by step to each step's own force
+    (:meth:`~workbench.models.effect_context.CriticismRecord.force_timed_phase`); the
+    statistic finds where in the step the error power gathers instead of assuming the
+    boundary is the heel strike. ``identify`` still places the pulse at its step starts
+    (:meth:`identification_columns`), which on a record are the split's boundaries.
     """
 
     name = "heel_impact"
@@ -573,27 +584,41 @@ class HeelImpact(Effect):
     )
 
     def criticism_columns(self, data: CriticismRecord) -> FloatArray | None:
-        """Step-phase harmonics above the baseline's default ones (up to three times as many).
+        """Harmonics above the baseline's default ones (up to three times as many).
 
-        None when the sample rate leaves no room above them (orders above 0.45 of the
-        sample rate would alias).
+        Harmonics of the step phase re-timed to each step's force (class Notes): of the
+        smooth step phase, the jitter of the strikes against it (7-10 ms sd on simulated
+        overground walks, up to 28 ms at their first and last steps,
+        ``analyses/heel_impact_timing.py``) is as wide as the pulse. None when the sample
+        rate leaves no room above the default harmonics (orders above 0.45 of the sample
+        rate would alias).
         """
         max_order = 0.45 * data.sample_rate_hz / data.pacing_hz
         top = int(min(3 * CRITICISM_HARMONICS, math.floor(max_order)))
         if top <= CRITICISM_HARMONICS:
             return None
-        return phase_harmonics(data.phase_rad, range(CRITICISM_HARMONICS + 1, top + 1))
+        return phase_harmonics(data.force_timed_phase(), range(CRITICISM_HARMONICS + 1, top + 1))
 
     def statistic(
         self, data: CriticismRecord, baseline_residual_n: FloatArray
     ) -> tuple[float, str]:
-        """Share of the error power in the first 10 % of the step."""
+        """Largest share of the error power in one tenth of the step, and where it starts.
+
+        The tenth is searched all round the step (in hundredths, on the re-timed phase), so
+        a heel strike before or after the boundary is found where it is; its start is
+        given from the boundary.
+        """
         resid = baseline_residual_n
-        early = data.step_fraction < 0.1
-        share = float(np.sum(resid[early] ** 2) / max(np.sum(resid**2), 1e-300))
+        frac = np.mod(data.force_timed_phase() / (2.0 * np.pi), 1.0)
+        bins = np.minimum((frac * 100).astype(np.int64), 99)
+        power = np.bincount(bins, weights=resid**2, minlength=100)
+        windows = np.convolve(np.concatenate([power, power[:9]]), np.ones(10), mode="valid")
+        start = int(np.argmax(windows))
+        share = float(windows[start] / max(float(np.sum(power)), 1e-300))
+        offset = start / 100 if start <= 50 else start / 100 - 1.0
         return share, (
-            f"{100 * share:.0f} % of the error power lies in the first 10 % of the step "
-            "(10 % expected if it were spread evenly)"
+            f"{100 * share:.0f} % of the error power lies in one tenth of the step, from "
+            f"{offset:+.2f} step after the boundary (10 % if it were spread evenly)"
         )
 
     def identification_columns(
@@ -605,7 +630,10 @@ class HeelImpact(Effect):
     ) -> tuple[FloatArray, tuple[str, ...]]:
         """Return the pulse of unit height with this instance's ``decay_s``.
 
-        Only ``impact_n`` is fitted (the term is linear in it); the decay is held.
+        Only ``impact_n`` is fitted (the term is linear in it); the decay is held. The pulse
+        starts at the context's step starts: on a record, the footfall split's boundaries,
+        which lie after the heel strikes (0.08-0.13 step on the real records,
+        docs/science.md 2), so there the fitted pulse comes that much late.
         """
         t = np.asarray(t_s, dtype=np.float64)
         decay = float(self.values["decay_s"])
