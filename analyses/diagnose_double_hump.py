@@ -39,6 +39,9 @@ from workbench.diagnostics.criticism import diagnose, prepare
 from workbench.synth import simulate_walking
 from workbench.synth.gait import double_hump_force
 
+sys.path.insert(0, str(Path(__file__).parent))
+from footfall_accuracy import draw_walker  # the study's ranges, shared
+
 FIELDS = (
     "seed",
     "hump_ratio",
@@ -54,20 +57,7 @@ FIELDS = (
 def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
     """Simulate walk ``seed``; returns the record and what was drawn."""
     rng = np.random.default_rng([seed, 0xD1A6])
-    d: dict[str, Any] = {
-        "mass_kg": float(rng.uniform(50.0, 100.0)),
-        "pacing_hz": float(rng.uniform(1.5, 2.3)),
-        "natural_frequency_hz": float(rng.uniform(1.8, 3.4)),
-        "damping_ratio": float(rng.uniform(0.2, 0.5)),
-        "hump_ratio": float(np.exp(rng.uniform(np.log(0.8), np.log(1.25)))),
-        "peak_fraction": float(rng.uniform(0.15, 0.35)),
-        "step_duration_sd": float(rng.uniform(0.01, 0.03)),
-        "amplitude_sd": float(rng.uniform(0.02, 0.08)),
-        "phase_sd_rad": float(rng.uniform(0.02, 0.08)),
-        "noise_sd_n": float(rng.uniform(0.0, 20.0)),
-        "sample_rate_hz": float(rng.choice([100.0, 200.0, 500.0])),
-        "duration_s": float(rng.uniform(30.0, 60.0)),
-    }
+    d = draw_walker(rng)
     sim = simulate_walking(
         mass_kg=d["mass_kg"],
         pacing_hz=d["pacing_hz"],

@@ -73,12 +73,12 @@ OFF_HUMP_STEP = 0.15
 KINDS = ("steady", "overground", "speed_change")
 
 
-def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
-    """Simulate walk ``seed`` of the study; returns the record and what was drawn."""
-    rng = np.random.default_rng([seed, 0xF007])
-    kind = KINDS[seed % 3]
-    deck = (seed // 3) % 2 == 1
-    d: dict[str, Any] = {
+def draw_walker(rng: np.random.Generator) -> dict[str, Any]:
+    """Draw a double-humped walker and its record's details (the study's ranges).
+
+    ``analyses/diagnose_double_hump.py`` draws its walks with the same ranges.
+    """
+    return {
         "mass_kg": float(rng.uniform(50.0, 100.0)),
         "pacing_hz": float(rng.uniform(1.5, 2.3)),
         "natural_frequency_hz": float(rng.uniform(1.8, 3.4)),
@@ -91,6 +91,17 @@ def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
         "noise_sd_n": float(rng.uniform(0.0, 20.0)),
         "sample_rate_hz": float(rng.choice([100.0, 200.0, 500.0])),
         "duration_s": float(rng.uniform(30.0, 60.0)),
+    }
+
+
+def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
+    """Simulate walk ``seed`` of the study; returns the record and what was drawn."""
+    rng = np.random.default_rng([seed, 0xF007])
+    kind = KINDS[seed % 3]
+    deck = (seed // 3) % 2 == 1
+    d: dict[str, Any] = draw_walker(rng)
+    # Drawn after the walker's details, in this order, whatever the walk's kind.
+    d |= {
         "deck_rms_m_s2": float(np.exp(rng.uniform(np.log(0.1), np.log(1.5)))),
         "deck_frequency_hz": float(rng.uniform(1.5, 4.0)),
         "deck_kind": str(rng.choice(["sine", "narrowband"])),
