@@ -11,7 +11,7 @@ from tests.test_hsi import _crowd
 from tests.walks import simulated_walk
 from workbench.cli import main
 from workbench.records.io import save_record
-from workbench.wording import count, join_words, p_value, parameter_words, verb
+from workbench.wording import count, join_words, p_value, parameter_words, signed, verb
 
 
 def test_parameters_are_named_in_words():
@@ -41,6 +41,13 @@ def walk_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("diag") / "walk.csv"
     save_record(simulated_walk(4, 12.0).record, path)
     return path
+
+
+def test_a_signed_value_below_the_printed_precision_has_one_sign():
+    # A score of -4e-7 and one of +4e-7 are the same printed number on every machine.
+    assert signed(-4e-7) == signed(4e-7) == signed(0.0) == signed(-0.0) == "+0.000"
+    assert signed(-0.0123) == "-0.012" and signed(0.0126) == "+0.013"
+    assert signed(-0.04, 1) == "+0.0" and signed(1.25, 1) == "+1.2"
 
 
 def test_diagnose_names_the_record_and_ranks_candidates_by_score(walk_csv, capsys):

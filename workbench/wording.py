@@ -10,7 +10,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-__all__ = ["count", "join_words", "p_value", "parameter_words", "parameters_in_words", "verb"]
+__all__ = [
+    "count",
+    "join_words",
+    "p_value",
+    "parameter_words",
+    "parameters_in_words",
+    "signed",
+    "verb",
+]
 
 #: The field's words for each parameter key of the results.
 PARAMETER_WORDS = {
@@ -63,3 +71,12 @@ def p_value(p: float, digits: int = 3) -> str:
     if p < SMALLEST_P:
         return f"< {SMALLEST_P:.0e}"
     return f"{p:.{digits}g}"
+
+
+def signed(x: float, decimals: int = 3) -> str:
+    """Write ``x`` with its sign in ``decimals`` decimals; a value that rounds to zero is ``+0``.
+
+    A score of -4e-7 is written ``+0.000``, not ``-0.000``: the sign of a value below the
+    printed precision follows the last bits of the arithmetic, which differ between machines.
+    """
+    return f"{round(float(x), decimals) + 0.0:+.{decimals}f}"

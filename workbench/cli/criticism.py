@@ -16,7 +16,7 @@ from workbench.cli.common import (
     surface_choice,
 )
 from workbench.errors import UsageError
-from workbench.wording import p_value
+from workbench.wording import p_value, signed
 
 __all__ = ["add_criticism_parser", "parse_effect_names"]
 
@@ -108,7 +108,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     for c in result.candidates_by_score:
         mark = "*" if c.significant else " "
         lines.append(
-            f"{mark} {c.effect:<18} score {c.score:+.3f}  drop "
+            f"{mark} {c.effect:<18} score {signed(c.score)}  drop "
             f"{100 * c.expected_error_drop:5.1f} %  {c.evidence}"
         )
     lines.append(obj["verdict"])

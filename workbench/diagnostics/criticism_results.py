@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.diagnostics.criticism_data import CriticismData
-from workbench.wording import p_value
+from workbench.wording import p_value, signed
 
 __all__ = ["Candidate", "Comparison", "Diagnosis", "ScoreRow"]
 
@@ -195,7 +195,7 @@ class Diagnosis:
         rows = [
             [
                 c.effect,
-                f"{c.score:+.3f}",
+                signed(c.score),
                 f"{c.score_se:.3f}",
                 ("yes" if c.significant else "no") if c.testable else "untestable",
                 f"{100 * c.separable_fraction:.1f} %",

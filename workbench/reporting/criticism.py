@@ -25,7 +25,7 @@ from workbench.diagnostics.criticism import (
 from workbench.records.record import Record
 from workbench.reporting.document import Report, Section, Table
 from workbench.reporting.figures import save_figure
-from workbench.wording import p_value
+from workbench.wording import p_value, signed
 
 __all__ = [
     "criticism_demo_section",
@@ -221,7 +221,7 @@ def criticism_section(diag: Diagnosis, out_dir: str | Path, key: str) -> Section
             [
                 [
                     c.effect,
-                    f"{c.score:+.3f}",
+                    signed(c.score),
                     ("yes" if c.significant else "no") if c.testable else "untestable",
                     f"{100 * c.expected_error_drop:.1f} %",
                     c.evidence,
