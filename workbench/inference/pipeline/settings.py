@@ -140,6 +140,8 @@ _METHOD_OPTION = {
     "ess_threshold": "ess_threshold",
     "force_proposal": "force_proposal",
 }
+#: The method options a particle filter's class sets defaults for (all but the count).
+_FILTER_OPTIONS = tuple(key for key in _METHOD_OPTION if key != "particles")
 
 
 @dataclass(frozen=True)
@@ -298,7 +300,7 @@ def _method_from_flat(
             f"'force_proposal' must be 'regression' or 'prior', got {flat['force_proposal']!r}",
             parameter="force_proposal",
         )
-    options = {key: flat[key] for key in ("resampling", "ess_threshold", "force_proposal")}
+    options = {key: flat[key] for key in _FILTER_OPTIONS}
     return as_method(
         name,
         n_particles=int(particles) if particles else None,
@@ -373,10 +375,8 @@ class IdentifySettings:
         method = _method_from_flat(values, given)
         carried = tuple(
             (key, values[key])
-            for key, attribute in _METHOD_OPTION.items()
-            if key != "particles"
-            and not hasattr(method, attribute)
-            and values[key] != _FLAT_DEFAULTS[key]
+            for key in _FILTER_OPTIONS
+            if not hasattr(method, _METHOD_OPTION[key]) and values[key] != _FLAT_DEFAULTS[key]
         )
         return cls(
             model=_model_from_flat(values),
@@ -458,7 +458,7 @@ class IdentifySettings:
                 # The new method takes its own defaults, except for options set away from
                 # the old method's defaults, which carry over.
                 flat["particles"] = None
-                for key in ("resampling", "ess_threshold", "force_proposal"):
+                for key in _FILTER_OPTIONS:
                     attribute = _METHOD_OPTION[key]
                     if flat[key] == getattr(type(self.method), attribute, _FLAT_DEFAULTS[key]):
                         flat[key] = None
