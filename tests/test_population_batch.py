@@ -160,6 +160,38 @@ def test_kill_and_resume_equals_uninterrupted(study, reference, tmp_path, capsys
     assert _batch(study, tmp_path, "--resume", "--particles", "40") == 2
 
 
+def test_a_run_stopped_between_a_records_two_files_keeps_every_time(
+    study, reference, tmp_path, monkeypatch, capsys
+):
+    # The kill test above lands wherever the process happens to be; this one stops the run
+    # exactly between a record's timing file and its result file, the window in which a
+    # record could once be kept as done without its time (a NaN in timings.csv).
+    import workbench.population.batch as batch_module
+
+    real_write = batch_module.atomic_write_json
+    files_written: dict[str, int] = {}
+
+    def write_then_stop(path, payload):
+        # A record writes two files of one name (its result and its time); stop after the
+        # first file of the third record identified, whichever of the two comes first.
+        if Path(path).parent.name in ("records", "timings") and payload["status"] == "done":
+            finished = sum(n == 2 for n in files_written.values())
+            if finished == 2 and files_written.get(Path(path).name) == 1:
+                raise KeyboardInterrupt
+            files_written[Path(path).name] = files_written.get(Path(path).name, 0) + 1
+        real_write(path, payload)
+
+    monkeypatch.setattr(batch_module, "atomic_write_json", write_then_stop)
+    assert _batch(study, tmp_path) == 130  # the command's exit status when interrupted
+    monkeypatch.setattr(batch_module, "atomic_write_json", real_write)
+    capsys.readouterr()
+    assert _batch(study, tmp_path, "--resume") == EXIT_RECORDS_FAILED
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["skipped"] == 2
+    ref, _ = reference
+    _assert_same_outputs(tmp_path, ref)
+
+
 def test_dask_local_cluster(study, reference, tmp_path, capsys):
     distributed = pytest.importorskip("distributed")
     with (

@@ -405,8 +405,10 @@ def run_batch(
             for res in results:
                 timing = {"path": res["path"], "status": res["status"]}
                 timing["elapsed_s"] = res.pop("elapsed_s")
-                atomic_write_json(rec_dir / f"{res['key']}.json", strict_json(res))
+                # The timing first: the record's file marks the record done, so a run killed
+                # between the two writes redoes the record instead of keeping it without its time.
                 atomic_write_json(time_dir / f"{res['key']}.json", strict_json(timing))
+                atomic_write_json(rec_dir / f"{res['key']}.json", strict_json(res))
                 done += res["status"] == "done"
                 bar.update(1)
                 if on_record is not None:
