@@ -373,6 +373,13 @@ def real(
             f"{100 * slow:.1f} % sd); baseline held-out RMSE {b['heldout_rmse_n']:.1f} N, "
             f"fit {b['fit_percent']:.1f} %"
         )
+        if rec.grf_left_n is not None and rec.grf_right_n is not None:
+            # An independent look at a left/right difference: the feet's own channels.
+            left, right = float(np.mean(rec.grf_left_n)), float(np.mean(rec.grf_right_n))
+            print(
+                f"   feet's channels: mean force left {left:.0f} N, right {right:.0f} N "
+                f"(left {100 * (left / right - 1):+.1f} % against right)"
+            )
         for c in diag.candidates:
             mark = "*" if c.significant else " "
             print(f"   {mark} {c.effect:<18} {100 * c.score:+5.1f} % +- {100 * c.score_se:.1f} %")

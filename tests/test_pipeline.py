@@ -227,11 +227,11 @@ def test_demo_writes_report(tmp_path, capsys):
     insole = res["records"][1]
     assert insole["static_balance"] == pytest.approx(1.33, abs=0.03)
     assert insole["warnings"]
-    # The rest of the chain: criticism on the whole treadmill trial (its speed changes are
-    # found, added and re-scored), sensitivity, and the population batch ending in the
-    # Table-2-style report.
+    # The rest of the chain: criticism on the whole treadmill trial (the error gathered at
+    # its heel strikes is called a heel impact, added and re-scored), sensitivity, and the
+    # population batch ending in the Table-2-style report.
     assert "Model criticism" in md and "Sensitivity" in md
-    assert "Add pacing_drift" in md
+    assert "Add heel_impact" in md
     assert "demo_criticism_scoreboard.png" in figures
     pop = res["population"]
     assert pop["failed"] == 0

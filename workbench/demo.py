@@ -5,9 +5,10 @@ The chain, on the embedded real records (treadmill and insole) and the small syn
 1. inspection: every record validated, preprocessed and split into footfall steps (GRF with
    footfalls, COM response, spectrum with pacing harmonics, instantaneous pacing);
 2. model criticism: the compare-locate-explain-extend-re-score loop on the whole treadmill
-   record (``workbench diagnose`` / ``compare``): its speed changes are found as a pacing
-   drift and a small left/right difference beyond it, both added, and the held-out error
-   falls (criticism fits regressions, not a filter, so the whole trial is cheap);
+   record (``workbench diagnose`` / ``compare``): the error its smooth force shape leaves
+   gathers at the heel strikes, a heel impact is called and added, then a small left/right
+   difference beyond it, and the held-out error falls (criticism fits regressions, not a
+   filter, so the whole trial is cheap);
 3. individual identification, as the seed's section 5.3: the embedded deck walk of the
    seed's individual identified (C and K converging as more of the record is used, the
    biomechanical force, its load factors, the identifiability sentence) and the real
@@ -168,7 +169,8 @@ def run_demo(
     stretches = _real_stretches(records)
     from workbench.reporting.criticism import criticism_demo_section
 
-    # The whole trial, not the steady stretch: its speed changes are what criticism finds.
+    # The whole trial, not the steady stretch: every step is evidence, and the baseline
+    # follows the trial's speed changes (its pace block), so they are not called as effects.
     report.add(criticism_demo_section(records["treadmill"][0], out_dir, seed))
     stages.update()
     from workbench.reporting.individual import individual_demo_section
