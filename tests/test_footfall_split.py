@@ -278,6 +278,35 @@ def test_an_unmeasured_deck_is_left_out_and_named() -> None:
     assert any(line in w and "ground_acc" in w for w in insp.warnings)
 
 
+def test_a_line_the_split_cannot_take_out_is_named(monkeypatch) -> None:
+    # Every split judged a lone line: the notched repeat is one too, so the footfalls still
+    # follow the first split, and inspect must say that its steps may be the line's.
+    import workbench.records.footfalls as footfalls
+
+    monkeypatch.setattr(footfalls, "_is_lone_line", lambda *args: True)
+    insp = inspect_record(double_hump_walk(7, 1.0))
+    assert insp.steps.lone_line_hz is None
+    assert insp.steps.unremoved_line_hz == pytest.approx(insp.pacing.pacing_hz, rel=0.1)
+    assert insp.to_json()["split"]["unremoved_line_hz"] == pytest.approx(
+        insp.steps.unremoved_line_hz, abs=1e-4
+    )
+    assert any("could not be taken out" in w for w in insp.warnings)
+
+
+def test_template_alignment_takes_candidates_up_to_a_step_past_either_end() -> None:
+    # Candidates are clipped to one step beyond the record; at the upper clip the wide
+    # correlation window once read one sample past its padding (an IndexError).
+    from workbench.records.footfalls import _SAMPLES_PER_STEP, _align_to_template
+
+    per_step = _SAMPLES_PER_STEP
+    shape = np.sin(2 * np.pi * np.arange(20 * per_step) / per_step)
+    peaks = np.arange(per_step // 4, shape.size, per_step)
+    for extra in (shape.size + per_step, shape.size + 3 * per_step, -3 * per_step):
+        positions, match = _align_to_template(shape, np.append(peaks, extra))
+        assert positions.shape == match.shape == (peaks.size + 1,)
+        assert np.all(np.isfinite(positions))
+
+
 @pytest.mark.parametrize("seed", [300, 301])
 def test_overground_and_speed_change_walks(seed: int) -> None:
     # Double-humped steps (humps 0.9 and 1.1) on an overground walk from standing to

@@ -359,11 +359,6 @@ def test_small_recovery_on_decks_recovers_the_seed_law(tmp_path):
     for law, pars in (("blf1", ("slope", "intercept")), ("blf2", ("mu", "sigma"))):
         assert set(obj["verdict"]["pipeline"][law]) == set(pars), law
         assert fit["laws" if law == "blf1" else "lognormal"][law]["n"] == fit["records_used"]
-    print(
-        json.dumps(
-            {w: {k: obj["verdict"][w][k] for k in ("blf1", "blf2", "blf3")} for w in obj["verdict"]}
-        )
-    )
     # Written atomically, and a resumed run identifies nothing again and gives the same.
     stored = json.loads((tmp_path / "r" / "recovery.json").read_text())
     assert stored["verdict"] == obj["verdict"]

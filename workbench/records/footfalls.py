@@ -11,6 +11,7 @@ and the boundary times are mapped back to sample indices.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -153,30 +154,30 @@ def _detect_in_phase(
     # within 0.3 step), and the boundary is the peak of that median step's pacing component.
     # Both humps of a double-humped step take part in the match, so the boundary keeps the
     # same gait event whichever hump is higher in a given step.
-    refined, height = _align_to_template(shape, peaks)
+    refined, match = _align_to_template(shape, peaks)
     refined = grid[0] + refined / _SAMPLES_PER_STEP
 
     # Spurious double peaks: while two footfalls are closer than 0.6 step, drop the one
     # that matches the median step worse.
     order = np.argsort(refined)
-    refined, height = refined[order], height[order]
+    refined, match = refined[order], match[order]
     while refined.size > 1:
         gaps = np.diff(refined)
         k = int(np.argmin(gaps))
         if gaps[k] >= _MIN_INTERVAL_STEPS:
             break
-        drop = k if height[k] < height[k + 1] else k + 1
+        drop = k if match[k] < match[k + 1] else k + 1
         refined = np.delete(refined, drop)
-        height = np.delete(height, drop)
+        match = np.delete(match, drop)
     inside = (refined >= _EDGE_GUARD_STEPS) & (refined <= total_steps - _EDGE_GUARD_STEPS)
-    refined, height = refined[inside], height[inside]
+    refined, match = refined[inside], match[inside]
     # Standing before the first step or after the last: a boundary whose step looks little
     # like the walker's (the window runs into quiet standing) is not the same event.
     first = 0
-    while first < refined.size and height[first] < _MIN_EDGE_MATCH:
+    while first < refined.size and match[first] < _MIN_EDGE_MATCH:
         first += 1
     last = refined.size
-    while last > first and height[last - 1] < _MIN_EDGE_MATCH:
+    while last > first and match[last - 1] < _MIN_EDGE_MATCH:
         last -= 1
     return np.interp(refined[first:last], phase, time_s)
 
@@ -202,7 +203,9 @@ def _align_to_template(shape: FloatArray, peaks: IntArray) -> tuple[FloatArray, 
     per_step = _SAMPLES_PER_STEP
     half = round(_TEMPLATE_HALF_WINDOW_STEPS * per_step)
     shift = round(_TEMPLATE_MAX_SHIFT_STEPS * per_step)
-    pad = half + shift + per_step
+    # Candidates are clipped to one step beyond either end, and the wide window reaches
+    # ``half + shift`` beyond that, inclusive: one sample more than that on each side.
+    pad = half + shift + per_step + 1
     padded = np.pad(shape, pad, mode="edge")
     window = np.arange(-half, half + 1)
     lags = np.arange(-shift, shift + 1)
@@ -289,7 +292,22 @@ def locate_footfalls(
     out (zero-phase band-stop of +-8 % around it) and the split repeated; the repeat is kept
     when its steps are not a lone line either.
     """
-    return _locate(acc, sample_rate_hz, pacing_hz, surface_acc, place_on_cleaned)[0]
+    return _locate(acc, sample_rate_hz, pacing_hz, surface_acc, place_on_cleaned).times_s
+
+
+@dataclass(frozen=True)
+class _Located:
+    """Footfalls and what the lone-line check did on the way (see :func:`locate_footfalls`).
+
+    ``notched_line_hz`` is a lone line that was notched out before the footfalls were found;
+    ``unremoved_line_hz`` a lone line the footfalls still follow because it could not be
+    taken out (its notch would reach the Nyquist frequency, or without it no walk is left).
+    At most one of the two is set.
+    """
+
+    times_s: FloatArray
+    notched_line_hz: float | None = None
+    unremoved_line_hz: float | None = None
 
 
 def _locate(
@@ -298,28 +316,28 @@ def _locate(
     pacing_hz: float | None,
     surface_acc: FloatArray | None,
     place_on_cleaned: bool = True,
-) -> tuple[FloatArray, float | None]:
-    """:func:`locate_footfalls`, and the frequency of a lone line it notched out (or None)."""
+) -> _Located:
+    """:func:`locate_footfalls`, and what its lone-line check found (:class:`_Located`)."""
     n = acc.size
     band = _search_band(pacing_hz)
     if n < 4 or n / sample_rate_hz < 2.0 / band[0]:
-        return np.empty(0), None
+        return _Located(np.empty(0))
     detect = acc if surface_acc is None else without_surface(acc, surface_acc, sample_rate_hz)
     place = detect if place_on_cleaned else acc
     times = _split(detect, place, sample_rate_hz, band)
     if times.size < _TEMPLATE_MIN_STEPS + 1:
-        return times, None
+        return _Located(times)
     if not _is_lone_line(place, sample_rate_hz, times):
-        return times, None
+        return _Located(times)
     line_hz = _line_near(detect, sample_rate_hz, float(np.median(_stride_pacing(np.diff(times)))))
     if line_hz * (1.0 + _NOTCH_HALF_WIDTH) >= 0.5 * sample_rate_hz:
-        return times, None
+        return _Located(times, unremoved_line_hz=line_hz)
     detect_n = notch(detect, sample_rate_hz, line_hz)
     place_n = detect_n if place is detect else notch(place, sample_rate_hz, line_hz)
     again = _split(detect_n, place_n, sample_rate_hz, band)
     if again.size >= _TEMPLATE_MIN_STEPS + 1 and not _is_lone_line(place_n, sample_rate_hz, again):
-        return again, line_hz
-    return times, None
+        return _Located(again, notched_line_hz=line_hz)
+    return _Located(times, unremoved_line_hz=line_hz)
 
 
 def _is_lone_line(acc: FloatArray, sample_rate_hz: float, times_s: FloatArray) -> bool:

@@ -225,6 +225,15 @@ def inspect_record(
             "its acceleration (a ground_acc column) so that its response is taken out "
             "exactly."
         )
+    if steps.unremoved_line_hz is not None:
+        warnings.append(
+            f"{record.name}: the footfalls follow a strong line at "
+            f"{steps.unremoved_line_hz:.3f} Hz with no step shape behind it, and it could not "
+            "be taken out (without it no walk is left, or its notch would reach half the "
+            "sample rate), so the steps and the pacing may be the line's, not the walk's; "
+            "check that the record holds walking, and if the floor moved, give its "
+            "acceleration (a ground_acc column)."
+        )
     split = check_split(steps)
     off_rhythm = split.warning(steps, record.name)
     if off_rhythm is not None:

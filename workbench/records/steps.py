@@ -109,6 +109,10 @@ class Steps:
         is not in the record, a machine) that the split first followed and then notched
         out (:func:`~workbench.records.footfalls.locate_footfalls`); None when there was
         none.
+    unremoved_line_hz : float or None
+        Such a line that the footfalls still follow because it could not be taken out (its
+        notch would reach the Nyquist frequency, or without it no walk is left): the steps
+        and pacing may be the line's, not the walk's. None when there was none.
     """
 
     boundaries: IntArray
@@ -117,6 +121,7 @@ class Steps:
     sample_rate_hz: float
     source: str = "<memory>"
     lone_line_hz: float | None = None
+    unremoved_line_hz: float | None = None
 
     def __post_init__(self) -> None:
         boundaries = np.array(self.boundaries, dtype=np.intp)
@@ -229,7 +234,8 @@ def segment_steps(
     acc = np.asarray(com.acc_m_s2, dtype=np.float64)
     fs = com.sample_rate_hz
     surface = None if surface_acc_m_s2 is None else np.asarray(surface_acc_m_s2, dtype=np.float64)
-    times, lone_line_hz = _locate(acc, fs, pacing_hz, surface)
+    located = _locate(acc, fs, pacing_hz, surface)
+    times = located.times_s
     indices = np.clip(np.rint(times * fs).astype(np.intp), 0, max(acc.size - 1, 0))
     _, first = np.unique(indices, return_index=True)
     indices, times = indices[first], times[first]
@@ -253,13 +259,18 @@ def segment_steps(
         durations_s=np.diff(footfall_times),
         sample_rate_hz=fs,
         source=com.source,
-        lone_line_hz=lone_line_hz,
+        lone_line_hz=located.notched_line_hz,
+        unremoved_line_hz=located.unremoved_line_hz,
     )
 
 
 # ======================================================================================
 # consistency of the split
 # ======================================================================================
+
+
+def _rounded(line_hz: float | None) -> float | None:
+    return None if line_hz is None else round(line_hz, 4)
 
 
 @dataclass(frozen=True)
@@ -312,7 +323,8 @@ class SplitCheck:
             else None,
             "phase_tolerance_steps": OFF_RHYTHM_PHASE_STEPS,
             "duration_band": list(OFF_RHYTHM_DURATION),
-            "lone_line_hz": None if steps.lone_line_hz is None else round(steps.lone_line_hz, 4),
+            "lone_line_hz": _rounded(steps.lone_line_hz),
+            "unremoved_line_hz": _rounded(steps.unremoved_line_hz),
         }
 
     def warning(self, steps: Steps, name: str) -> str | None:

@@ -32,7 +32,12 @@ from workbench.errors import UsageError
 from workbench.inference.core.problem import IdentificationProblem
 from workbench.records.record import G_M_S2
 
-__all__ = ["LoadFactorPosterior", "mix_load_factors", "realised_load_factors"]
+__all__ = [
+    "LoadFactorPosterior",
+    "coefficient_load_factors",
+    "mix_load_factors",
+    "realised_load_factors",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -62,6 +67,20 @@ class LoadFactorPosterior:
     piece: FloatArray
     points: int
     mixed_over: str
+
+
+def coefficient_load_factors(coefficients: ArrayLike, mass_kg: float, harmonics: int) -> FloatArray:
+    """``BLF_i = |a_i + j b_i| / (M g)`` of force coefficients, along their last axis.
+
+    ``coefficients`` has the columns ``a0, a1, b1, ..., an, bn`` (then any effect columns,
+    ignored); the result has ``n`` = ``harmonics`` columns.
+    """
+    c = np.asarray(coefficients, dtype=np.float64)
+    n = int(harmonics)
+    return np.asarray(
+        np.hypot(c[..., 1 : 2 * n : 2], c[..., 2 : 2 * n + 1 : 2]) / (float(mass_kg) * G_M_S2),
+        dtype=np.float64,
+    )
 
 
 def mix_load_factors(
@@ -155,5 +174,5 @@ def realised_load_factors(problem: IdentificationProblem, force_n: ArrayLike) ->
     for p in range(problem.n_pieces):
         rows = slice(int(starts[p]), int(starts[p + 1]))
         theta = np.linalg.lstsq(problem.basis[rows, :m], f[rows], rcond=None)[0]
-        out[p] = np.hypot(theta[1::2], theta[2::2]) / (problem.mass_kg * G_M_S2)
+        out[p] = coefficient_load_factors(theta, problem.mass_kg, problem.harmonics)
     return out

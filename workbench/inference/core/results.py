@@ -32,7 +32,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from workbench.fileutil import atomic_path
-from workbench.inference.core.load_factors import LoadFactorPosterior
+from workbench.inference.core.load_factors import LoadFactorPosterior, coefficient_load_factors
 from workbench.inference.core.problem import IdentificationProblem
 from workbench.inference.core.result_parts import (
     EffectPosterior,
@@ -392,9 +392,9 @@ class IdentificationResult:
         """BLF_i of every piece, shape (P, n): mixed over (C, K) where the result has them."""
         if self.load_factors is not None:
             return self.load_factors.piece
-        coef = self.piece_coefficients_mean[:, : 2 * self.problem.harmonics + 1]
-        a, b = coef[:, 1::2], coef[:, 2::2]
-        return np.sqrt(a**2 + b**2) / (self.mass_kg * G_M_S2)
+        return coefficient_load_factors(
+            self.piece_coefficients_mean, self.mass_kg, self.problem.harmonics
+        )
 
     @property
     def blf(self) -> FloatArray:

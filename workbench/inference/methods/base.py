@@ -334,6 +334,18 @@ def _filter_result(
     )
 
 
+def posterior_subsample(weights: FloatArray, seed: int) -> NDArray[np.intp]:
+    """Draw :data:`CORRELATION_DRAWS` indices from a weighted cloud, with replacement.
+
+    The draws at which the load factors are mixed and the force correlation is graded;
+    seeded, so that a result does not depend on anything but the settings' seed.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    rng = np.random.default_rng(seed)
+    return rng.choice(w.size, size=min(CORRELATION_DRAWS, w.size), p=w)
+
+
 def load_factors_at_draws(
     problem: IdentificationProblem, damping: FloatArray, stiffness: FloatArray
 ) -> tuple[LoadFactorPosterior, FloatArray, FloatArray]:
@@ -370,8 +382,7 @@ def _filter_posterior_checks(
     cov = (dev * w[:, None]).T @ dev
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = float(cov[0, 1] / (sd[0] * sd[1])) if np.all(sd > 0) else float("nan")
-    rng = np.random.default_rng(seed)
-    idx = rng.choice(draws.shape[0], size=min(CORRELATION_DRAWS, draws.shape[0]), p=w)
+    idx = posterior_subsample(w, seed)
     load_factors, theta_mean, theta_var = load_factors_at_draws(
         problem, draws[idx, 0], draws[idx, 1]
     )

@@ -477,11 +477,9 @@ def run_route(
     if result.load_factors is None:
         # A registered method that does not mix its load factors over its (C, K) posterior:
         # mixed here over its draws, so its BLF bands leave out C and K no more than ours.
-        from workbench.inference.methods.base import CORRELATION_DRAWS, load_factors_at_draws
+        from workbench.inference.methods.base import load_factors_at_draws, posterior_subsample
 
-        rng = np.random.default_rng(settings.seed)
-        w = result.weights / result.weights.sum()
-        idx = rng.choice(w.size, size=min(CORRELATION_DRAWS, w.size), p=w)
+        idx = posterior_subsample(result.weights, settings.seed)
         draws = result.draws
         result = result.replace(
             load_factors=load_factors_at_draws(problem, draws[idx, 0], draws[idx, 1])[0]
