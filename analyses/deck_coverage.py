@@ -7,7 +7,7 @@ The walks are ``deck_walk`` seeds 0-39 (fixed before any result was seen): masse
 f_n 1.8-3.4 Hz, zeta 0.2-0.5, sine or narrow-band decks of 0.05-1 m/s^2 RMS at 1.5-4 Hz,
 20-60 s at 100-500 Hz, step-to-step variability as the generator draws it. Each is
 identified with the default settings (surface coupled: C and K from the transmissibility)
-and with ``surface="rigid"`` (the surface ignored, the default RBPF and force-model check).
+and with ``surface="rigid"`` (the surface ignored, the default method and force-model check).
 One row per walk and surface model goes to the CSV (the script resumes from it); the summary
 printed at the end is quoted in docs/validation/deck.md.
 """
