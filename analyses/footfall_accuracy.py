@@ -236,6 +236,7 @@ def measure(record: Any) -> dict[str, Any]:
         "richness": richness(insp),
         "locking": locking(insp),
         "warnings": len(insp.warnings),
+        "octave_warning": any("fast for walking" in w for w in insp.warnings),
     }
 
 
@@ -317,6 +318,15 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"{inside} of {len(steady)} (p10 lowest {100 * p10.min():+.1f} %, p90 highest "
             f"{100 * p90.max():+.1f} %); 'pacing varies' on {sum(r['varies'] for r in steady)}"
         )
+    # An octave error: the pacing found at about twice (or half) the true pacing.
+    octave = [r for r in ok if abs(np.log2(r["pacing_hz"] / r["true_pacing_hz"])) > 0.5]
+    named = sum(r["octave_warning"] for r in octave)
+    false_alarms = sum(r["octave_warning"] for r in ok) - named
+    print(
+        f"pacing an octave off: {len(octave)} of {len(ok)} walks, named by inspect's "
+        f"'fast for walking' warning in {named}; the warning on walks at the right octave: "
+        f"{false_alarms}"
+    )
     decks = [r for r in ok if r["deck"]]
     on_deck = sum(
         abs(r["pacing_hz"] - r["deck_frequency_hz"]) < 0.03 * r["deck_frequency_hz"]

@@ -278,6 +278,30 @@ def test_an_unmeasured_deck_is_left_out_and_named() -> None:
     assert any(line in w and "ground_acc" in w for w in insp.warnings)
 
 
+def test_a_pacing_found_an_octave_high_is_named() -> None:
+    # A slow walker (1.545 Hz) whose natural frequency is about twice the pacing: its GRF's
+    # second harmonic outweighs the first, and with no pacing stated the spectrum cannot
+    # tell this walk from one at twice the pace (the parameters of analyses/
+    # footfall_accuracy.py's walk 54). inspect must say so and name the likely pacing;
+    # stated, the pacing is right and nothing is said.
+    walk = simulate_walking(
+        mass_kg=79.94, pacing_hz=1.545, duration_s=52.0, natural_frequency_hz=3.227,
+        damping_ratio=0.245, coefficients=double_hump_force(79.94, 1.178, peak_fraction=0.226),
+        step_duration_sd=0.015, amplitude_sd=0.02, phase_sd_rad=0.044, noise_sd_n=1.6,
+        sample_rate_hz=100.0, start="steady", seed=54,
+    ).record  # fmt: skip
+    unstated = inspect_record(walk.replace(pacing_hz=None))
+    assert unstated.pacing.pacing_hz == pytest.approx(2 * 1.545, rel=0.03)
+    octave = [w for w in unstated.warnings if "fast for walking" in w]
+    assert len(octave) == 1 and "--pacing 1.5" in octave[0]
+    stated = inspect_record(walk)
+    assert stated.pacing.pacing_hz == pytest.approx(1.545, rel=0.01)
+    assert not any("fast for walking" in w for w in stated.warnings)
+    # An ordinary walk at 1.85 Hz, pacing not stated, raises nothing of the kind.
+    plain = inspect_record(double_hump_walk(7, 1.0).replace(pacing_hz=None))
+    assert not any("fast for walking" in w for w in plain.warnings)
+
+
 def test_a_line_the_split_cannot_take_out_is_named(monkeypatch) -> None:
     # Every split judged a lone line: the notched repeat is one too, so the footfalls still
     # follow the first split, and inspect must say that its steps may be the line's.

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import InputError
+from workbench.records.pacing import FAST_WALKING_HZ
 from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ, COMResponse, preprocess
 from workbench.records.record import G_M_S2, Record
 from workbench.records.steps import (
@@ -224,6 +225,15 @@ def inspect_record(
             "is not in the record, or a machine, makes such a line. If the floor moved, give "
             "its acceleration (a ground_acc column) so that its response is taken out "
             "exactly."
+        )
+    if record.pacing_hz is None and pacing.pacing_hz > FAST_WALKING_HZ:
+        half = pacing.pacing_hz / 2.0
+        warnings.append(
+            f"{record.name}: the pacing found, {pacing.pacing_hz:.2f} Hz, is fast for walking; "
+            "when the GRF's second harmonic outweighs the first (a walker whose natural "
+            "frequency is near twice the pacing), the pacing is found an octave high. If the "
+            f"walker paced at about {half:.2f} Hz, state it (--pacing {half:.2f}, or pacing_hz "
+            "in the record's JSON sidecar)."
         )
     if steps.unremoved_line_hz is not None:
         warnings.append(

@@ -24,6 +24,11 @@ FloatArray = NDArray[np.float64]
 
 #: Pacing (step) frequencies searched in spectra [Hz]: slow walking to brisk walking.
 WALKING_BAND_HZ = (1.0, 3.2)
+# A pacing found above this, with none stated, is more likely the second harmonic of a slow
+# walk than a walk: normal walking paces at about N(1.99, 0.17) Hz (Matsumoto), so 2.5 Hz
+# is three sd above the mean, while a walker whose natural frequency is near twice the
+# pacing has a GRF whose second harmonic can outweigh the first.
+FAST_WALKING_HZ = 2.5
 
 # --- pacing track (sliding spectra) ---------------------------------------------------
 # 8 s holds at least 8 steps at the slowest pacing, enough to resolve the pacing to a few
