@@ -36,11 +36,9 @@ from typing import Any
 import numpy as np
 
 from workbench.diagnostics.criticism import diagnose, prepare
-from workbench.synth import simulate_walking
-from workbench.synth.gait import double_hump_force
 
 sys.path.insert(0, str(Path(__file__).parent))
-from footfall_accuracy import draw_walker  # the study's ranges, shared
+from footfall_accuracy import draw_walker, simulate_drawn_walker  # the study's ranges
 
 FIELDS = (
     "seed",
@@ -58,24 +56,7 @@ def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
     """Simulate walk ``seed``; returns the record and what was drawn."""
     rng = np.random.default_rng([seed, 0xD1A6])
     d = draw_walker(rng)
-    sim = simulate_walking(
-        mass_kg=d["mass_kg"],
-        pacing_hz=d["pacing_hz"],
-        duration_s=d["duration_s"],
-        natural_frequency_hz=d["natural_frequency_hz"],
-        damping_ratio=d["damping_ratio"],
-        coefficients=double_hump_force(
-            d["mass_kg"], d["hump_ratio"], peak_fraction=d["peak_fraction"]
-        ),
-        step_duration_sd=d["step_duration_sd"],
-        amplitude_sd=d["amplitude_sd"],
-        phase_sd_rad=d["phase_sd_rad"],
-        noise_sd_n=d["noise_sd_n"],
-        sample_rate_hz=d["sample_rate_hz"],
-        start="steady",
-        seed=seed,
-    )
-    return sim.record, d
+    return simulate_drawn_walker(d, d["duration_s"], seed), d
 
 
 def measure(seed: int) -> dict[str, Any]:

@@ -128,10 +128,22 @@ def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
                 seed=seed,
                 period_s=round(duration * d["sample_rate_hz"]) / d["sample_rate_hz"],
             )
-    sim = simulate_walking(
+    return simulate_drawn_walker(d, duration, seed, ground, kind, gait), d
+
+
+def simulate_drawn_walker(
+    d: dict[str, Any],
+    duration_s: float,
+    seed: int,
+    ground: Any = None,
+    kind: str = "steady",
+    gait: GaitProfile | None = None,
+) -> Any:
+    """Simulate the walker ``d`` (from :func:`draw_walker`) and return its record."""
+    return simulate_walking(
         mass_kg=d["mass_kg"],
         pacing_hz=d["pacing_hz"],
-        duration_s=duration,
+        duration_s=duration_s,
         natural_frequency_hz=d["natural_frequency_hz"],
         damping_ratio=d["damping_ratio"],
         coefficients=double_hump_force(
@@ -146,8 +158,7 @@ def draw_walk(seed: int) -> tuple[Any, dict[str, Any]]:
         start="rest" if kind == "overground" else "steady",
         seed=seed,
         gait=gait,
-    )
-    return sim.record, d
+    ).record
 
 
 def true_events(truth: dict[str, Any]) -> tuple[float, float]:
