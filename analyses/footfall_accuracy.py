@@ -478,38 +478,41 @@ def replays() -> None:
             )
 
 
-def _line_locking(insp: Any, line_hz: float) -> float:
-    """Harmonic locking of steps cut at a line's period (the split a lone line gives)."""
+def _lone_line_statistic(insp: Any, name: str, line_hz: float | None = None) -> float:
+    """Evaluate a statistic of the split's lone-line check on an inspected record.
+
+    ``name`` is ``step_shape_richness`` or ``step_harmonic_locking`` of
+    :mod:`workbench.records.footfalls`, evaluated on the acceleration without the deck's
+    response, at the record's footfalls or, with ``line_hz``, at that line's period (the
+    split a lone line gives). NaN with a workbench that has no such check (the split before
+    it), so that the study also measures that one.
+    """
     try:
-        from workbench.records.footfalls import step_harmonic_locking, without_surface
+        from workbench.records import footfalls
     except ImportError:
         return float("nan")
-
+    statistic = getattr(footfalls, name, None)
+    if statistic is None:
+        return float("nan")
     acc = np.asarray(insp.com.acc_m_s2)
     fs = insp.com.sample_rate_hz
     if insp.record.ground_acc_m_s2 is not None:
-        acc = without_surface(acc, insp.record.ground_acc_m_s2, fs)
-    cycles = np.arange(0.5, acc.size / fs - 0.5, 1.0 / line_hz)
-    return step_harmonic_locking(acc, fs, cycles)
+        acc = footfalls.without_surface(acc, insp.record.ground_acc_m_s2, fs)
+    if line_hz is None:
+        times = np.asarray(insp.steps.footfall_times_s) - float(insp.record.time_s[0])
+    else:
+        times = np.arange(0.5, acc.size / fs - 0.5, 1.0 / line_hz)
+    return float(statistic(acc, fs, times))
+
+
+def _line_locking(insp: Any, line_hz: float) -> float:
+    """Harmonic locking of steps cut at a line's period (the split a lone line gives)."""
+    return _lone_line_statistic(insp, "step_harmonic_locking", line_hz)
 
 
 def richness(insp: Any) -> float:
-    """Share of the median step's power above its first harmonic (the lone-line check).
-
-    NaN with a workbench that has no such check (the split before it), so that the study
-    also measures that one.
-    """
-    try:
-        from workbench.records.footfalls import step_shape_richness, without_surface
-    except ImportError:
-        return float("nan")
-
-    acc = np.asarray(insp.com.acc_m_s2)
-    if insp.record.ground_acc_m_s2 is not None:
-        acc = without_surface(acc, insp.record.ground_acc_m_s2, insp.com.sample_rate_hz)
-    t0 = float(insp.record.time_s[0])
-    times = np.asarray(insp.steps.footfall_times_s) - t0
-    return step_shape_richness(acc, insp.com.sample_rate_hz, times)
+    """Share of the median step's power above its first harmonic (the lone-line check)."""
+    return _lone_line_statistic(insp, "step_shape_richness")
 
 
 def _off_rhythm(insp: Any) -> str:
@@ -579,20 +582,8 @@ def _lowest(values: list[float]) -> str:
 
 
 def locking(insp: Any) -> float:
-    """Whether the split's harmonics 2-6 repeat from step to step (the lone-line check).
-
-    NaN with a workbench that has no such check.
-    """
-    try:
-        from workbench.records.footfalls import step_harmonic_locking, without_surface
-    except ImportError:
-        return float("nan")
-
-    acc = np.asarray(insp.com.acc_m_s2)
-    if insp.record.ground_acc_m_s2 is not None:
-        acc = without_surface(acc, insp.record.ground_acc_m_s2, insp.com.sample_rate_hz)
-    times = np.asarray(insp.steps.footfall_times_s) - float(insp.record.time_s[0])
-    return step_harmonic_locking(acc, insp.com.sample_rate_hz, times)
+    """Whether the split's harmonics 2-6 repeat from step to step (the lone-line check)."""
+    return _lone_line_statistic(insp, "step_harmonic_locking")
 
 
 def main(argv: list[str] | None = None) -> int:
