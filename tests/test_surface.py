@@ -17,7 +17,11 @@ from workbench.inference.core.problem import ForcePrior, build_problem
 from workbench.inference.kalman import filter as kf
 from workbench.inference.pipeline import IdentifySettings, gather_evidence, grade_identifiability
 from workbench.inference.pipeline.grading import CHECK_OFF
-from workbench.inference.surface.frf import deck_spectra, surface_transmissibility
+from workbench.inference.surface.frf import (
+    MARGIN_BINS,
+    deck_spectra,
+    surface_transmissibility,
+)
 from workbench.records.inspection import inspect_record
 from workbench.records.io import save_record
 from workbench.records.preprocess import preprocess
@@ -185,7 +189,10 @@ def test_transmissibility_recovers_c_and_k_from_the_deck_alone(periodic_deck_wal
     # Informative, not the prior box's spread: a 0.5 m/s^2 deck fixes f_n to about 1 %.
     assert frf.posterior_sd["natural_frequency_hz"] < 0.02 * FN
     assert frf.posterior_sd["damping_ratio"] < 0.1 * ZETA
-    assert np.all(np.abs(frf.frequency_hz - DECK_HZ) < 0.2)
+    # The deck's main lobe (four bins each side of its line) and the neighbours the taper
+    # correlates with it (MARGIN_BINS), nothing further.
+    bin_hz = float(np.min(np.diff(frf.frequency_hz)))
+    assert np.all(np.abs(frf.frequency_hz - DECK_HZ) < (5 + MARGIN_BINS) * bin_hz)
     rigid = build_problem(insp.com, insp.steps)
     assert surface_transmissibility(rigid) is None
 
@@ -211,12 +218,16 @@ def test_the_deck_driven_spectrum_is_exact_for_an_analytic_response(periodic_dec
     analytic = dataclasses.replace(problem, surface=surface, y=y)
     spectra = deck_spectra(analytic)
     assert spectra is not None and spectra.frequency_hz.size >= 6
-    model = spectra.deck_driven(c, k)[0]
-    err = np.abs(model - spectra.body) / np.abs(spectra.body)
+    # The bins the deck drives (the neighbours the likelihood adds hold only leakage).
+    driven = spectra.deck_power > 1e-3 * spectra.deck_power.max()
+    assert driven.sum() >= 6
+    model = spectra.deck_driven(c, k)[0][driven]
+    body = spectra.body[driven]
+    err = np.abs(model - body) / np.abs(body)
     assert np.max(err) < 0.01, err
     # A 5 % change of K moves the prediction by far more than that error.
-    moved = spectra.deck_driven(c, 1.05 * k)[0]
-    assert np.max(np.abs(moved - spectra.body) / np.abs(spectra.body)) > 5 * np.max(err)
+    moved = spectra.deck_driven(c, 1.05 * k)[0][driven]
+    assert np.max(np.abs(moved - body) / np.abs(body)) > 5 * np.max(err)
 
 
 @pytest.mark.slow
@@ -283,8 +294,9 @@ def test_the_default_reads_c_and_k_from_the_transmissibility():
 
 
 def test_the_advice_on_more_vibration_follows_the_deck_information_scaling():
-    """The sentence's advice assumes sd(f_n) ~ 1 / RMS; a deck four times stronger on the
-    same walk (seeds 0-2, stated in advance) cuts the sd about fourfold."""
+    """The sentence's advice assumes sd(f_n) ~ 1 / (RMS sqrt(length)), the bound's scaling; a
+    deck four times stronger on the same walk (seeds 0-2, stated in advance) cuts the sd
+    about fourfold (docs/validation/deck-information.md measures the length)."""
     from workbench.inference.surface.information import enough_vibration
 
     walker = {
@@ -308,9 +320,13 @@ def test_the_advice_on_more_vibration_follows_the_deck_information_scaling():
             sds.append(frf.posterior_sd["natural_frequency_hz"])
         ratios.append(sds[0] / sds[1])
     assert 2.5 < float(np.median(ratios)) < 6.0, ratios
-    assert enough_vibration(0.3, 0.02, "well identified") == "."
-    assert "about 0.4 m/s^2 RMS" in enough_vibration(0.1, 0.12, "weakly identified")
-    assert "at least 0.19 m/s^2" in enough_vibration(0.02, 0.28, "mostly prior")
+    assert enough_vibration(0.3, 0.02, "well identified", 0.018, 30.0) == "."
+    # sd 12 % at 0.1 m/s^2 over 30 s: four times the deck, or sixteen times the record.
+    advice = enough_vibration(0.1, 0.12, "weakly identified", 0.10, 30.0)
+    assert "about 0.4 m/s^2 RMS" in advice and "about 16 times as long" in advice
+    assert "(about 480 s of steady walking)" in advice
+    # A posterior narrowed below the bound by the prior box: the bound sets the advice.
+    assert "at least 0.4 m/s^2" in enough_vibration(0.02, 0.28, "mostly prior", 0.6, 20.0)
 
 
 def test_base_motion_is_not_counted_twice(periodic_deck_walk):

@@ -35,7 +35,8 @@ from numpy.typing import NDArray
 
 from workbench.inference.core import IdentificationProblem, SurfaceReport
 from workbench.inference.kalman import record_loglik
-from workbench.inference.surface.frf import surface_transmissibility
+from workbench.inference.surface.bound import PARAMETERS, information_bound, local_sd
+from workbench.inference.surface.frf import deck_spectra, surface_transmissibility
 from workbench.records.record import Record
 
 if TYPE_CHECKING:
@@ -50,7 +51,6 @@ STEP_SD = 0.5
 #: Below this fraction of the information on C or K from the surface, the sentence says the
 #: deck carried little of it.
 LITTLE_FROM_SURFACE = 0.5
-PARAMETERS = ("damping_ns_per_m", "stiffness_n_per_m", "natural_frequency_hz", "damping_ratio")
 
 
 def rigid_floor_problem(problem: IdentificationProblem) -> IdentificationProblem:
@@ -74,23 +74,6 @@ def _information(
     h[1, 1] = (ll[1, 2] - 2 * ll[1, 1] + ll[1, 0]) / step[1] ** 2
     h[0, 1] = h[1, 0] = (ll[2, 2] - ll[2, 0] - ll[0, 2] + ll[0, 0]) / (4 * step[0] * step[1])
     return -h
-
-
-def _local_sd(info: FloatArray, centre: FloatArray, mass_kg: float) -> dict[str, float]:
-    """Local sd of C, K, f_n and zeta from an information matrix (inf where unbounded)."""
-    evals = np.linalg.eigvalsh(info)
-    if not (np.all(np.isfinite(evals)) and evals[0] > 1e-12 * max(evals[-1], 1e-300)):
-        return dict.fromkeys(PARAMETERS, float("inf"))
-    cov = np.linalg.inv(info)
-    cov = 0.5 * (cov + cov.T)
-    c, k = centre
-    fn = np.sqrt(k / mass_kg) / (2 * np.pi)
-    zeta = c / (2 * np.sqrt(k * mass_kg))
-    # Gradients of f_n and zeta with respect to (C, K).
-    jac = np.array([[0.0, fn / (2 * k)], [zeta / c, -zeta / (2 * k)]])
-    cov_fz = jac @ cov @ jac.T
-    var = [cov[0, 0], cov[1, 1], cov_fz[0, 0], cov_fz[1, 1]]
-    return {name: float(np.sqrt(max(v, 0.0))) for name, v in zip(PARAMETERS, var, strict=True)}
 
 
 def information_with_and_without(
@@ -118,9 +101,9 @@ def information_with_and_without(
     """
     centre = np.array([damping_ns_per_m, stiffness_n_per_m], dtype=np.float64)
     h = np.asarray(step, dtype=np.float64)
-    with_sd = _local_sd(_information(problem, centre, h), centre, problem.mass_kg)
+    with_sd = local_sd(_information(problem, centre, h), centre, problem.mass_kg)
     rigid = rigid_floor_problem(problem)
-    without_sd = _local_sd(_information(rigid, centre, h), centre, problem.mass_kg)
+    without_sd = local_sd(_information(rigid, centre, h), centre, problem.mass_kg)
     out: dict[str, dict[str, float]] = {}
     for name in PARAMETERS:
         a, b = with_sd[name], without_sd[name]
@@ -199,7 +182,10 @@ def surface_report(
     else:
         info = _route_information(problem, c, k, step, sd)
     if route is not None:
-        # C and K already are the transmissibility's posterior: report it, not again.
+        # C and K already are the transmissibility's posterior: report it, not again, with
+        # its information bound at the posterior mean.
+        spectra = deck_spectra(problem)
+        bound = None if spectra is None else information_bound(spectra, c, k)
         frf_json: dict[str, Any] | None = {
             "estimates": dict(est),
             "posterior_sd": dict(sd),
@@ -207,6 +193,7 @@ def surface_report(
             "level": result.identifiability.get("level"),
             "bins": route.bins,
             "band_hz": list(route.band_hz or ()),
+            "information_bound": None if bound is None else bound.to_json(sd),
         }
     else:
         frf = surface_transmissibility(problem)
@@ -215,11 +202,15 @@ def surface_report(
     if route is not None:
         level = str(result.identifiability.get("level", ""))
         lo, hi = route.band_hz or (float("nan"), float("nan"))
-        sd_rel = sd["natural_frequency_hz"] / est["natural_frequency_hz"]
+        fn = est["natural_frequency_hz"]
+        sd_rel = sd["natural_frequency_hz"] / fn
+        bound_rel = float("nan") if bound is None else bound.sd["natural_frequency_hz"] / fn
         sentence = (
             f"C and K were read from the deck's transmissibility ({route.bins} bins at "
             f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them; the posterior "
-            f"sd of f_n is {100 * sd_rel:.1f} % of it" + enough_vibration(rms, sd_rel, level)
+            f"sd of f_n is {100 * sd_rel:.1f} % of it"
+            + _against_bound(sd_rel, bound_rel)
+            + enough_vibration(rms, sd_rel, level, bound_rel, problem.n_samples * problem.dt_s)
         )
     elif frf_json is None:
         sentence = (
@@ -243,16 +234,39 @@ def surface_report(
 
 #: The posterior sd of f_n, as a fraction of f_n, that the advice on more vibration aims at.
 TARGET_SD_FN = 0.03
+#: Within this factor of the bound the sentence calls the posterior "at the bound".
+AT_BOUND = 1.25
 
 
-def enough_vibration(rms_m_s2: float, sd_fn_rel: float, level: str) -> str:
-    """Finish the route's sentence: how much deck motion would pin f_n to 3 %.
+def _against_bound(sd_rel: float, bound_rel: float) -> str:
+    """Set the posterior sd beside the record's information bound, in words."""
+    if not (np.isfinite(bound_rel) and bound_rel > 0):
+        return ", and the record's information bound could not be computed"
+    ratio = sd_rel / bound_rel
+    if ratio < 1.0 / AT_BOUND:
+        where = "below it: the prior box narrows the posterior"
+    elif ratio <= AT_BOUND:
+        where = "at it"
+    else:
+        where = f"{ratio:.2g} times it"
+    return (
+        f"; the record's information bound (the least sd any estimator can reach from what the "
+        f"deck drives, docs/science.md 6) is {100 * bound_rel:.2g} %, and the posterior is {where}"
+    )
 
-    The posterior sd of f_n falls in proportion to the deck's RMS acceleration (the
-    deck-driven response, and so each bin's signal-to-noise amplitude ratio, is proportional
-    to it), while a longer record helps much less; ``analyses/deck_information.py`` measures
-    both (docs/validation/deck-information.md). Where the prior still shapes the posterior,
-    the reported sd understates the likelihood's, and the amount is a lower bound.
+
+def enough_vibration(
+    rms_m_s2: float, sd_fn_rel: float, level: str, bound_fn_rel: float, duration_s: float
+) -> str:
+    """Finish the route's sentence: the deck motion, or the record length, that pins f_n to 3 %.
+
+    The information bound scales exactly with the deck's RMS (the deck-driven response, and
+    so its signal-to-noise ratio, is proportional to it) and with the record's length (for a
+    stationary walk the information grows in proportion to it), so the bound's sd of f_n
+    falls as ``1 / (RMS sqrt(length))``. The advice scales the larger of the posterior sd and
+    the bound: a posterior that the prior box narrows below the bound does not know more.
+    ``analyses/deck_bound.py`` measures both scalings on records whose variability is measured
+    (docs/validation/deck-information.md).
 
     Parameters
     ----------
@@ -262,6 +276,10 @@ def enough_vibration(rms_m_s2: float, sd_fn_rel: float, level: str) -> str:
         Posterior sd of f_n over f_n.
     level : str
         The identifiability level.
+    bound_fn_rel : float
+        The information bound's sd of f_n over f_n (NaN when it could not be computed).
+    duration_s : float
+        The record's length [s].
 
     Returns
     -------
@@ -271,13 +289,18 @@ def enough_vibration(rms_m_s2: float, sd_fn_rel: float, level: str) -> str:
     identified = level in ("well identified", "weakly identified")
     if identified and sd_fn_rel <= TARGET_SD_FN:
         return "."
-    needed = rms_m_s2 * max(sd_fn_rel / TARGET_SD_FN, 1.0)
-    bound = "about" if identified else "at least"
+    known = max(sd_fn_rel, bound_fn_rel) if np.isfinite(bound_fn_rel) else sd_fn_rel
+    factor = max(known / TARGET_SD_FN, 1.0)
     head = "" if identified else f"; the deck's {rms_m_s2:.3g} m/s^2 carries too little information"
+    # Where the posterior is not identified its mean, and so the bound there, is uncertain too.
+    about = "about" if identified else "at least"
+    times = f"{factor**2:.0f}" if factor**2 >= 10 else f"{factor**2:.2g}"
     return (
-        f"{head}; sd(f_n) falls in proportion to the deck's RMS, so {bound} {needed:.2g} "
-        f"m/s^2 RMS at these frequencies would bring it to {100 * TARGET_SD_FN:.0f} %, while a "
-        "longer record helps much less (docs/validation/deck-information.md)."
+        f"{head}; sd(f_n) falls in proportion to the deck's RMS and to one over the square root "
+        f"of the record's length, so {about} {rms_m_s2 * factor:.2g} m/s^2 RMS at these "
+        f"frequencies, or a record {about} {times} times as long (about "
+        f"{duration_s * factor**2:.0f} s of steady walking), would bring it to "
+        f"{100 * TARGET_SD_FN:.0f} % (docs/validation/deck-information.md)."
     )
 
 
@@ -295,7 +318,7 @@ def _route_information(
     """
     centre = np.array([damping_ns_per_m, stiffness_n_per_m], dtype=np.float64)
     rigid = rigid_floor_problem(problem)
-    without = _local_sd(_information(rigid, centre, np.asarray(step)), centre, problem.mass_kg)
+    without = local_sd(_information(rigid, centre, np.asarray(step)), centre, problem.mass_kg)
     return {
         name: {
             "local_sd_with_surface": float(posterior_sd[name]),
