@@ -378,7 +378,18 @@ def main() -> None:
         help="instead: the route and the known-noise posterior where the model is exactly "
         "true, over SEEDS noise realisations per bound",
     )
+    ap.add_argument(
+        "--level-block",
+        type=int,
+        metavar="BINS",
+        help="whitened bins sharing one level in the route's Student-t (default the route's)",
+    )
     args = ap.parse_args()
+    if args.level_block:
+        # The workers are forked from this process and inherit the setting.
+        from workbench.inference.surface import frf
+
+        frf.LEVEL_BLOCK_BINS = args.level_block
     if args.ideal:
         ideal(args.ideal)
         return

@@ -8,10 +8,13 @@ inverse Fisher information of the transmissibility's bins (:mod:`.frf`):
   Z_{j-d}`` at every bin the likelihood uses (the deck's bins and their neighbours, the gait's
   line cores excluded: there the walker's own force dwarfs the deck's);
 - the gait noise there complex normal with the variance ``s_j^2`` of a given noise spectrum
-  (the record's own estimate, or the true one a simulated or replayed record knows) and the
-  correlation the taper gives neighbouring bins;
-- Fisher information ``I = 2 Re(G^H S^-1 G)`` with ``G`` the derivatives of ``mu`` by C and K
-  and ``S`` that covariance; ``cov = I^-1``, and f_n and zeta by the delta method.
+  (the record's own estimate, or the true one a simulated or replayed record knows), the
+  correlation the taper gives neighbouring bins and the nugget;
+- Fisher information ``I = 2 Re(G^H S^-1 G)`` with ``G`` the derivatives of ``mu`` by C, K
+  and the response's common complex gain, and ``S`` that covariance; the gain's prior
+  (:data:`~.frf.CALIBRATION_SD`) added, the information left on (C, K) is the Schur
+  complement; ``cov = I^-1``, and f_n and zeta by the delta method
+  (:meth:`~.frf.DeckSpectra.information`).
 
 It is local (at one (C, K)), ignores the prior box and assumes the noise spectrum is known;
 an estimator that must also estimate it, or protect itself against it being wrong, sits a

@@ -22,27 +22,36 @@ Spectra
     assignment of a bin to an "effective" frequency is involved (that is what biased an
     earlier Welch estimate on narrow-band decks).
 Bins used
-    Where the tapered deck spectrum has at least ``POWER_FRACTION`` of its peak power, above
-    ``MIN_HZ``, and outside a guard around every gait harmonic ``k f_p`` of four bins (the
-    window's main lobe) plus ``HARMONIC_SPREAD`` times ``k f_p`` (step-to-step variation of
-    the pacing spreads the lines).
-Noise
-    The gait part of ``Y`` at a used bin is complex normal with a variance ``s_j^2`` that
-    varies smoothly with frequency. It is estimated from the residual ``Y - Yd`` at the
-    maximum-likelihood (C, K) over every bin (used or not, gait lines excluded) within
-    ``NOISE_HALF_WIDTH_HZ`` of the bin, with a degrees-of-freedom correction for the two
-    fitted parameters. The maximum likelihood itself comes from a first pass whose noise is
-    the median power of ``Y`` in bins near the used ones where the deck is quiet.
+    Every bin within ``MARGIN_BINS`` of one where the tapered deck spectrum has power (above
+    ``SIGNAL_FRACTION`` of its peak: the deck's main lobes, a narrow band's or a sweep's
+    spread), above ``MIN_HZ``, and outside the guards: around every gait harmonic ``k f_p``
+    four bins (the window's main lobe) plus ``HARMONIC_SPREAD`` times ``k f_p``, and around
+    any bin where the deck drives less than the noise but whose residual power is
+    ``LINE_EXCESS`` times the local level (a line the pacing did not predict).
+Noise (:func:`noise_model`)
+    The gait part of the tapered DFT is complex normal with, between the bins of a run of
+    adjacent used bins, the covariance ``s_j s_k (rho_{j-k} + nugget delta_jk) / (1 +
+    nugget)``: ``rho`` the correlation the taper gives locally white noise (bins up to six
+    apart share data), ``s_j^2`` a level smooth across frequency (the mean residual power at
+    a first pass's best (C, K) over the unguarded bins within ``NOISE_HALF_WIDTH_HZ``, never
+    below the mean over the ``LOCAL_BINS`` nearest on either side), and the nugget the share
+    of the noise independent from bin to bin, chosen among ``NUGGETS`` by maximum likelihood
+    on the residual. The first pass fits the strongest bins each on its own (heavy-tailed,
+    divided by the window's equivalent noise bandwidth), against the level of quiet bins
+    near them; it only has to find the mode.
 Likelihood
-    A Student-t misfit with ``STUDENT_DOF`` (4) degrees of freedom per bin,
-    ``log p = -sum_j (nu + 2) / 2 log(1 + |Y_j - Yd_j(C, K)|^2 / (s_j^2 nu / 2)) / ENBW``
-    over the used bins, divided by the window's equivalent noise bandwidth (2.0 bins)
-    because neighbouring tapered bins share the same data. The heavy tails keep a bin whose
-    noise level is underestimated -- next to a gait line, where the level changes fast --
-    from deciding the answer (a Gaussian misfit made such bins overconfident on decks near
-    the gait's harmonics). It is vectorised over (C, K) and costs microseconds per pair, so
-    the exact grid posterior
-    (:func:`workbench.inference.methods.exact.exact_posterior`) runs on it.
+    Each run's scaled residual is whitened by the banded Cholesky factor of its correlation,
+    and each whitened bin gets a Student-t scale mixture over its level (``STUDENT_DOF``
+    degrees of freedom, ``LEVEL_BLOCK_BINS`` bins per level): a level estimated low --
+    next to a gait line, or at the deck's own bins, where the noise cannot be measured --
+    is absorbed there instead of deciding the answer. The deck-driven response carries a
+    common complex gain ``1 + g``, ``g`` of ``CALIBRATION_SD``, set for each (C, K) at its
+    most likely value with its prior (a calibration mismatch between the channels, alike at
+    every bin, which many bins do not average out). It is vectorised over (C, K) and costs
+    microseconds per pair, so the exact grid posterior
+    (:func:`workbench.inference.methods.exact.exact_posterior`) runs on it, and its normal
+    version's Fisher information (:meth:`DeckSpectra.information`) is the record's
+    Cramer-Rao bound (:mod:`workbench.inference.surface.bound`).
 
 This uses only what the deck drives, so the step force cannot absorb it: on realistic walks
 it is where the surface's information on C and K is read from (docs/validation/deck.md). A
@@ -116,6 +125,14 @@ LEVEL_BLOCK_BINS = 1
 #: amplify them. At least a hundredth: the record's ends, where the taper is below about a
 #: tenth of its peak, count as independent noise, in the likelihood and in its bound alike.
 NUGGETS = (1e-2, 3e-2, 0.1, 0.3, 1.0)
+#: Standard deviation of the complex gain between the deck's channel and the body's, as a
+#: fraction: the likelihood integrates the deck-driven response's common gain and phase
+#: over it. A calibration mismatch between the deck's accelerometer and the force plate, or
+#: a simulator's time step, leaves an error in proportion to the deck's drive and the same
+#: at every bin, which on a strongly driven record outweighs the gait noise and does not
+#: average out over bins. One per cent (0.6 degrees of phase) is a calibration
+#: laboratory's tolerance.
+CALIBRATION_SD = 0.01
 #: The default nugget of :func:`correlated_runs`: it keeps a run's correlation well
 #: conditioned.
 NUGGET = 1e-4
@@ -187,7 +204,10 @@ class NoiseRun:
 
     def loglik(self, resid: NDArray[np.complex128]) -> FloatArray:
         """Return the run's log-likelihood of scaled residuals ``r`` (B, n), up to a constant."""
-        re, im = self.whiten(resid)
+        return self.loglik_whitened(*self.whiten(resid))
+
+    def loglik_whitened(self, re: FloatArray, im: FloatArray) -> FloatArray:
+        """Return the run's log-likelihood from whitened residuals (B, n), up to a constant."""
         power = re * re + im * im
         if not np.isfinite(self.dof):
             return -self.weight * np.sum(power, axis=1)
@@ -268,6 +288,9 @@ class DeckSpectra:
         Index of each used bin in the record's spectrum.
     nugget : float
         Share of the noise independent from bin to bin (:data:`NUGGETS`).
+    calibration : float
+        Standard deviation of the deck-driven response's common complex gain, integrated
+        over (:data:`CALIBRATION_SD`; 0 in the first pass).
     """
 
     mass_kg: float
@@ -280,6 +303,7 @@ class DeckSpectra:
     runs: tuple[NoiseRun, ...]
     bin_index: NDArray[np.int64]
     nugget: float
+    calibration: float = 0.0
 
     def deck_driven(self, damping: Any, stiffness: Any) -> NDArray[np.complex128]:
         """Tapered DFT of the deck-driven body acceleration at the bins, (B, J)."""
@@ -315,25 +339,61 @@ class DeckSpectra:
         bins (:mod:`workbench.inference.surface.bound`).
         """
         var = self.noise_var if noise_var is None else np.asarray(noise_var, dtype=np.float64)
-        grad = self.deck_driven_gradient(damping, stiffness) / np.sqrt(var)
-        info = np.zeros((2, 2))
+        scale = np.sqrt(var)
+        driven = self.deck_driven(damping, stiffness)[0] / scale
+        # Derivatives by C, K and the common gain's real and imaginary parts (at 1).
+        grad = np.concatenate(
+            [self.deck_driven_gradient(damping, stiffness) / scale, [driven, 1j * driven]]
+        )
+        full = np.zeros((4, 4))
         share = self.nugget if nugget is None else float(nugget)
         for run in correlated_runs(self.bin_index, float("inf"), share):
             g = grad[:, run.start : run.stop]
-            # Re(g_a^H R^-1 g_b) through the run's quadratic form (polarisation).
-            q = run.quadratic_form(np.stack([g[0], g[1], g[0] + g[1], g[0] - g[1]]))
-            cross = (q[2] - q[3]) / 4.0
-            info += 2.0 * np.array([[q[0], cross], [cross, q[1]]])
-        return info
+            for a in range(4):
+                # Re(g_a^H R^-1 g_b) through the run's quadratic form (polarisation).
+                q = run.quadratic_form(
+                    np.stack([g[a] + g[b] for b in range(4)] + [g[a] - g[b] for b in range(4)])
+                )
+                full[a] += 2.0 * (q[:4] - q[4:]) / 4.0
+        full = 0.5 * (full + full.T)
+        if self.calibration <= 0:
+            return full[:2, :2]
+        # The gain's prior (each part of a CN(0, s^2) gain has variance s^2 / 2), then the
+        # information left on (C, K) once the gain is not known (Schur complement).
+        gain = full[2:, 2:] + np.eye(2) * 2.0 / self.calibration**2
+        return full[:2, :2] - full[:2, 2:] @ np.linalg.solve(gain, full[2:, :2])
 
     def loglik(self, problem: Any, damping: Any, stiffness: Any) -> FloatArray:
         """``log p(Y | C, K)`` up to a constant, (B,): the exact method's likelihood hook."""
-        resid = (self.body[None] - self.deck_driven(damping, stiffness)) / np.sqrt(self.noise_var)[
-            None
-        ]
-        out = np.zeros(resid.shape[0])
+        scale = np.sqrt(self.noise_var)
+        driven = self.deck_driven(damping, stiffness) / scale[None]
+        data = (self.body / scale)[None]
+        b = driven.shape[0]
+        parts = []
+        cross = np.zeros(b, dtype=np.complex128)
+        power = np.zeros(b)
         for run in self.runs:
-            out += run.loglik(resid[:, run.start : run.stop])
+            # Whitening is linear: the residual's is the data's minus the response's.
+            y_re, y_im = run.whiten(data[:, run.start : run.stop])
+            m_re, m_im = run.whiten(driven[:, run.start : run.stop])
+            w = (y_re - m_re) + 1j * (y_im - m_im)
+            m = m_re + 1j * m_im
+            parts.append((run, w, m))
+            cross += np.sum(np.conj(m) * w, axis=1)
+            power += np.sum(m_re * m_re + m_im * m_im, axis=1)
+        out = np.zeros(b)
+        gain = np.zeros(b, dtype=np.complex128)
+        if self.calibration > 0:
+            # The response's common gain 1 + g, g ~ CN(0, s^2): set at its normal-part
+            # posterior mean, with its prior and the Laplace volume term (profiling it
+            # inside the heavy-tailed misfit, rather than integrating it out of a normal
+            # one, keeps a gain from buying back what the tails forgive).
+            s2 = self.calibration**2
+            gain = cross / (1.0 / s2 + power)
+            out -= np.abs(gain) ** 2 / s2 + np.log1p(s2 * power)
+        for run, w, m in parts:
+            left = w - gain[:, None] * m
+            out += run.loglik_whitened(left.real, left.imag)
         return out
 
     @property
@@ -474,7 +534,11 @@ def _build_spectra(problem: IdentificationProblem) -> DeckSpectra | None:
         return None
 
     def at(
-        bins: NDArray[np.int64], noise: FloatArray, runs: tuple[NoiseRun, ...], nugget: float
+        bins: NDArray[np.int64],
+        noise: FloatArray,
+        runs: tuple[NoiseRun, ...],
+        nugget: float,
+        calibration: float = 0.0,
     ) -> DeckSpectra:
         cols = bins[:, None] - _OFFSETS[None, :]
         return DeckSpectra(
@@ -488,6 +552,7 @@ def _build_spectra(problem: IdentificationProblem) -> DeckSpectra | None:
             runs=runs,
             bin_index=bins,
             nugget=nugget,
+            calibration=calibration,
         )
 
     # First pass: the strongest bins, each on its own with a heavy-tailed misfit, against
@@ -534,7 +599,8 @@ def _build_spectra(problem: IdentificationProblem) -> DeckSpectra | None:
     if used.size == 0:
         return None
     noise, _, nugget = noise_model(around[keep], r[keep], freq, used, half)
-    return at(used, noise, correlated_runs(used, STUDENT_DOF, nugget, LEVEL_BLOCK_BINS), nugget)
+    runs = correlated_runs(used, STUDENT_DOF, nugget, LEVEL_BLOCK_BINS)
+    return at(used, noise, runs, nugget, CALIBRATION_SD)
 
 
 @dataclass(frozen=True)
