@@ -214,6 +214,24 @@ def measure(number: int) -> dict[str, Any]:
     }
 
 
+def _read(path: Path) -> list[dict[str, Any]]:
+    """Rows of a run's CSV, with its numbers and flags typed again."""
+
+    def typed(value: str) -> Any:
+        if value in ("True", "False"):
+            return value == "True"
+        try:
+            return float(value) if value != "" else math.nan
+        except ValueError:
+            return value
+
+    with open(path, newline="") as fh:
+        rows = [{k: typed(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+    for row in rows:
+        row["record"] = int(row["record"])
+    return rows
+
+
 def _median(values: list[float]) -> float:
     vals = [v for v in values if np.isfinite(v)]
     return float(np.median(vals)) if vals else math.nan
@@ -264,11 +282,35 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"| {100 * _median([r.get('bound_fn_rel', math.nan) for r in sel]):.2f} | "
             f"{_median([r.get('efficiency', math.nan) for r in sel]):.2f} |"
         )
-    excess = [r["level_excess"] for r in core if r["level"] in IDENTIFIED]
+    ided = [r for r in core if r["level"] in IDENTIFIED]
+    both = sum(bool(r["fn_held"]) and bool(r["zeta_held"]) for r in ided)
+    z = [
+        (r["fn_hz"] - r["natural_frequency_hz"]) / (r["sd_fn_rel"] * r["natural_frequency_hz"])
+        for r in ided
+    ]
     print(
-        "\nthe true noise at the deck's main bins over the route's level, identified records: "
-        f"median {_median(excess):.2f}, above 3 on {sum(e > 3 for e in excess)} of {len(excess)}"
+        f"\nidentified single-mode and narrow-band records: both bands hold on {both} of "
+        f"{len(ided)}; standardised errors of f_n, sd {float(np.std(z, ddof=1)):.2f}"
     )
+    capped = [r for r in core if r.get("bound_fn_rel", math.inf) < BOUND_CAP]
+    print("by the bound's size (records whose bound is below 10 %):")
+    for lo, hi in ((0.0, 0.02), (0.02, 0.04), (0.04, 0.06), (0.06, 0.10)):
+        sel = [r["efficiency"] for r in capped if lo <= r["bound_fn_rel"] < hi]
+        print(
+            f"  bound {100 * lo:.0f}-{100 * hi:.0f} %: {len(sel)} records, median sd/bound "
+            f"{_median(sel):.2f}, largest {max(sel, default=math.nan):.2f}"
+        )
+    print(f"  median sd/bound of zeta: {_median([r['efficiency_zeta'] for r in capped]):.2f}")
+    excess = [r["level_excess"] for r in ided]
+    high = [r for r in ided if r["level_excess"] > 3]
+    print(
+        "the true noise at the deck's main bins over the route's level, identified records: "
+        f"median {_median(excess):.2f}, above 3 on {len(high)} of {len(excess)}, which hold "
+        f"{sum(not r['fn_held'] for r in high)} of the "
+        f"{sum(not r['fn_held'] for r in ided)} misses of f_n"
+    )
+    nuggets = sorted({r["nugget"] for r in core if "nugget" in r and np.isfinite(r["nugget"])})
+    print(f"nuggets chosen: {', '.join(f'{n:g}' for n in nuggets)}")
     cpu = [r["cpu_s"] for r in rows if r["duration_s"] == 30.0 and r["source"] != "insole"]
     print(f"median route CPU time, 30 s 200 Hz records: {_median(cpu):.2f} s")
 
@@ -379,12 +421,18 @@ def main() -> None:
         "true, over SEEDS noise realisations per bound",
     )
     ap.add_argument(
+        "--summarise", type=Path, metavar="CSV", help="instead: print the tables of a run's CSV"
+    )
+    ap.add_argument(
         "--level-block",
         type=int,
         metavar="BINS",
         help="whitened bins sharing one level in the route's Student-t (default the route's)",
     )
     args = ap.parse_args()
+    if args.summarise:
+        summarise(_read(args.summarise))
+        return
     if args.level_block:
         # The workers are forked from this process and inherit the setting.
         from workbench.inference.surface import frf

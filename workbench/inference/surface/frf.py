@@ -60,6 +60,7 @@ deck at a harmonic of the pacing gives no bins; a weak deck gives a wide posteri
 
 from __future__ import annotations
 
+import functools
 import itertools
 import weakref
 from dataclasses import dataclass
@@ -365,16 +366,13 @@ class DeckSpectra:
 
     def loglik(self, problem: Any, damping: Any, stiffness: Any) -> FloatArray:
         """``log p(Y | C, K)`` up to a constant, (B,): the exact method's likelihood hook."""
-        scale = np.sqrt(self.noise_var)
-        driven = self.deck_driven(damping, stiffness) / scale[None]
-        data = (self.body / scale)[None]
+        driven = self.deck_driven(damping, stiffness) / np.sqrt(self.noise_var)[None]
         b = driven.shape[0]
         parts = []
         cross = np.zeros(b, dtype=np.complex128)
         power = np.zeros(b)
-        for run in self.runs:
+        for run, (y_re, y_im) in zip(self.runs, self._whitened_body, strict=True):
             # Whitening is linear: the residual's is the data's minus the response's.
-            y_re, y_im = run.whiten(data[:, run.start : run.stop])
             m_re, m_im = run.whiten(driven[:, run.start : run.stop])
             w = (y_re - m_re) + 1j * (y_im - m_im)
             m = m_re + 1j * m_im
@@ -395,6 +393,12 @@ class DeckSpectra:
             left = w - gain[:, None] * m
             out += run.loglik_whitened(left.real, left.imag)
         return out
+
+    @functools.cached_property
+    def _whitened_body(self) -> list[tuple[FloatArray, FloatArray]]:
+        """The scaled body spectrum whitened run by run (the same for every (C, K))."""
+        data = (self.body / np.sqrt(self.noise_var))[None]
+        return [run.whiten(data[:, run.start : run.stop]) for run in self.runs]
 
     @property
     def apparent_mass_kg(self) -> NDArray[np.complex128]:

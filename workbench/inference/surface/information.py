@@ -260,11 +260,13 @@ def enough_vibration(
 ) -> str:
     """Finish the route's sentence: the deck motion, or the record length, that pins f_n to 3 %.
 
-    The information bound scales exactly with the deck's RMS (the deck-driven response, and
-    so its signal-to-noise ratio, is proportional to it) and with the record's length (for a
+    The information bound scales with the deck's RMS (the deck-driven response, and so its
+    signal-to-noise ratio, is proportional to it) and with the record's length (for a
     stationary walk the information grows in proportion to it), so the bound's sd of f_n
-    falls as ``1 / (RMS sqrt(length))``. The advice scales the larger of the posterior sd and
-    the bound: a posterior that the prior box narrows below the bound does not know more.
+    falls as ``1 / (RMS sqrt(length))`` while the gait noise limits it (the channels'
+    unknown common gain sets a floor far below 3 %). The advice scales the larger of the
+    posterior sd and the bound: a posterior that the prior box narrows below the bound does
+    not know more.
     ``analyses/deck_bound.py`` measures both scalings on records whose variability is measured
     (docs/validation/deck-information.md).
 
