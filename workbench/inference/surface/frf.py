@@ -48,7 +48,8 @@ Likelihood
     common complex gain ``1 + g``, ``g`` of ``CALIBRATION_SD``, set for each (C, K) at its
     most likely value with its prior (a calibration mismatch between the channels, alike at
     every bin, which many bins do not average out), and each bin's noise variance has
-    ``RELATIVE_ERROR`` squared times its power added (an error that varies along the record). It is vectorised over (C, K) and costs
+    ``RELATIVE_ERROR`` squared times its power added (an error that varies along the
+    record). It is vectorised over (C, K) and costs
     microseconds per pair, so the exact grid posterior
     (:func:`workbench.inference.methods.exact.exact_posterior`) runs on it, and its normal
     version's Fisher information (:meth:`DeckSpectra.information`) is the record's
