@@ -232,10 +232,15 @@ def test_the_deck_driven_spectrum_is_exact_for_an_analytic_response(periodic_dec
 
 @pytest.mark.slow
 def test_transmissibility_bands_hold_the_truth_on_deck_walks():
-    """deck_walk seeds 0-19 (fixed in advance): at most two identified walks whose bands miss
-    the truth (binomial: at a true 95 % coverage and about 12 identified walks, three or more
-    misses happen in 2 % of runs), and the decks of 0.2 m/s^2 or more whose centre is more
-    than 0.2 f_p from a gait harmonic are identified (one may fail)."""
+    """deck_walk seeds 0-19 (fixed in advance): at most three identified walks whose bands of
+    f_n and zeta do not both hold the truth, and the decks of 0.2 m/s^2 or more whose centre
+    is more than 0.2 f_p from a gait harmonic are identified (one may fail).
+
+    Two 95 % bands hold together less often than one: on the 101 identified records of
+    ``analyses/deck_bound.py`` both held on 93 % (docs/validation/deck-information.md). At
+    that rate and about 12 identified walks, four or more misses happen in under 1 % of runs
+    (three in about 4 %).
+    """
     held, identified, strong_away, strong_away_ok = 0, 0, 0, 0
     for seed in range(20):
         sim = deck_walk(seed)
@@ -255,7 +260,7 @@ def test_transmissibility_bands_hold_the_truth_on_deck_walks():
             ci[n][0] <= sim.truth[n] <= ci[n][1] for n in ("natural_frequency_hz", "damping_ratio")
         )
     assert identified >= 8, identified
-    assert identified - held <= 2, (held, identified)
+    assert identified - held <= 3, (held, identified)
     assert strong_away_ok >= strong_away - 1, (strong_away_ok, strong_away)
 
 

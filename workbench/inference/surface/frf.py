@@ -118,8 +118,7 @@ STUDENT_DOF = 4.0
 #: the deck's own bins cannot be measured where the deck drives (a single-mode deck's
 #: response is one line, which (C, K) fit whatever the noise there), so each bin's level is
 #: allowed its own error. Where the level is right this costs a quarter of the information
-#: (sd x 1.15); without it the bands held the truth in 88 % of the validation's records
-#: instead of 93 % (docs/validation/deck-information.md).
+#: (the Student-t's efficiency); docs/validation/deck-information.md measures what it buys.
 LEVEL_BLOCK_BINS = 1
 #: Candidate shares of the gait noise that is independent from bin to bin (the nugget), the
 #: record's own residual choosing among them by maximum likelihood: the part the taper's
@@ -129,18 +128,19 @@ LEVEL_BLOCK_BINS = 1
 #: tenth of its peak, count as independent noise, in the likelihood and in its bound alike.
 NUGGETS = (1e-2, 3e-2, 0.1, 0.3, 1.0)
 #: Standard deviation of the complex gain between the deck's channel and the body's, as a
-#: fraction: the likelihood integrates the deck-driven response's common gain and phase
-#: over it. A calibration mismatch between the deck's accelerometer and the force plate, or
-#: a simulator's time step, leaves an error in proportion to the deck's drive and the same
-#: at every bin, which on a strongly driven record outweighs the gait noise and does not
+#: fraction: the likelihood sets the deck-driven response's common gain and phase at their
+#: most likely values under this prior (with the volume term of integrating them out). A
+#: calibration mismatch between the deck's accelerometer and the force plate, or a
+#: simulator's time step, leaves an error in proportion to the deck's drive and the same at
+#: every bin, which on a strongly driven record outweighs the gait noise and does not
 #: average out over bins. One per cent (0.6 degrees of phase) is a calibration
 #: laboratory's tolerance.
 CALIBRATION_SD = 0.01
-#: Relative error of the deck-driven response at each bin, as an amplitude: a bin's noise
-#: variance is at least this squared times its power. What varies along the record and so
+#: Relative error of the deck-driven response at each bin, as an amplitude: this squared
+#: times a bin's power is added to its noise variance. What varies along the record and so
 #: spreads over bins: the foot moves along the deck's mode shape, so the deck's acceleration
 #: under it and the foot's own differ by terms of 1-2 % that change along a crossing (the
-#: footbridge closed loop), and a simulator's time step leaves 0.3 % at 5.8 Hz (200 Hz).
+#: footbridge closed loop), and a simulator's time step leaves an error of its own.
 RELATIVE_ERROR = 0.02
 #: The default nugget of :func:`correlated_runs`: it keeps a run's correlation well
 #: conditioned.
