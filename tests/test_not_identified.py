@@ -201,8 +201,11 @@ def test_the_deck_route_repeats_no_withheld_number_in_its_surface_report() -> No
     frf = out["surface"]["transmissibility"]
     for key in ("stiffness_n_per_m", "natural_frequency_hz", "damping_ratio"):
         assert frf["estimates"][key] is None and frf["interval_95"][key] is None, key
+        # The bound's efficiency is the withheld sd over the bound's: withheld too.
+        assert frf["information_bound"]["efficiency"][key] is None, key
         assert out[CONDITIONAL_KEY][key]["estimate"] == pytest.approx(deck.estimates[key])
     assert frf["estimates"]["damping_ns_per_m"] == pytest.approx(deck.estimates["damping_ns_per_m"])
+    assert frf["information_bound"]["efficiency"]["damping_ns_per_m"] > 0
 
 
 def test_the_identification_report_shows_no_number_for_what_is_not_identified(

@@ -687,6 +687,11 @@ class IdentificationResult:
         for block in ("estimates", "posterior_sd", "interval_95"):
             if isinstance(frf.get(block), dict):
                 frf[block] = {k: None if k in hidden else v for k, v in frf[block].items()}
+        bound = frf.get("information_bound")
+        if isinstance(bound, dict) and isinstance(bound.get("efficiency"), dict):
+            # The efficiency carries the posterior sd withheld above.
+            efficiency = {k: None if k in hidden else v for k, v in bound["efficiency"].items()}
+            frf["information_bound"] = {**bound, "efficiency": efficiency}
         surface["transmissibility"] = frf
         return surface
 

@@ -91,11 +91,8 @@ class InformationBound:
 
     def to_json(self, posterior_sd: dict[str, float] | None = None) -> dict[str, Any]:
         """JSON-able form, with the efficiency when a posterior sd is given."""
+        # Evaluated at the posterior mean, which the result reports (or withholds) itself.
         out: dict[str, Any] = {
-            "at": {
-                "damping_ns_per_m": self.damping_ns_per_m,
-                "stiffness_n_per_m": self.stiffness_n_per_m,
-            },
             "bound_sd": dict(self.sd),
             "bins": self.bins,
         }
