@@ -156,7 +156,7 @@ def test_the_bound_is_the_scatter_of_the_best_estimate_when_the_model_is_true(wa
     - The route's own posterior mean, which must estimate the level and the nugget,
       protects itself with a per-bin Student-t and leaves the channels' common gain
       unknown, scatters by at most 1.6 times the bound (``analyses/deck_bound.py --ideal``
-      measures 1.06-1.10 on other seeds; the sample sd's own spread is 13 %).
+      measures 1.05-1.09 on other seeds; the sample sd's own spread is 13 %).
     """
     from workbench.inference.methods import exact_posterior
 

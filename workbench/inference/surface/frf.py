@@ -139,7 +139,7 @@ CALIBRATION_SD = 0.01
 #: Relative error of the deck-driven response at each bin, as an amplitude: this squared
 #: times a bin's power is added to its noise variance. What varies along the record and so
 #: spreads over bins: the foot moves along the deck's mode shape, so the deck's acceleration
-#: under it and the foot's own differ by terms of 1-2 % that change along a crossing (the
+#: under it and the foot's own differ by small terms that change along a crossing (the
 #: footbridge closed loop), and a simulator's time step leaves an error of its own.
 RELATIVE_ERROR = 0.02
 #: The default nugget of :func:`correlated_runs`: it keeps a run's correlation well
@@ -459,7 +459,7 @@ def noise_model(
     freq: FloatArray,
     at_bins: NDArray[np.int64],
     half_width_hz: float,
-) -> tuple[FloatArray, FloatArray, float]:
+) -> tuple[FloatArray, float]:
     """Estimate the gait noise's level at ``at_bins`` and its nugget from a residual at ``bins``.
 
     The level is the mean residual power over the bins within ``half_width_hz``, or over the
@@ -470,8 +470,8 @@ def noise_model(
 
     Returns
     -------
-    level, count, nugget
-        Level at each of ``at_bins``, how many bins it averaged, and the nugget.
+    level, nugget
+        Level at each of ``at_bins`` and the nugget.
     """
     power = np.abs(resid) ** 2
     bin_hz = float(freq[1] - freq[0])
@@ -485,7 +485,7 @@ def noise_model(
         near, _ = _local_level(freq[bins], power, at, narrow)
         return np.maximum(wide, near), n
 
-    level, count = smooth(freq[at_bins])
+    level, _ = smooth(freq[at_bins])
     own, _ = smooth(freq[bins])
     scaled = (resid / np.sqrt(np.maximum(own, 1e-300)))[None]
     best, nugget = -np.inf, NUGGETS[-1]
@@ -496,7 +496,7 @@ def noise_model(
         if ll > best:
             best, nugget = ll, candidate
     level = np.maximum(level, 1e-12 * max(float(level.max()), 1e-300))
-    return level, count, float(nugget)
+    return level, float(nugget)
 
 
 #: The last problems' spectra: choosing the route, running it and reporting its bound all
@@ -610,7 +610,7 @@ def _build_spectra(problem: IdentificationProblem) -> DeckSpectra | None:
     used = np.flatnonzero(near_deck & ~guard)
     if used.size == 0:
         return None
-    noise, _, nugget = noise_model(around[keep], r[keep], freq, used, half)
+    noise, nugget = noise_model(around[keep], r[keep], freq, used, half)
     noise = noise + RELATIVE_ERROR**2 * np.abs(body[used]) ** 2
     runs = correlated_runs(used, STUDENT_DOF, nugget, LEVEL_BLOCK_BINS)
     return at(used, noise, runs, nugget, CALIBRATION_SD)
@@ -730,5 +730,5 @@ def gait_noise(
     w = 2.0 * np.pi * freq[cols]
     num = stiffness_n_per_m + 1j * w * damping_ns_per_m
     driven = np.sum(num / (num - w * w * problem.mass_kg) * deck[cols] * _TAPER_LINES, axis=1)
-    level, _, nugget = noise_model(around, body - driven, freq, used, half)
+    level, nugget = noise_model(around, body - driven, freq, used, half)
     return level + RELATIVE_ERROR**2 * np.abs(spectra.body) ** 2, nugget
