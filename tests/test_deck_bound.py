@@ -272,3 +272,16 @@ def test_a_deck_identification_reports_its_bound_and_efficiency():
     rel = bound["bound_sd"]["natural_frequency_hz"] / res.estimates["natural_frequency_hz"]
     assert "information bound (the least sd any estimator can reach" in out["sentence"]
     assert f"is {100 * rel:.2g} %" in out["sentence"]
+
+
+def test_a_weak_decks_sentence_prints_no_sd_of_what_is_not_identified():
+    """A 0.03 m/s^2 deck (deck_walk seed 0, 20 s) leaves f_n mostly prior: the surface
+    sentence names the grade and the record's bound, and no posterior sd of f_n."""
+    import workbench as wb
+
+    sim = deck_walk(0, deck_rms_m_s2=0.03, deck_frequency_hz=3.1, pacing_hz=PACING, duration_s=20)
+    res = wb.identify(sim.record, seed=0)
+    assert "natural_frequency_hz" in res.not_identified
+    sentence = res.surface.sentence
+    assert "f_n is mostly prior" in sentence and "information bound" in sentence
+    assert "posterior sd of f_n" not in sentence

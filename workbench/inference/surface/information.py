@@ -205,11 +205,22 @@ def surface_report(
         fn = est["natural_frequency_hz"]
         sd_rel = sd["natural_frequency_hz"] / fn
         bound_rel = float("nan") if bound is None else bound.sd["natural_frequency_hz"] / fn
+        if level in ("well identified", "weakly identified"):
+            precision = f"the posterior sd of f_n is {100 * sd_rel:.1f} % of it" + _against_bound(
+                sd_rel, bound_rel
+            )
+        else:
+            # Not identified: its sd is withheld like its estimate; the record's bound is not
+            # an estimate of the walker and stays.
+            precision = f"f_n is {level}" + (
+                f"; the record's information bound (docs/science.md 6) is {100 * bound_rel:.2g} %"
+                if np.isfinite(bound_rel)
+                else ""
+            )
         sentence = (
             f"C and K were read from the deck's transmissibility ({route.bins} bins at "
-            f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them; the posterior "
-            f"sd of f_n is {100 * sd_rel:.1f} % of it"
-            + _against_bound(sd_rel, bound_rel)
+            f"{lo:.2f}-{hi:.2f} Hz, {rms:.3g} m/s^2 RMS), the force given them; "
+            + precision
             + enough_vibration(rms, sd_rel, level, bound_rel, problem.n_samples * problem.dt_s)
         )
     elif frf_json is None:
