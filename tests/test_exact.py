@@ -447,3 +447,95 @@ def test_simulate_then_identify_twenty_records_each_set(tmp_path) -> None:
     summary = _coverage_study().main(["--out", str(tmp_path)])
     for key, counts in summary.items():
         assert counts["records"] == 20 and counts["fine"] >= 17, (key, summary)
+
+
+# -- the force moments on a sub-lattice ------------------------------------------------------
+def test_the_sub_lattice_interpolation_is_exact_on_linear_functions() -> None:
+    """Bilinear weights are non-negative, sum to one and reproduce any linear function of
+    the lattice position (up to rounding), wherever the nodes sit against the anchors."""
+    from workbench.inference.methods.exact_force import _sublattice
+
+    rng = np.random.default_rng(0)
+    i, j = np.meshgrid(np.arange(-7, 9), np.arange(-5, 12), indexing="ij")
+    lattice = np.column_stack([i.ravel(), j.ravel()])
+    index = lattice[rng.random(lattice.shape[0]) < 0.6]
+    anchors, interp = _sublattice(index, index[3])
+    assert np.all(interp >= 0.0)
+    np.testing.assert_allclose(interp.sum(axis=1), 1.0, rtol=1e-15)
+    assert np.all((anchors - index[3]) % 2 == 0)
+    assert anchors.shape[0] < index.shape[0]
+    coef = np.array([0.3, -1.7])
+    np.testing.assert_allclose(interp @ (anchors @ coef + 5.0), index @ coef + 5.0, rtol=1e-13)
+
+
+def test_force_moments_on_the_sub_lattice_err_by_at_most_the_bilinear_bound(
+    problem, monkeypatch
+) -> None:
+    """A conditional mean quadratic in (C, K): mixed from the sub-lattice, every node's mean
+    is the bilinear interpolant, which exceeds a convex quadratic by at most kappa h^2 / 8 per
+    axis (h: the coarse cell, two grid cells), so the mixed mean errs by at most that sum;
+    a linear component and the conditional covariance come through exactly."""
+    import workbench.inference.methods.exact_force as exact_force
+
+    mean, sd, rho = np.array([700.0, 11000.0]), np.array([30.0, 300.0]), 0.0
+    loglik, _ = gaussian(mean, sd, rho)
+    m, p = problem.n_coefficients, problem.n_pieces
+    kappa_c, kappa_k, s = 0.02, 2e-5, 40.0
+
+    def moments(_p, c, k):
+        mu = np.zeros((c.size, p, m))
+        mu[:, :, 0] = (0.5 * kappa_c * (c - mean[0]) ** 2 + 0.5 * kappa_k * (k - mean[1]) ** 2)[
+            :, None
+        ]
+        mu[:, :, 1] = (2.0 * c - 0.05 * k)[:, None]
+        cov_theta = np.broadcast_to(np.eye(m) * s**2, (c.size, p, m, m)).copy()
+        return mu, cov_theta
+
+    sub = exact_posterior(problem, loglik=loglik, force_moments=moments)
+    monkeypatch.setattr(exact_force, "_FORCE_SUBLATTICE_FROM", 10**9)
+    every = exact_posterior(problem, loglik=loglik, force_moments=moments)
+    assert sub.force.filtered_points < every.force.filtered_points
+    assert every.force.filtered_points == every.force.node_weights.size
+    h = 2.0 * np.abs(np.diag(sub.cell_edges))
+    bound = (kappa_c * h[0] ** 2 + kappa_k * h[1] ** 2) / 8.0
+    error = sub.force.mean[:, 0] - every.force.mean[:, 0]
+    assert np.all(error >= -1e-9 * bound) and np.all(error <= bound * (1 + 1e-9)), (error, bound)
+    np.testing.assert_allclose(sub.force.mean[:, 1], every.force.mean[:, 1], rtol=1e-12)
+    np.testing.assert_allclose(sub.force.sd[:, 1], every.force.sd[:, 1], rtol=1e-9)
+    np.testing.assert_allclose(sub.force.sd[:, 2], s, rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_force_moments_on_the_sub_lattice_match_every_node_on_deck_walks(monkeypatch) -> None:
+    """The Kalman filter's own moments on deck records (the embedded deck walk and
+    deck_walk seeds 0-3, fixed in advance): the force coefficients' and the BLFs' posterior
+    means and sds from the sub-lattice are within 1 % of the posterior sd of those from
+    every node. The interpolation error is second order in the coarse cell (about 1.2
+    posterior sd), and the conditional force posterior bends little over it."""
+    import workbench.inference.methods.exact_force as exact_force
+    from workbench.datasets import load
+    from workbench.synth import deck_walk
+
+    records = [load("seed_individual_deck")] + [
+        deck_walk(seed, duration_s=30.0).record for seed in range(4)
+    ]
+    for record in records:
+        monkeypatch.setattr(exact_force, "_FORCE_SUBLATTICE_FROM", 64)
+        sub = identify(record)
+        monkeypatch.setattr(exact_force, "_FORCE_SUBLATTICE_FROM", 10**9)
+        every = identify(record)
+        sd = np.asarray(every.piece_coefficients_sd)
+        assert (
+            np.max(
+                np.abs(
+                    np.asarray(sub.piece_coefficients_mean)
+                    - np.asarray(every.piece_coefficients_mean)
+                )
+                / sd
+            )
+            < 0.01
+        )
+        assert np.max(np.abs(np.asarray(sub.piece_coefficients_sd) / sd - 1.0)) < 0.01
+        blf_sd = np.asarray(every.blf_sd)
+        assert np.max(np.abs(np.asarray(sub.blf) - np.asarray(every.blf)) / blf_sd) < 0.01
+        assert np.max(np.abs(np.asarray(sub.blf_sd) / blf_sd - 1.0)) < 0.01

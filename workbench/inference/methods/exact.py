@@ -485,7 +485,15 @@ def exact_posterior(
 
     force = None
     if force_moments is not None:
-        force = _force_posterior(problem, force_moments, grid.nodes, w, np.asarray(map_x))
+        force = _force_posterior(
+            problem,
+            force_moments,
+            grid.nodes,
+            w,
+            np.asarray(map_x),
+            index=grid.index,
+            cell_edges=frame.edges,
+        )
 
     posterior = ExactPosterior(
         mass_kg=m,
