@@ -46,8 +46,9 @@ Quadrature
 Means, covariances and the evidence use the nodes as a midpoint rule (spectrally accurate for
 a smooth density that has decayed at the frame edge; for the flat box the discrete-uniform
 variance falls short of ``width^2 / 12`` by a factor ``1 - 1 / n^2``). Quantiles treat the
-density as constant over each cell, then apply Sheppard's correction (deviations from the
-median scaled by ``sqrt(V_nodes / V_cells)``, exact for a Gaussian posterior).
+density as constant over each cell (its CDF is then exact, and each quantile is its root,
+found by bisection), then apply Sheppard's correction (deviations from the median scaled by
+``sqrt(V_nodes / V_cells)``, exact for a Gaussian posterior).
 :meth:`ExactPosterior.sample` draws uniformly within cells as it is: its draws have the
 cells' extra variance ``edge^2 / 12`` (about 3 % of the variance, 1.5 % of the sd, at the
 default resolution).
@@ -62,7 +63,8 @@ Each likelihood call is a whole Kalman pass over the record whose time is domina
 per-sample loop, nearly whatever the batch of (C, K) pairs, so the method minimises calls,
 not points: one coarse grid, usually one to five Newton stencils (the first Newton step comes
 free from the coarse grid's neighbourhood of its best node), one fine grid, one call for the
-force coefficients (with the MAP in the same batch). ``start`` (e.g. from the ``auto`` noise
+force coefficients (with the MAP in the same batch; its cost grows with the points filtered,
+so a finely resolved posterior filters a sub-lattice). ``start`` (e.g. from the ``auto`` noise
 estimate) skips the coarse grid.
 
 What "exact" means
@@ -78,7 +80,9 @@ Given (C, K) the Kalman filter gives the Gaussian posterior of each piece's coef
 (``record_loglik(..., return_pieces=True)``). Reported: at the MAP, and mixed over the grid
 posterior (mean and covariance by the law of total variance, over the nodes holding all but
 ``1e-3`` of the mass); the walk's load factors ``BLF_i = sqrt(a_i^2 + b_i^2) / (M g)`` are
-mixed over the same nodes (:mod:`workbench.inference.core.load_factors`).
+mixed over the same nodes (:mod:`workbench.inference.core.load_factors`). Where many nodes
+hold the mass, the filter runs on every other lattice position around them and the nodes'
+moments are interpolated bilinearly (:mod:`workbench.inference.methods.exact_force`).
 """
 
 from __future__ import annotations
