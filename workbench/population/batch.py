@@ -5,7 +5,12 @@
 
 - ``OUT/records/<key>.json``: one file per record, written atomically (temporary file in the
   same folder, then rename; :mod:`workbench.fileutil`) as soon as the record is finished,
-  with ``status`` ``"done"`` (and the result row) or ``"failed"`` (and the reason);
+  with ``status`` ``"done"`` (and the result row) or ``"failed"`` (and the reason); a done
+  record identified on the exact grid (the default, and every deck route) also keeps its
+  ``posterior``: the (C, K) posterior on the nodes holding nearly all its mass, the prior
+  box, each node's BLF1-3 and whether the force-model check passed
+  (:mod:`workbench.inference.core.node_posterior`), read back by
+  :func:`workbench.population.posteriors.read_record_posteriors`;
 - ``OUT/results.csv``: one row per identified record (:data:`RESULT_COLUMNS`), sorted by
   the record's path, assembled from the record files at the end, so its bytes (and the
   record files') depend only on the records and the settings -- never on worker count,
@@ -225,6 +230,13 @@ def run_task(task: BatchTask) -> dict[str, Any]:
                 adjust_noise=None if ov is None else ov.adjust_noise,
             )
             out["row"] = result_row(result, task.path, record.subject, task.seed)
+            if result.node_posterior is not None:
+                # What a fit over many records needs of this one (docs/science.md 8).
+                check = result.identifiability.get("force_model_check") or {}
+                out["posterior"] = {
+                    **result.node_posterior.to_json(),
+                    "force_model_check_passed": check.get("passed"),
+                }
             out["status"] = "done"
         except WorkbenchError as err:
             out.update(status="failed", reason=as_in_manifest(str(err), task.folder, task.path))

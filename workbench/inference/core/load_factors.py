@@ -36,6 +36,7 @@ __all__ = [
     "LoadFactorPosterior",
     "coefficient_load_factors",
     "mix_load_factors",
+    "point_load_factors",
     "realised_load_factors",
 ]
 
@@ -83,6 +84,43 @@ def coefficient_load_factors(coefficients: ArrayLike, mass_kg: float, harmonics:
     )
 
 
+def point_load_factors(
+    theta_mean: FloatArray, theta_var: FloatArray, mass_kg: float, harmonics: int
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Return the walk's load factors given (C, K) at each point, before mixing.
+
+    Parameters
+    ----------
+    theta_mean, theta_var : ndarray, shape (B, P, m)
+        As for :func:`mix_load_factors`.
+    mass_kg : float
+        Body mass [kg].
+    harmonics : int
+        Number of harmonics n.
+
+    Returns
+    -------
+    walk_mean, walk_var : ndarray, shape (B, n)
+        The walk's mean load factors at each point and their variance given (C, K).
+    piece : ndarray, shape (B, P, n)
+        Every piece's load factors at each point.
+    """
+    mu = np.asarray(theta_mean, dtype=np.float64)
+    var = np.asarray(theta_var, dtype=np.float64)
+    weight_n = float(mass_kg) * G_M_S2
+    ia = 2 * np.arange(1, int(harmonics) + 1) - 1
+    ib = ia + 1
+    a, b = mu[..., ia], mu[..., ib]
+    # Clipped so that a harmonic estimated at exactly zero has a zero gradient, not NaN.
+    amp = np.maximum(np.hypot(a, b), 1e-300)
+    blf_bp = amp / weight_n  # (B, P, n)
+    # Delta method; the a-b covariance is not kept per point (the grid stores variances),
+    # and given C and K the two quadratures of a harmonic are nearly uncorrelated.
+    var_bp = ((a / amp) ** 2 * var[..., ia] + (b / amp) ** 2 * var[..., ib]) / weight_n**2
+    n_pieces = mu.shape[1]
+    return blf_bp.mean(axis=1), var_bp.sum(axis=1) / n_pieces**2, blf_bp
+
+
 def mix_load_factors(
     theta_mean: FloatArray,
     theta_var: FloatArray,
@@ -111,23 +149,10 @@ def mix_load_factors(
     -------
     LoadFactorPosterior
     """
-    mu = np.asarray(theta_mean, dtype=np.float64)
-    var = np.asarray(theta_var, dtype=np.float64)
     w = np.asarray(weights, dtype=np.float64)
     w = w / w.sum()
-    weight_n = float(mass_kg) * G_M_S2
-    ia = 2 * np.arange(1, int(harmonics) + 1) - 1
-    ib = ia + 1
-    a, b = mu[..., ia], mu[..., ib]
-    # Clipped so that a harmonic estimated at exactly zero has a zero gradient, not NaN.
-    amp = np.maximum(np.hypot(a, b), 1e-300)
-    blf_bp = amp / weight_n  # (B, P, n)
-    # Delta method; the a-b covariance is not kept per point (the grid stores variances),
-    # and given C and K the two quadratures of a harmonic are nearly uncorrelated.
-    var_bp = ((a / amp) ** 2 * var[..., ia] + (b / amp) ** 2 * var[..., ib]) / weight_n**2
-    n_pieces = mu.shape[1]
-    walk_b = blf_bp.mean(axis=1)  # (B, n)
-    walk_var_b = var_bp.sum(axis=1) / n_pieces**2
+    walk_b, walk_var_b, blf_bp = point_load_factors(theta_mean, theta_var, mass_kg, harmonics)
+    n_pieces = blf_bp.shape[1]
     mean = w @ walk_b
     total = w @ walk_var_b + w @ (walk_b - mean) ** 2
     piece = np.einsum("b,bpn->pn", w, blf_bp)

@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from workbench.fileutil import atomic_path
 from workbench.inference.core.load_factors import LoadFactorPosterior, coefficient_load_factors
+from workbench.inference.core.node_posterior import NodePosterior
 from workbench.inference.core.problem import IdentificationProblem
 from workbench.inference.core.result_parts import (
     EffectPosterior,
@@ -137,6 +138,10 @@ class IdentificationResult:
         The walk's load factors mixed over the (C, K) posterior (every built-in method sets
         it; without it the BLFs are those of the mean coefficients and their sd is the
         step-to-step standard error, which leaves out C and K).
+    node_posterior : NodePosterior or None
+        The (C, K) posterior on the nodes holding nearly all its mass, with each node's load
+        factors, for fits over many records (:mod:`workbench.inference.core.node_posterior`;
+        the exact grid and the deck route set it, the particle filters do not).
     """
 
     method: str
@@ -158,6 +163,7 @@ class IdentificationResult:
     inspection_warnings: tuple[str, ...] = ()
     split: dict[str, Any] | None = None
     load_factors: LoadFactorPosterior | None = None
+    node_posterior: NodePosterior | None = None
 
     def replace(self, **changes: Any) -> IdentificationResult:
         """Return a copy with some fields changed (results are immutable)."""

@@ -51,7 +51,12 @@ from workbench.inference.core import (
     force_correlation,
     identifiability_report,
 )
-from workbench.inference.core.load_factors import LoadFactorPosterior, mix_load_factors
+from workbench.inference.core.load_factors import (
+    LoadFactorPosterior,
+    mix_load_factors,
+    point_load_factors,
+)
+from workbench.inference.core.node_posterior import NODE_LOAD_FACTORS, NodePosterior
 from workbench.inference.kalman import record_loglik
 from workbench.inference.methods.pf import PF_PARTICLES
 from workbench.inference.methods.rbpf import RBPF_PARTICLES, REJUVENATE
@@ -602,6 +607,19 @@ def exact_result(
     if force is None:  # pragma: no cover - only with an injected likelihood and no force
         raise RuntimeError("the exact posterior returned no force coefficients")
     report = post.identifiability
+    blf_mean, blf_var, _ = point_load_factors(
+        force.node_theta_mean, force.node_theta_var, problem.mass_kg, problem.harmonics
+    )
+    nodes = NodePosterior(
+        damping_ns_per_m=force.node_damping,
+        stiffness_n_per_m=force.node_stiffness,
+        weight=force.node_weights,
+        mass_held=force.mass_held,
+        blf_mean=blf_mean[:, :NODE_LOAD_FACTORS],
+        blf_sd=np.sqrt(np.maximum(blf_var[:, :NODE_LOAD_FACTORS], 0.0)),
+        prior=post.prior,
+        mass_kg=problem.mass_kg,
+    )
     return IdentificationResult(
         method="exact",
         draws=draws,
@@ -612,6 +630,7 @@ def exact_result(
         identifiability=report.to_json() if report is not None else {},
         grid_results=GridResults(post.to_json()),
         load_factors=force.load_factors,
+        node_posterior=nodes,
         problem=problem,
         **(common or {}),
     )

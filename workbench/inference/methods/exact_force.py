@@ -73,6 +73,8 @@ class ForcePosterior:
         from the sub-lattice when the filter ran on one.
     filtered_points : int
         How many (C, K) points the filter ran at, besides the MAP.
+    mass_held : float
+        Share of the grid posterior's mass the nodes hold (before renormalising).
     """
 
     coefficient_names: tuple[str, ...]
@@ -88,6 +90,7 @@ class ForcePosterior:
     node_theta_mean: FloatArray
     node_theta_var: FloatArray
     filtered_points: int = 0
+    mass_held: float = 1.0
 
 
 def _sublattice(
@@ -194,6 +197,7 @@ def _force_posterior(
         node_theta_mean=node_mean,
         node_theta_var=node_var,
         filtered_points=int(points.shape[0]),
+        mass_held=float(weights[sel].sum() / weights.sum()),
     )
 
 
@@ -204,7 +208,7 @@ def _moments_at(
     point_weights: FloatArray,
     map_x: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The filter's force moments at the MAP and at points of (C, K), in chunks.
+    """Return the filter's force moments at the MAP and at points of (C, K), in chunks.
 
     Returns the MAP's mean and covariance, every point's mean and variance, and the
     covariances summed with ``point_weights`` (the full covariances are not kept).

@@ -1,0 +1,175 @@
+"""Record posteriors kept for fits over many records (the hierarchical population issue).
+
+Each identification on the exact grid keeps its (C, K) posterior on the nodes holding nearly
+all the mass, with each node's load factors; a batch writes it into the record's file, and
+the population layer reads it back with the decision of docs/science.md 8.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from workbench.errors import UsageError
+from workbench.inference.core.node_posterior import NodePosterior
+from workbench.inference.core.problem import StiffnessDampingPrior
+from workbench.inference.pipeline.identification import identify
+from workbench.population.batch import run_batch
+from workbench.population.posteriors import StoredRecord, likelihood_use, read_record_posteriors
+from workbench.records.io import save_record
+from workbench.synth import deck_walk
+from workbench.synth.simulate import simulate_walking
+
+
+@pytest.fixture(scope="module")
+def deck_result():
+    # deck_walk seed 3 at 0.4 m/s^2, 20 s: a deck record the route identifies.
+    sim = deck_walk(3, deck_rms_m_s2=0.4, duration_s=20.0, sample_rate_hz=200)
+    return sim, identify(sim.record, seed=0)
+
+
+def test_the_nodes_hold_the_grid_posterior_and_the_mixed_load_factors(deck_result) -> None:
+    """The kept nodes' masses sum to one, hold all but a thousandth of the grid's mass, and
+    mixing their load factors gives the result's own load factors (the same arithmetic, so
+    to rounding)."""
+    _, result = deck_result
+    nodes = result.node_posterior
+    assert nodes is not None and nodes.kind == "grid"
+    assert nodes.weight.sum() == pytest.approx(1.0, rel=1e-12)
+    assert 0.999 - 1e-12 <= nodes.mass_held <= 1.0 + 1e-12
+    assert nodes.blf_mean.shape == (nodes.weight.size, 3) == nodes.blf_sd.shape
+    np.testing.assert_allclose(
+        nodes.weight @ nodes.blf_mean, result.load_factors.mean[:3], rtol=1e-12
+    )
+    # Every node lies in the prior box, where the prior is uniform.
+    box = nodes.prior
+    for values, (lo, hi) in (
+        (nodes.damping_ns_per_m, box.damping_ns_per_m),
+        (nodes.stiffness_n_per_m, box.stiffness_n_per_m),
+    ):
+        assert np.all((values >= lo) & (values <= hi))
+
+
+def test_the_nodes_masses_are_the_likelihoods_ratios(deck_result) -> None:
+    """Dividing the uniform prior out leaves the likelihood: the masses of two nodes are in
+    the ratio of the route's likelihood at them (up to the rounding of the exponentials)."""
+    from workbench.inference.surface.frf import deck_spectra
+
+    _, result = deck_result
+    nodes = result.node_posterior
+    spectra = deck_spectra(result.problem)
+    ll = spectra.loglik(None, nodes.damping_ns_per_m, nodes.stiffness_n_per_m)
+    np.testing.assert_allclose(
+        np.log(nodes.weight) - np.log(nodes.weight[0]), ll - ll[0], rtol=0, atol=1e-9
+    )
+
+
+def test_the_prior_in_modal_terms_is_minus_the_log_jacobian() -> None:
+    """``log_prior_modal`` against a finite-difference Jacobian of (C, K) -> (f_n, zeta):
+    central differences err by O(h^2), here below 1e-8 relative."""
+    box = StiffnessDampingPrior((100.0, 3000.0), (3000.0, 60000.0))
+    c = np.array([300.0, 900.0, 2500.0])
+    k = np.array([5000.0, 20000.0, 41000.0])
+    one = np.ones(3)
+    nodes = NodePosterior(c, k, one / 3, 1.0, np.ones((3, 3)), np.ones((3, 3)), box, 71.0)
+    m = 71.0
+
+    def modal(cc, kk):
+        return np.sqrt(kk / m) / (2 * np.pi), cc / (2 * np.sqrt(kk * m))
+
+    h_c, h_k = 1e-4 * c, 1e-4 * k
+    fk = (modal(c, k + h_k)[0] - modal(c, k - h_k)[0]) / (2 * h_k)
+    zc = (modal(c + h_c, k)[1] - modal(c - h_c, k)[1]) / (2 * h_c)
+    # d f_n / d C = 0, so |J| = (d f_n / d K)(d zeta / d C).
+    expected = -np.log(fk * zc)
+    got = nodes.log_prior_modal()
+    np.testing.assert_allclose(got - got[0], expected - expected[0], rtol=1e-8, atol=1e-8)
+
+
+def test_the_json_round_trip_and_a_malformed_posterior(deck_result) -> None:
+    _, result = deck_result
+    nodes = result.node_posterior
+    text = json.dumps(nodes.to_json(), allow_nan=False)
+    back = NodePosterior.from_json(json.loads(text), "rec.json, key 'posterior'")
+    # Ten significant digits are kept.
+    np.testing.assert_allclose(back.weight, nodes.weight, rtol=1e-9)
+    np.testing.assert_allclose(back.stiffness_n_per_m, nodes.stiffness_n_per_m, rtol=1e-9)
+    np.testing.assert_allclose(back.blf_mean, nodes.blf_mean, rtol=1e-9)
+    broken = json.loads(text)
+    broken["nodes"]["weight"] = broken["nodes"]["weight"][:-1]
+    with pytest.raises(UsageError, match=r"rec\.json, key 'posterior'.*one entry per node"):
+        NodePosterior.from_json(broken, "rec.json, key 'posterior'")
+    del broken["nodes"]
+    with pytest.raises(UsageError, match="malformed"):
+        NodePosterior.from_json(broken, "rec.json, key 'posterior'")
+
+
+def _stored(**kw):
+    base = dict(
+        path="r.csv",
+        subject="A",
+        pacing_hz=1.8,
+        identifiability="weakly identified",
+        c_and_k_from="deck transmissibility",
+        force_model_check_passed=None,
+        posterior=object(),
+    )
+    return StoredRecord(**{**base, **kw})
+
+
+def test_which_records_carry_a_trustworthy_likelihood() -> None:
+    """The decision of docs/science.md 8, one case each."""
+    assert likelihood_use(_stored()) is None
+    assert likelihood_use(_stored(identifiability="not identified")) is None  # deck: used
+    rigid = "time history, rigid floor"
+    failed = likelihood_use(_stored(c_and_k_from=rigid, force_model_check_passed=False))
+    assert failed is not None and "force-model check failed" in failed
+    assert likelihood_use(_stored(c_and_k_from=rigid, force_model_check_passed=True)) is None
+    unchecked = likelihood_use(_stored(c_and_k_from=rigid, identifiability="mostly prior"))
+    assert unchecked is not None and "mostly prior" in unchecked
+    assert "no stored posterior" in likelihood_use(_stored(posterior=None))
+    assert likelihood_use(_stored(problem="cannot be read")) == "cannot be read"
+    assert likelihood_use(_stored(pacing_hz=math.nan)) == "no pacing"
+
+
+@pytest.mark.slow
+def test_a_batch_keeps_every_records_posterior_and_reads_it_back(tmp_path) -> None:
+    """A deck walk and a rigid-floor walk through ``run_batch`` (defaults): both record files
+    hold their posterior; the deck one is used, the rigid one (the force-model check fails on
+    it) is left out with the reason; a record file with a broken posterior is kept with its
+    problem, not dropped."""
+    deck = deck_walk(
+        5, deck_rms_m_s2=0.4, deck_frequency_hz=3.15, pacing_hz=1.8, duration_s=20.0
+    ).record
+    rigid = simulate_walking(
+        mass_kg=70.0, pacing_hz=1.8, duration_s=20.0, sample_rate_hz=200, seed=4
+    ).record
+    save_record(deck.replace(subject="W1"), tmp_path / "recs" / "deck.csv")
+    save_record(rigid.replace(subject="W1"), tmp_path / "recs" / "rigid.csv")
+    (tmp_path / "recs" / "manifest.csv").write_text("path\ndeck.csv\nrigid.csv\n")
+    out = tmp_path / "out"
+    run_batch(tmp_path / "recs" / "manifest.csv", out)
+    stored = read_record_posteriors(out)
+    assert [r.path for r in stored] == ["deck.csv", "rigid.csv"]
+    by_path = {r.path: r for r in stored}
+    assert by_path["deck.csv"].c_and_k_from == "deck transmissibility"
+    assert by_path["deck.csv"].posterior is not None
+    assert likelihood_use(by_path["deck.csv"]) is None
+    assert by_path["deck.csv"].subject == "W1"
+    assert by_path["rigid.csv"].posterior is not None
+    # A simulated walk with the default per-step force: the check fails on it (as on the
+    # rigid-floor records of docs/validation/recovery.md), so its likelihood is not used.
+    assert by_path["rigid.csv"].force_model_check_passed is False
+    reason = likelihood_use(by_path["rigid.csv"])
+    assert reason is not None and "force-model check failed" in reason
+    # A hand-edited file with a broken posterior is reported, not dropped.
+    file = next(p for p in (out / "records").glob("*.json") if "deck" in p.read_text())
+    obj = json.loads(file.read_text())
+    obj["posterior"]["nodes"]["weight"] = "x"
+    file.write_text(json.dumps(obj))
+    again = {r.path: r for r in read_record_posteriors(out)}
+    assert again["deck.csv"].posterior is None
+    assert "cannot be read" in likelihood_use(again["deck.csv"])

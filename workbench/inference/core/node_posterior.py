@@ -1,0 +1,172 @@
+"""The posterior of (C, K) on its quadrature nodes, kept for fits over many records.
+
+A population law fitted to point estimates uses one number per record and drops the records
+that did not pass; a law fitted to every record's *likelihood* weighs a record that pins f_n
+to 2 % against one that leaves it at 20 %, and uses both (docs/science.md 8). The exact grid
+posterior (and the deck route's, which is one) holds that likelihood on its nodes, so an
+identification keeps them:
+
+- the nodes that hold all but a thousandth of the posterior mass (those the force mixture
+  uses, :mod:`workbench.inference.methods.exact_force`), their posterior mass renormalised
+  over them, and the share of the whole grid's mass they hold;
+- the prior they were computed under: uniform over the prior box in (C, K), so within the
+  box the likelihood is proportional to the mass (the cells are alike);
+- each node's walk load factors BLF1-3 (those the population laws use) given its (C, K),
+  mean and sd (:func:`~workbench.inference.core.load_factors.point_load_factors`).
+
+In the walker's own terms: a density uniform in (C, K) is, in (f_n, zeta), proportional to
+``1 / |J|`` with ``J = d(f_n, zeta) / d(C, K)``; ``f_n = sqrt(K / M) / (2 pi)`` depends on K
+alone and ``zeta = C / (2 sqrt(K M))`` on C linearly, so ``|J| = (f_n / (2 K)) / (2 sqrt(K
+M))``. :meth:`NodePosterior.log_prior_modal` is ``-log |J|``: dividing it out of the node
+masses leaves the likelihood of (f_n, zeta) at the nodes, whatever population density a
+later fit multiplies in.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from workbench.errors import UsageError
+from workbench.inference.core.problem import StiffnessDampingPrior
+
+__all__ = ["NODE_LOAD_FACTORS", "NodePosterior"]
+
+FloatArray = NDArray[np.float64]
+
+#: Load factors kept per node: BLF1-3, those the population laws use.
+NODE_LOAD_FACTORS = 3
+#: Significant digits the JSON keeps (as ``results.csv`` does).
+_DIGITS = 10
+
+
+def _rounded(values: Any) -> Any:
+    return np.vectorize(lambda x: float(f"{x:.{_DIGITS}g}"), otypes=[float])(values).tolist()
+
+
+@dataclass(frozen=True, eq=False)
+class NodePosterior:
+    """The posterior of (C, K) on the nodes that hold nearly all its mass (module docstring).
+
+    Attributes
+    ----------
+    damping_ns_per_m, stiffness_n_per_m : ndarray, shape (B,)
+        The nodes' C [N s/m] and K [N/m].
+    weight : ndarray, shape (B,)
+        Posterior mass of each node, renormalised over the nodes (sums to one).
+    mass_held : float
+        Share of the whole posterior's mass the nodes hold before renormalising.
+    blf_mean, blf_sd : ndarray, shape (B, 3)
+        The walk's mean load factors BLF1-3 given each node's (C, K), and their sd (fewer
+        columns where the model has fewer harmonics).
+    prior : StiffnessDampingPrior
+        The uniform prior box over (C, K) the posterior was computed under.
+    mass_kg : float
+        Body mass [kg].
+    kind : str
+        ``"grid"``: the exact posterior's nodes, masses their cells'.
+    """
+
+    damping_ns_per_m: FloatArray
+    stiffness_n_per_m: FloatArray
+    weight: FloatArray
+    mass_held: float
+    blf_mean: FloatArray
+    blf_sd: FloatArray
+    prior: StiffnessDampingPrior
+    mass_kg: float
+    kind: str = "grid"
+
+    @property
+    def natural_frequency_hz(self) -> FloatArray:
+        """Natural frequency at every node [Hz]."""
+        return np.sqrt(self.stiffness_n_per_m / self.mass_kg) / (2.0 * math.pi)
+
+    @property
+    def damping_ratio(self) -> FloatArray:
+        """Damping ratio at every node."""
+        return self.damping_ns_per_m / (2.0 * np.sqrt(self.stiffness_n_per_m * self.mass_kg))
+
+    def log_prior_modal(self) -> FloatArray:
+        """Log density of the uniform (C, K) prior in (f_n, zeta) at every node, up to a constant.
+
+        ``-log |J|`` (module docstring).
+        """
+        k = self.stiffness_n_per_m
+        jac = (self.natural_frequency_hz / (2.0 * k)) / (2.0 * np.sqrt(k * self.mass_kg))
+        return np.asarray(-np.log(jac), dtype=np.float64)
+
+    def to_json(self) -> dict[str, Any]:
+        """Return a JSON-able dict (numbers to ten significant digits)."""
+        return {
+            "kind": self.kind,
+            "prior": {
+                "kind": "uniform",
+                "damping_ns_per_m": list(self.prior.damping_ns_per_m),
+                "stiffness_n_per_m": list(self.prior.stiffness_n_per_m),
+            },
+            "mass_kg": float(self.mass_kg),
+            "mass_held": float(f"{self.mass_held:.{_DIGITS}g}"),
+            "nodes": {
+                "damping_ns_per_m": _rounded(self.damping_ns_per_m),
+                "stiffness_n_per_m": _rounded(self.stiffness_n_per_m),
+                "weight": _rounded(self.weight),
+                "blf_mean": _rounded(self.blf_mean),
+                "blf_sd": _rounded(self.blf_sd),
+            },
+        }
+
+    @classmethod
+    def from_json(cls, obj: Any, where: str) -> NodePosterior:
+        """Read :meth:`to_json`'s dict back; a malformed one is a UsageError naming ``where``.
+
+        Parameters
+        ----------
+        obj : dict
+            The stored posterior.
+        where : str
+            What the dict came from (a file and key), for the error's sentence.
+        """
+        fix = "identify the record again with this version (its batch with --resume)"
+        try:
+            nodes = obj["nodes"]
+            prior = obj["prior"]
+            c = np.asarray(nodes["damping_ns_per_m"], dtype=np.float64)
+            k = np.asarray(nodes["stiffness_n_per_m"], dtype=np.float64)
+            w = np.asarray(nodes["weight"], dtype=np.float64)
+            blf_mean = np.asarray(nodes["blf_mean"], dtype=np.float64)
+            blf_sd = np.asarray(nodes["blf_sd"], dtype=np.float64)
+            box = StiffnessDampingPrior(
+                tuple(prior["damping_ns_per_m"]),
+                tuple(prior["stiffness_n_per_m"]),
+            )
+            mass_kg = float(obj["mass_kg"])
+            held = float(obj["mass_held"])
+            kind = str(obj.get("kind", "grid"))
+        except (KeyError, TypeError, ValueError, UsageError) as err:
+            raise UsageError(f"{where}: the stored posterior is malformed ({err}); {fix}") from None
+        b = c.shape
+        shapes_ok = (
+            c.ndim == 1
+            and c.size > 0
+            and k.shape == b
+            and w.shape == b
+            and blf_mean.ndim == 2
+            and blf_mean.shape[0] == c.size
+            and blf_sd.shape == blf_mean.shape
+        )
+        if not shapes_ok:
+            raise UsageError(
+                f"{where}: the stored posterior's node arrays do not have one entry per node; "
+                f"{fix}"
+            )
+        finite = all(np.all(np.isfinite(a)) for a in (c, k, w, blf_mean, blf_sd))
+        if not finite or np.any(w < 0) or w.sum() <= 0 or np.any(k <= 0) or mass_kg <= 0:
+            raise UsageError(
+                f"{where}: the stored posterior holds non-finite or negative numbers; {fix}"
+            )
+        return cls(c, k, w / w.sum(), held, blf_mean, blf_sd, box, mass_kg, kind)
