@@ -1,0 +1,590 @@
+"""The hierarchical population model: the likelihood integration, the sampler, its diagnostics.
+
+Every check is against an exact answer: a closed-form marginal likelihood, the posterior of
+Bayesian linear regression, a known simulated population; Monte Carlo tolerances come from
+the fit's own effective sample sizes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import special, stats
+
+from workbench.errors import UsageError
+from workbench.population.hierarchy import (
+    ESS_MIN,
+    LAWS,
+    PACING_REF_HZ,
+    RHAT_MAX,
+    RecordLikelihood,
+    fit_hierarchical,
+    record_log_marginal,
+)
+
+# A realistic population: the seed's laws at the reference pacing, residual sds of the size
+# a walking study reports, walker sds a little below them. Per law: intercept at the
+# reference pacing, slope, residual sd, walker sd (log scale for BLF2 and BLF3).
+TRUTH = {
+    "natural_frequency_hz": (1.92, 0.30, 0.15, 0.12),
+    "damping_ratio": (0.49, -0.21, 0.05, 0.04),
+    "blf1": (0.35, 0.20, 0.04, 0.03),
+    "blf2": (math.log(0.07), 0.0, 0.30, 0.20),
+    "blf3": (math.log(0.06), 0.0, 0.30, 0.20),
+}
+
+
+def _law_means(pacing_hz: float) -> np.ndarray:
+    """The five laws' means (log scale for BLF2, BLF3) at a pacing, no walker effect."""
+    return np.array([a + b * (pacing_hz - PACING_REF_HZ) for a, b, _, _ in TRUTH.values()])
+
+
+def _truth_parameters(with_walker_sd: bool = True) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for law, (a, b, sigma, tau) in TRUTH.items():
+        if law in ("blf2", "blf3"):
+            out[f"{law}.mu"] = a
+        else:
+            out[f"{law}.slope"] = b
+            out[f"{law}.intercept_at_ref"] = a
+        out[f"{law}.residual_sd"] = sigma
+        if with_walker_sd:
+            out[f"{law}.walker_sd"] = tau
+    return out
+
+
+def _blf_nodes(latent: np.ndarray, sd: np.ndarray, rng: np.random.Generator, b: int):
+    """BLF1-3 node means and sds observed from latent (BLF1, log BLF2, log BLF3) values.
+
+    BLF1's mean is N(BLF1, sd1^2); log BLF2's mean is N(log BLF2, rel^2) with sd = rel * mean,
+    so the model's delta-method likelihood is this generating process's exact one.
+    """
+    obs1 = latent[0] + sd[0] * rng.standard_normal()
+    obs23 = np.exp(latent[1:] + sd[1:] * rng.standard_normal(2))
+    mean = np.array([obs1, *obs23])
+    sds = np.array([sd[0], *(sd[1:] * obs23)])
+    return np.tile(mean, (b, 1)), np.tile(sds, (b, 1))
+
+
+def _grid_record(
+    path: str,
+    subject: str | None,
+    pacing_hz: float,
+    latent: np.ndarray,
+    sd: np.ndarray,
+    rng: np.random.Generator,
+    nodes: int = 9,
+    span: float = 4.0,
+) -> RecordLikelihood:
+    """A record whose f_n and zeta likelihood is normal, on a product grid around the data.
+
+    ``latent`` holds the record's five true values, ``sd`` the likelihood sds (f_n, zeta,
+    BLF1, and the relative sds of BLF2 and BLF3). The data y ~ N(latent, sd^2); the grid
+    spans y +- ``span`` sd with ``nodes`` nodes a side (spacing sd for the defaults, at which
+    sums of normal densities over the lattice are exact to ~1e-8).
+    """
+    y = latent[:2] + sd[:2] * rng.standard_normal(2)
+    f, z = np.meshgrid(*(y[i] + sd[i] * np.linspace(-span, span, nodes) for i in range(2)))
+    f, z = f.ravel(), z.ravel()
+    log_weight = stats.norm.logpdf(f, y[0], sd[0]) + stats.norm.logpdf(z, y[1], sd[1])
+    mean, sds = _blf_nodes(latent[2:], sd[2:], rng, f.size)
+    return RecordLikelihood(path, subject, pacing_hz, f, z, log_weight, np.zeros(f.size), mean, sds)
+
+
+def _population(
+    seed: int, walkers: int, per_walker: int, walker_sd_scale: float = 1.0
+) -> list[RecordLikelihood]:
+    """Records of a simulated population with walker effects (TRUTH), narrow grids."""
+    rng = np.random.default_rng([seed, 99])
+    base_sd = np.array([0.03, 0.01, 0.01, 0.05, 0.05])
+    taus = np.array([t[3] for t in TRUTH.values()]) * walker_sd_scale
+    sigmas = np.array([t[2] for t in TRUTH.values()])
+    records = []
+    for w in range(walkers):
+        effect = taus * rng.standard_normal(5)
+        for k in range(per_walker):
+            pacing = rng.uniform(1.5, 2.3)
+            latent = _law_means(pacing) + effect + sigmas * rng.standard_normal(5)
+            sd = base_sd * rng.uniform(0.5, 1.5)  # records differ in how well they pin
+            records.append(_grid_record(f"w{w}_r{k}.csv", f"w{w}", pacing, latent, sd, rng))
+    return records
+
+
+# -- 1. the likelihood integration ---------------------------------------------------------
+
+
+def test_record_log_marginal_is_the_conjugate_normal_marginal():
+    """Grid quadrature of N(y; x, s^2) N(x; law, sigma^2) equals N(y; law, sigma^2 + s^2).
+
+    The record's posterior was computed under a non-uniform prior (exp(0.8 x)), which
+    record_log_marginal must divide out. zeta and the load factors sit on exact nodes, so
+    their terms are closed forms too: N(zeta0; .), N(m1; ., sigma1^2 + s1^2) and, for BLF2
+    and BLF3, N(log m; mu, sigma^2 + (s/m)^2) / m.
+    """
+    y, s, pacing = 2.31, 0.07, 2.05
+    step = s / 20.0
+    x = y + step * np.arange(-200, 201)  # +-10 s: the grid's truncation is e^-50
+    log_prior = 0.8 * x
+    log_weight = stats.norm.logpdf(y, x, s) + math.log(step) + log_prior + 3.0
+    zeta0, m, sd = 0.41, np.array([0.37, 0.08, 0.05]), np.array([0.02, 0.01, 0.004])
+    rec = RecordLikelihood(
+        "conjugate.csv",
+        None,
+        pacing,
+        x,
+        np.full(x.size, zeta0),
+        log_weight,
+        log_prior,
+        np.tile(m, (x.size, 1)),
+        np.tile(sd, (x.size, 1)),
+    )
+    for shift in (0.0, 0.2, -0.35):
+        params = _truth_parameters(with_walker_sd=False)
+        params["natural_frequency_hz.intercept_at_ref"] += shift
+        a = params  # short name for the closed form below
+        mean = {
+            law: a[f"{law}.intercept_at_ref"] + a[f"{law}.slope"] * (pacing - PACING_REF_HZ)
+            for law in ("natural_frequency_hz", "damping_ratio", "blf1")
+        }
+        sig = {law: a[f"{law}.residual_sd"] for law in LAWS}
+        exact = (
+            3.0
+            + stats.norm.logpdf(y, mean["natural_frequency_hz"], math.hypot(sig[LAWS[0]], s))
+            + stats.norm.logpdf(zeta0, mean["damping_ratio"], sig["damping_ratio"])
+            + stats.norm.logpdf(m[0], mean["blf1"], math.hypot(sig["blf1"], sd[0]))
+        )
+        for i, law in ((1, "blf2"), (2, "blf3")):
+            rel = sd[i] / m[i]
+            exact += stats.norm.logpdf(math.log(m[i]), a[f"{law}.mu"], math.hypot(sig[law], rel))
+            exact -= math.log(m[i])
+        # The Gaussian sum over a lattice of spacing s/20 is exact to far below 1e-12
+        # (Poisson summation); 1e-9 leaves room for the rounding of 401 terms.
+        assert record_log_marginal(rec, a) == pytest.approx(exact, abs=1e-9)
+    # The seed's form (intercept at f_p = 0) names the same law.
+    seed_form = dict(params)
+    at_ref = seed_form.pop("natural_frequency_hz.intercept_at_ref")
+    seed_form["natural_frequency_hz.intercept"] = (
+        at_ref - seed_form["natural_frequency_hz.slope"] * PACING_REF_HZ
+    )
+    assert record_log_marginal(rec, seed_form) == pytest.approx(record_log_marginal(rec, params))
+
+
+def test_the_log_scale_term_is_the_integral_of_the_load_factor_likelihood():
+    """BLF2's term N(log m; mu, sigma^2 + (s/m)^2) / m against the exact integral.
+
+    The exact integral of the likelihood N(e^z; m, s^2) against N(z; mu, sigma^2) over
+    z = log BLF, by quadrature. The delta method is exact to second order: the error is
+    about 3.2 (s/m)^2 (it quarters when s/m halves), where leaving out the Jacobian 1/m
+    would be off by log m = -2.5.
+    """
+    m2 = 0.08
+    params = _truth_parameters(with_walker_sd=False)
+    mu, sigma = params["blf2.mu"], params["blf2.residual_sd"]
+
+    def record(blf2_sd: float) -> RecordLikelihood:
+        return RecordLikelihood(
+            "one_node.csv",
+            None,
+            1.8,
+            np.array([1.9]),
+            np.array([0.5]),
+            np.array([0.0]),
+            np.array([0.0]),
+            np.array([[0.35, m2, 0.05]]),
+            np.array([[0.01, blf2_sd, 0.001]]),
+        )
+
+    errors = []
+    for rel in (0.01, 0.005):
+        z = np.linspace(math.log(m2) - 12 * rel, math.log(m2) + 12 * rel, 20001)
+        integrand = stats.norm.pdf(np.exp(z), m2, rel * m2) * stats.norm.pdf(z, mu, sigma)
+        exact = math.log(np.trapezoid(integrand, z))
+        # BLF2's term: the record's marginal less the other laws' closed forms (one node at
+        # the reference pacing, log_weight = log_prior = 0).
+        other = sum(
+            stats.norm.logpdf(value, params[f"{law}.intercept_at_ref"], sd)
+            for law, value, sd in (
+                ("natural_frequency_hz", 1.9, params["natural_frequency_hz.residual_sd"]),
+                ("damping_ratio", 0.5, params["damping_ratio.residual_sd"]),
+                ("blf1", 0.35, math.hypot(params["blf1.residual_sd"], 0.01)),
+            )
+        )
+        other += stats.norm.logpdf(
+            math.log(0.05), params["blf3.mu"], math.hypot(params["blf3.residual_sd"], 0.02)
+        ) - math.log(0.05)
+        term = record_log_marginal(record(rel * m2), params) - other
+        errors.append(exact - term)
+        assert term == pytest.approx(exact, abs=5 * rel**2)
+    assert errors[0] / errors[1] == pytest.approx(4.0, rel=0.05)
+
+
+# -- 2 and 6. the sampler against Bayesian linear regression ------------------------------
+
+
+N_PINNED = 40
+
+
+@pytest.fixture(scope="module")
+def pinned():
+    """Forty records pinned to their values (likelihood sds 1e-5 of the residual sds)."""
+    rng = np.random.default_rng(7)
+    records, values, pacings = [], [], []
+    for r in range(N_PINNED):
+        pacing = rng.uniform(1.5, 2.3)
+        latent = _law_means(pacing) + np.array([t[2] for t in TRUTH.values()]) * (
+            rng.standard_normal(5)
+        )
+        # Exact-enough nodes: a 3 x 3 grid 1e-6 wide and load factors with sd 1e-7.
+        sd = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-7])
+        rec = _grid_record(f"p{r}.csv", None, pacing, latent, sd, rng, nodes=3, span=1.0)
+        records.append(rec)
+        values.append(
+            [
+                np.mean(rec.natural_frequency_hz),
+                np.mean(rec.damping_ratio),
+                rec.blf_mean[0, 0],
+                math.log(rec.blf_mean[0, 1]),
+                math.log(rec.blf_mean[0, 2]),
+            ]
+        )
+        pacings.append(pacing)
+    fit = fit_hierarchical(records, seed=3, chains=4, draws=1000, burn=200)
+    return fit, np.array(values), np.array(pacings)
+
+
+def _regression_posterior(y: np.ndarray, design: np.ndarray):
+    """Exact posterior of Bayesian linear regression, flat on beta, uniform on sigma.
+
+    p(beta, sigma | y) is proportional to sigma^-n exp(-SS(beta) / (2 sigma^2)) (the uniform
+    prior on sigma adds nothing). With SS(beta) = SSE + (beta - b)' X'X (beta - b):
+
+    - integrating sigma out leaves SS(beta)^(-(n-1)/2), a multivariate t whose degrees of
+      freedom nu satisfy (nu + p) = n - 1: nu = n - p - 1 (n - 3 for a line, one fewer than
+      under the 1/sigma prior), scale matrix SSE / nu (X'X)^-1;
+    - integrating beta out leaves sigma^-(n-p) exp(-SSE / (2 sigma^2)) in sigma, i.e.
+      sigma^2 density (sigma^2)^-((n-p-1)/2 + 1) exp(-SSE / (2 sigma^2)): sigma^2 = SSE /
+      chi^2 with nu = n - p - 1 degrees of freedom.
+
+    Returns the frozen t distributions of each coefficient (and of the intercept at 0 for a
+    line), and (SSE, nu) for sigma.
+    """
+    n, p = design.shape
+    xtx_inv = np.linalg.inv(design.T @ design)
+    coef = xtx_inv @ design.T @ y
+    sse = float(np.sum((y - design @ coef) ** 2))
+    nu = n - p - 1
+    scale2 = sse / nu
+    out = {}
+    combos = {"at_ref": np.eye(p)[0]}
+    if p == 2:
+        combos["slope"] = np.array([0.0, 1.0])
+        combos["intercept"] = np.array([1.0, -PACING_REF_HZ])
+    for key, c in combos.items():
+        out[key] = stats.t(nu, loc=float(c @ coef), scale=math.sqrt(scale2 * c @ xtx_inv @ c))
+    return out, sse, nu
+
+
+def _sigma_moments(sse: float, nu: int) -> tuple[float, float]:
+    """Mean and sd of sigma when sigma^2 = SSE / chi^2_nu."""
+    mean = math.sqrt(sse / 2.0) * math.exp(special.gammaln((nu - 1) / 2) - special.gammaln(nu / 2))
+    return mean, math.sqrt(sse / (nu - 2) - mean**2)
+
+
+def test_the_sampler_gives_the_posterior_of_bayesian_linear_regression(pinned):
+    fit, values, pacings = pinned
+    assert not fit.walker_effects and fit.walkers == N_PINNED
+    assert fit.notes and "no walker has two or more records" in fit.notes[0]
+    assert not any(n.endswith("walker_sd") for n in fit.parameter_names)
+    flat = fit.draws.reshape(-1, fit.draws.shape[2])
+    checked = 0
+    for law_index, law in enumerate(LAWS):
+        y = values[:, law_index]
+        line = law not in ("blf2", "blf3")
+        design = np.column_stack([np.ones(y.size), pacings - PACING_REF_HZ])[:, : 2 if line else 1]
+        coefs, sse, nu = _regression_posterior(y, design)
+        s_mean, s_sd = _sigma_moments(sse, nu)
+        exact = {
+            f"{law}.residual_sd": (
+                s_mean,
+                s_sd,
+                [math.sqrt(sse / stats.chi2.ppf(1 - q, nu)) for q in (0.025, 0.975)],
+                # density of sigma at a quantile: chi^2 density times |d chi^2 / d sigma|
+                lambda v, sse=sse, nu=nu: stats.chi2.pdf(sse / v**2, nu) * 2 * sse / v**3,
+            )
+        }
+        names = {"slope": "slope", "at_ref": "intercept_at_ref", "intercept": "intercept"}
+        for key, dist in coefs.items():
+            name = f"{law}.{names[key]}" if line else f"{law}.mu"
+            exact[name] = (dist.mean(), dist.std(), list(dist.ppf([0.025, 0.975])), dist.pdf)
+        for name, (mean, sd, quantiles, pdf) in exact.items():
+            i = fit.parameter_names.index(name)
+            draws = flat[:, i]
+            bulk, tail = fit.ess_bulk[i], fit.ess_tail[i]
+            # Monte Carlo standard errors from the ESS: sd / sqrt(ESS) for the mean;
+            # sd sqrt((kurtosis - 1) / (4 ESS)) for the sd, with the kurtosis bounded by 4
+            # (t with 37 dof: 3.18; sigma: about 3.2); sqrt(q (1 - q) / ESS_tail) / density
+            # for a quantile. Four of them: 64 comparisons stay clear of chance failures.
+            # The residual sd's mean tells the uniform prior on sigma from 1/sigma: the one
+            # more degree of freedom of the latter moves it by several of these errors.
+            assert abs(draws.mean() - mean) < 4 * sd / math.sqrt(bulk), name
+            assert abs(draws.std(ddof=1) - sd) < 4 * sd * math.sqrt(3 / (4 * bulk)), name
+            for q, exact_q in zip((0.025, 0.975), quantiles, strict=True):
+                mc_se = math.sqrt(q * (1 - q) / tail) / pdf(exact_q)
+                assert abs(np.quantile(draws, q) - exact_q) < 4 * mc_se, (name, q)
+            checked += 1
+    assert checked == 3 * 4 + 2 * 2
+
+
+def test_diagnostics_are_reported_and_clear_on_a_well_posed_problem(pinned):
+    fit = pinned[0]
+    assert fit.rhat.shape == fit.ess_bulk.shape == (len(fit.parameter_names),)
+    assert np.all(fit.rhat < RHAT_MAX) and np.all(fit.rhat > 0.99)
+    assert np.all(fit.ess_bulk > ESS_MIN) and np.all(fit.ess_tail > ESS_MIN)
+    assert fit.flagged == ()
+    out = fit.to_json()
+    json.dumps(out, allow_nan=False)
+    assert out["diagnostics"]["converged"] and out["diagnostics"]["rhat_max"] < RHAT_MAX
+    assert out["records_used"] == N_PINNED and out["walker_effects"] is False
+    law = out["laws"]["natural_frequency_hz"]
+    assert law["walker_sd"] is None and law["slope"]["ci95"][0] < law["slope"]["mean"]
+    assert out["laws"]["blf2"]["scale"] == "log" and "mu" in out["laws"]["blf2"]
+    # The mean law's band: at the reference pacing it is the intercept's interval.
+    band = fit.law_band("natural_frequency_hz", [1.5, PACING_REF_HZ, 2.5])
+    ci = fit.conf_int().loc["natural_frequency_hz.intercept_at_ref"]
+    assert band.loc[1, "ci_low"] == pytest.approx(ci["lower"])
+    assert band.loc[1, "ci_high"] == pytest.approx(ci["upper"])
+    assert (band.ci_low < band["mean"]).all() and (band["mean"] < band.ci_high).all()
+    assert fit.law_band("blf3", [1.7, 2.0])["mean"].nunique() == 1
+    # A user's check of the fit: the records' marginal likelihood at the posterior mean.
+    assert math.isfinite(record_log_marginal(_population(0, 1, 1)[0], fit.params))
+
+
+def test_the_inference_data_holds_every_draw(pinned):
+    fit = pinned[0]
+    idata = fit.to_inference_data()
+    slope = idata.posterior["blf1.slope"].to_numpy()
+    assert slope.shape == fit.draws.shape[:2]
+    np.testing.assert_array_equal(slope, fit.draws[:, :, fit.parameter_names.index("blf1.slope")])
+
+
+# -- 3. walker effects -------------------------------------------------------------------
+
+
+COVERAGE_SEEDS = range(10)  # stated in advance
+
+
+@pytest.mark.slow
+def test_walker_effects_are_recovered_and_the_intervals_cover_the_truth():
+    """30 walkers x 6 records, ten populations: 95 % intervals hold the truth.
+
+    The 18 parameters (per linear law slope, intercept, residual and walker sd; per
+    lognormal law mu, residual and walker sd) over the seeds 0-9 are 180 cases. If each
+    interval misses with probability 0.05, independently, the misses are Binomial(180,
+    0.05); the floor allows at most the k with P(X > k) < 1 % (k = 16, 9 expected).
+    """
+    truth = _truth_parameters()
+    cases = len(truth) * len(COVERAGE_SEEDS)
+    k = int(stats.binom.ppf(0.99, cases, 0.05))
+    while stats.binom.sf(k, cases, 0.05) >= 0.01:
+        k += 1
+    misses, walker_sd = [], {law: [] for law in LAWS}
+    for seed in COVERAGE_SEEDS:
+        fit = fit_hierarchical(_population(seed, 30, 6), seed=seed, chains=2, draws=600, burn=200)
+        assert fit.walker_effects and fit.walkers == 30 and fit.records_used == 180
+        ci = fit.conf_int()
+        for name, value in truth.items():
+            if not ci.loc[name, "lower"] < value < ci.loc[name, "upper"]:
+                misses.append((seed, name))
+        for law in LAWS:
+            walker_sd[law].append(fit.params[f"{law}.walker_sd"])
+    assert len(misses) <= k, misses
+    # tau recovered: the mean over ten populations of its posterior mean (each with a
+    # relative sd of about 15 % from 30 walkers, so about 5 % for the mean of ten).
+    for law, (_, _, _, tau) in TRUTH.items():
+        assert np.mean(walker_sd[law]) == pytest.approx(tau, rel=0.15), law
+
+
+def test_walker_effects_follow_the_subjects():
+    """One population, fitted with and without its walkers' ids: the walker sd is found.
+
+    Without the ids each record is its own walker, so the walker effect joins the residual:
+    its sd becomes sqrt(sigma^2 + tau^2).
+    """
+    records = _population(11, 12, 5)
+    fit = fit_hierarchical(records, seed=1, chains=2, draws=300, burn=100)
+    assert fit.walker_effects and fit.walkers == 12 and not fit.notes
+    anonymous = [
+        RecordLikelihood(
+            r.path,
+            None,
+            r.pacing_hz,
+            r.natural_frequency_hz,
+            r.damping_ratio,
+            r.log_weight,
+            r.log_prior,
+            r.blf_mean,
+            r.blf_sd,
+        )
+        for r in records
+    ]
+    pooled = fit_hierarchical(anonymous, seed=1, chains=2, draws=300, burn=100)
+    assert not pooled.walker_effects and pooled.walkers == 60
+    for law in ("natural_frequency_hz", "blf2"):
+        total = math.hypot(fit.params[f"{law}.residual_sd"], fit.params[f"{law}.walker_sd"])
+        # Two fits of the same data: the pooled residual sd is the hierarchical model's
+        # total sd to within its posterior sd (about 10 % with 60 records).
+        assert pooled.params[f"{law}.residual_sd"] == pytest.approx(total, rel=0.15)
+    forced = fit_hierarchical(records, seed=1, chains=2, draws=20, burn=0, walker_effects=False)
+    assert not forced.walker_effects and "on request" in forced.notes[0]
+
+
+def test_the_walker_sd_mixes_when_the_walkers_do_not_differ():
+    """A population without walker effects, fitted with them: tau's posterior piles at 0.
+
+    There the plain Gibbs step tau^2 | u barely moves (the effects sit at the scale of tau);
+    tau drawn with the effects integrated out mixes as well as the rest.
+    """
+    fit = fit_hierarchical(_population(3, 20, 4, walker_sd_scale=0.0), seed=0, draws=500)
+    assert fit.walker_effects
+    assert fit.flagged == (), dict(zip(fit.parameter_names, fit.ess_bulk.round(), strict=True))
+    for law in LAWS:
+        ci = fit.conf_int().loc[f"{law}.walker_sd"]
+        # The residual sd holds the spread; the walker sd's interval reaches down to 0.
+        assert ci["lower"] < 0.2 * TRUTH[law][2] and ci["upper"] < TRUTH[law][2]
+
+
+# -- 4. wide, truncated likelihoods ---------------------------------------------------------
+
+
+#: The (f_n, zeta) box every record's posterior lives on: the population's laws over the
+#: pacings 1.5-2.3 Hz +- 4.5 residual sds, so the population's mass outside is below 1e-5.
+BOX = ((1.20, 2.70), (0.12, 0.78))
+
+
+def _truncated_record(path, pacing, latent, rng, blf_sd, wide):
+    """A record on the box's 25 x 25 grid, its nodes those within 5 sd of its likelihood peak.
+
+    ``wide``: likelihood sds twice the residual sds, so many records' likelihoods are cut
+    by the box's edge (their nodes cover only part of the box). Otherwise one node at the
+    record's value.
+    """
+    if not wide:
+        return _grid_record(path, None, pacing, latent, blf_sd, rng, nodes=1, span=0.0)
+    sd = np.array([0.30, 0.10])
+    y = latent[:2] + sd * rng.standard_normal(2)
+    f, z = np.meshgrid(*(np.linspace(*BOX[i], 25) for i in range(2)))
+    f, z = f.ravel(), z.ravel()
+    log_lik = stats.norm.logpdf(f, y[0], sd[0]) + stats.norm.logpdf(z, y[1], sd[1])
+    keep = log_lik > log_lik.max() - 12.5
+    mean, sds = _blf_nodes(latent[2:], blf_sd[2:], rng, int(keep.sum()))
+    # The posterior under the box's uniform prior in (C, K): log_prior is the Jacobian's
+    # log, any smooth function will do; the likelihood is what remains.
+    log_prior = -np.log(f[keep]) - 0.5 * np.log(z[keep])
+    return RecordLikelihood(
+        path, None, pacing, f[keep], z[keep], log_lik[keep] + log_prior, log_prior, mean, sds
+    )
+
+
+def test_wide_truncated_records_widen_the_intervals_without_bias():
+    rng = np.random.default_rng(21)
+    sigmas = np.array([t[2] for t in TRUTH.values()])
+    blf_sd = np.array([1e-6, 1e-6, 1e-5, 1e-5, 1e-5])
+    pinned, mixed, cut = [], [], 0
+    for r in range(50):
+        pacing = rng.uniform(1.5, 2.3)
+        latent = _law_means(pacing) + sigmas * rng.standard_normal(5)
+        state = rng.bit_generator.state
+        pinned.append(_truncated_record(f"r{r}.csv", pacing, latent, rng, blf_sd, False))
+        rng.bit_generator.state = state  # the same load factors in both
+        rec = _truncated_record(f"r{r}.csv", pacing, latent, rng, blf_sd, r % 2 == 0)
+        mixed.append(rec)
+        edge = (
+            np.isclose(rec.natural_frequency_hz[:, None], BOX[0]).any()
+            or np.isclose(rec.damping_ratio[:, None], BOX[1]).any()
+        )
+        cut += int(r % 2 == 0 and edge)
+    assert cut >= 10  # the box truncates many of the 25 wide likelihoods
+    sharp = fit_hierarchical(pinned, seed=5, chains=4, draws=600, burn=200)
+    blurred = fit_hierarchical(mixed, seed=5, chains=4, draws=600, burn=200)
+    assert blurred.records_used == 50
+    truth = _truth_parameters(with_walker_sd=False)
+    ci_s, ci_b = sharp.conf_int(), blurred.conf_int()
+    for law in ("natural_frequency_hz", "damping_ratio"):
+        for part in ("slope", "intercept_at_ref", "residual_sd"):
+            name = f"{law}.{part}"
+            width_s = ci_s.loc[name, "upper"] - ci_s.loc[name, "lower"]
+            width_b = ci_b.loc[name, "upper"] - ci_b.loc[name, "lower"]
+            assert width_b > 1.1 * width_s, name
+            assert ci_b.loc[name, "lower"] < truth[name] < ci_b.loc[name, "upper"], name
+            # Unbiased: the pinned posterior is the blurred one plus what the wide records
+            # hid, so their means differ by about sqrt(sd_b^2 - sd_s^2); three of those and
+            # four Monte Carlo errors of each mean.
+            sd_b, sd_s = blurred.bse[name], sharp.bse[name]
+            i = blurred.parameter_names.index(name)
+            mc = 4 * (sd_b / math.sqrt(blurred.ess_bulk[i]) + sd_s / math.sqrt(sharp.ess_bulk[i]))
+            gap = abs(blurred.params[name] - sharp.params[name])
+            assert gap < 3 * math.sqrt(max(sd_b**2 - sd_s**2, 0.0)) + mc, name
+
+
+# -- 5. determinism and refusals -----------------------------------------------------------
+
+
+def test_a_seed_fixes_every_draw():
+    records = _population(2, 4, 3)
+    a = fit_hierarchical(records, seed=4, chains=2, draws=30, burn=5)
+    b = fit_hierarchical(records, seed=4, chains=2, draws=30, burn=5)
+    c = fit_hierarchical(records, seed=5, chains=2, draws=30, burn=5)
+    np.testing.assert_array_equal(a.draws, b.draws)
+    assert not np.array_equal(a.draws, c.draws)
+    assert not np.array_equal(a.draws[0], a.draws[1])  # chains differ
+
+
+def _with(record: RecordLikelihood, **changes) -> RecordLikelihood:
+    fields = {k: getattr(record, k) for k in RecordLikelihood.__dataclass_fields__}
+    fields.update(changes)
+    return RecordLikelihood(**fields)
+
+
+def test_bad_input_is_refused_in_one_sentence_naming_the_record():
+    records = _population(3, 3, 2)
+    with pytest.raises(UsageError, match=r"4 record.*fewer than the 5.*give more records"):
+        fit_hierarchical(records[:4])
+    bad = records[:]
+    bad[2] = _with(records[2], damping_ratio=records[2].damping_ratio[:-1])
+    with pytest.raises(UsageError, match=r"'w1_r0.csv'.*damping_ratio.*give every per-node"):
+        fit_hierarchical(bad)
+    bad[2] = _with(records[2], blf_sd=records[2].blf_sd[:, :2])
+    with pytest.raises(UsageError, match=r"'w1_r0.csv'.*blf_sd has shape"):
+        fit_hierarchical(bad)
+    nan = records[3].natural_frequency_hz.copy()
+    nan[5] = np.nan
+    bad[2] = records[2]
+    bad[3] = _with(records[3], natural_frequency_hz=nan)
+    with pytest.raises(UsageError, match=r"'w1_r1.csv'.*non-finite.*give finite values"):
+        fit_hierarchical(bad)
+    bad[3] = _with(records[3], log_weight=np.full(records[3].log_weight.size, np.inf))
+    with pytest.raises(UsageError, match=r"'w1_r1.csv'.*log_weight"):
+        fit_hierarchical(bad)
+    bad[3] = _with(records[3], pacing_hz=float("nan"))
+    with pytest.raises(UsageError, match=r"'w1_r1.csv'.*pacing_hz"):
+        fit_hierarchical(bad)
+    with pytest.raises(UsageError, match=r"'w1_r1.csv'.*pacing_hz"):
+        record_log_marginal(bad[3], _truth_parameters())
+    same_pacing = [_with(r, pacing_hz=1.8) for r in records]
+    with pytest.raises(UsageError, match="share one pacing"):
+        fit_hierarchical(same_pacing)
+    # Walker effects asked for where each record is its own walker.
+    lone = [_with(r, subject=None) for r in records]
+    with pytest.raises(UsageError, match="no walker has two or more records") as err:
+        fit_hierarchical(lone, walker_effects=True)
+    assert err.value.parameter == "walker_effects"
+    for bad_setting in ({"chains": 1}, {"draws": 0}, {"burn": -1}, {"seed": -2}):
+        with pytest.raises(UsageError):
+            fit_hierarchical(records, **bad_setting)
+    incomplete = _truth_parameters()
+    del incomplete["blf3.mu"]
+    with pytest.raises(UsageError, match=r"lack 'blf3\.mu'"):
+        record_log_marginal(records[0], incomplete)

@@ -1,0 +1,948 @@
+"""Population laws as a hierarchical model fitted to every record's posterior.
+
+:func:`fit_hierarchical` takes, for every record, its likelihood of the walker's parameters
+on the nodes of its posterior (:class:`RecordLikelihood`) and fits the seed's laws as one
+hierarchical model, so that a record whose f_n or zeta is poorly identified counts for what
+it says and no more, instead of as a point estimate (:mod:`workbench.population.fit`).
+
+The model
+---------
+For record ``r`` of walker ``w(r)``, with the pacing centred at :data:`PACING_REF_HZ`
+(``d_r = f_p,r - PACING_REF_HZ``, so that slope and intercept are nearly uncorrelated)::
+
+    f_n,r      = a_fn + b_fn d_r + u_fn,w + e,   e ~ N(0, sigma_fn^2),  u ~ N(0, tau_fn^2)
+    zeta_r     = a_z  + b_z  d_r + u_z,w  + e    (its own a, b, sigma, tau)
+    BLF1_r     = a_1  + b_1  d_r + u_1,w  + e    (likewise)
+    log BLF2_r = mu_2 + u_2,w + e,   e ~ N(0, sigma_2^2),  u ~ N(0, tau_2^2)
+    log BLF3_r = mu_3 + u_3,w + e    (likewise)
+
+The intercept is reported at the reference pacing (``intercept_at_ref``) and, derived from
+every draw, at f_p = 0 (``intercept``, the seed's form ``slope * f_p + intercept``).
+Records without a subject are each their own walker. Walker effects are left out (tau = 0)
+when no walker has two or more records, since sigma and tau are then not separately
+identified, and when there are fewer than :data:`MIN_WALKERS` walkers, since under the
+uniform prior on tau the posterior of tau is then improper; the result says which.
+
+Priors: flat on every a, b and mu; uniform on every sigma and tau over (0, infinity),
+Gelman's (2006) recommendation for the scale of a variance component with a few groups
+(under an inverse-gamma(eps, eps) prior on the variance the posterior depends on eps
+whenever tau may be near zero; a uniform prior on the variance pushes tau upwards).
+
+The likelihood of a record
+--------------------------
+A record's nodes are the quadrature points of its posterior: its likelihood of (f_n, zeta)
+at node ``i`` is proportional to ``exp(log_weight_i - log_prior_i)``. Given the node, each
+load factor's conditional posterior ``N(m_i, s_i^2)`` is its likelihood (the force prior
+is broad), so BLF1 integrates against its population normal in closed form to
+``N(m_i; mean, sigma^2 + s_i^2)``. For BLF2 and BLF3 the delta method puts the likelihood
+on the log scale: as a function of ``z = log BLF``, ``N(e^z; m, s^2) ~= N(z; log m,
+(s/m)^2) / m``, and the integral against ``N(z; mu, sigma^2)`` is ``N(log m_i; mu,
+sigma^2 + (s_i/m_i)^2) / m_i`` (the ``1/m_i`` differs between nodes, so it is kept).
+:func:`record_log_marginal` is that sum over a record's nodes at given population
+parameters, exact up to the record's quadrature.
+
+The algorithm, and why
+----------------------
+A data-augmentation Gibbs sampler, not emcee: emcee's ensemble moves do not scale to one
+latent effect per walker and law (56 walkers and 5 laws are hundreds of dimensions), while
+given each record's node and latent load factors the model is a set of conditionally
+conjugate normal regressions. One sweep:
+
+1. each record's node, from its categorical distribution with the load factors integrated
+   out (log-probabilities ``log_weight - log_prior`` plus the population terms above),
+   drawn with the Gumbel-max trick on a (records, nodes) array padded with -inf;
+2. each record's latent BLF1, log BLF2 and log BLF3 given its node: the product of the
+   node's normal and the population normal, in closed form;
+3. per law, vectorised over the laws: tau by slice sampling of log tau with the walker
+   effects integrated out; (a, b) from its normal with the walker effects integrated out
+   (a generalised least-squares regression: each walker's records correlated by tau^2);
+   the walker effects given (a, b) (normal); sigma^2 given them (scaled inverse
+   chi-square with n - 1 degrees of freedom, the uniform prior on sigma).
+
+Step 3 departs from the plainest Gibbs sweep (a, b | u; sigma^2 | u; u | a, b; tau^2 | u,
+scaled inverse chi-square with J - 1 degrees of freedom) on purpose: drawing (a, b) with the
+effects integrated out removes the coupling of the intercept with the mean of the effects,
+and drawing tau from its conditional with the effects integrated out removes the coupling
+of tau with the effects, which makes the plain sweep crawl when tau is small against the
+residual sd (each effect then sits at the scale of tau, so tau^2 | u barely moves);
+``tests/test_population_hierarchy.py`` checks that the walker sds of walkers who do not
+differ clear the ESS threshold below. Both are partially
+collapsed steps whose trimmed variable (the effects) is drawn afresh before any step
+conditions on it again, so the sweep keeps the posterior. The integrals are closed forms:
+walker ``w``'s residuals are ``N(0, sigma^2 I + tau^2 11')``, whose inverse is ``(I - c_w
+11') / sigma^2`` with ``c_w = tau^2 / (sigma^2 + n_w tau^2)``.
+
+Several chains (default 4) start from dispersed values around the ordinary least-squares
+fit of the records' posterior means; each chain's generator is
+``np.random.default_rng([seed, chain])``, so one seed fixes every result. Convergence is
+read from arviz's rank-normalised split R-hat and bulk and tail ESS of every reported
+parameter; a parameter with R-hat above :data:`RHAT_MAX` or an ESS below :data:`ESS_MIN`
+is flagged (:attr:`HierarchicalFit.flagged`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from workbench.errors import UsageError, check_seed
+from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, MIN_RECORDS, PACING_SPREAD_HZ
+
+if TYPE_CHECKING:
+    import arviz
+
+__all__ = [
+    "ESS_MIN",
+    "LAWS",
+    "MIN_WALKERS",
+    "PACING_REF_HZ",
+    "RHAT_MAX",
+    "HierarchicalFit",
+    "RecordLikelihood",
+    "fit_hierarchical",
+    "record_log_marginal",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Pacing [Hz] at which the linear laws' intercepts are parametrised (the regressor is
+#: centred there so that the slope and the intercept are not strongly correlated).
+PACING_REF_HZ = 1.8
+#: The laws, in the order of the sampler's arrays: three linear in pacing, two lognormal.
+LAWS: tuple[str, ...] = (*LAW_COLUMNS, *LOGNORMAL_COLUMNS)
+#: Fewest walkers a fit with walker effects needs (with two, the posterior of tau under its
+#: uniform prior is improper).
+MIN_WALKERS = 3
+#: A parameter is flagged when its R-hat exceeds this ...
+RHAT_MAX = 1.01
+#: ... or its bulk or tail ESS falls below this.
+ESS_MIN = 400.0
+
+#: Width of the slice sampler's first interval on log tau (tau's posterior sd is a fraction
+#: of its value whenever there are a few walkers, so one unit of log tau steps out quickly).
+_SLICE_WIDTH = 1.0
+#: Bound on the slice sampler's steps out and shrinks (never reached on a proper posterior;
+#: it keeps a broken input from looping for ever).
+_SLICE_STEPS = 200
+#: Smallest variance a sigma^2 draw is floored at: identical latent values give SS = 0, and
+#: a zero variance would turn the node probabilities into NaN.
+_TINY = float(np.finfo(np.float64).tiny)
+_LOG_2PI = math.log(2.0 * math.pi)
+_HAS_SLOPE = np.array([law in LAW_COLUMNS for law in LAWS])
+_N_LAWS = len(LAWS)
+
+
+@dataclass(frozen=True, eq=False)
+class RecordLikelihood:
+    """One record's likelihood of its walker's parameters, on the nodes of its posterior.
+
+    Attributes
+    ----------
+    path : str
+        The record's name in the batch.
+    subject : str or None
+        Walker id; records sharing it share walker effects (None: a walker of its own).
+    pacing_hz : float
+        The record's identified pacing f_p [Hz].
+    natural_frequency_hz : ndarray, shape (B,)
+        f_n [Hz] at each node.
+    damping_ratio : ndarray, shape (B,)
+        zeta at each node.
+    log_weight : ndarray, shape (B,)
+        Log posterior mass of each node (any constant; -inf for a node without mass).
+    log_prior : ndarray, shape (B,)
+        Log density, at each node, of the prior the record's posterior was computed under,
+        expressed in (f_n, zeta) (any constant); dividing it out leaves the likelihood.
+    blf_mean : ndarray, shape (B, 3)
+        BLF1-3 posterior mean given the node's (C, K).
+    blf_sd : ndarray, shape (B, 3)
+        BLF1-3 posterior sd given the node's (C, K).
+    """
+
+    path: str
+    subject: str | None
+    pacing_hz: float
+    natural_frequency_hz: FloatArray
+    damping_ratio: FloatArray
+    log_weight: FloatArray
+    log_prior: FloatArray
+    blf_mean: FloatArray
+    blf_sd: FloatArray
+
+
+# -- the records as the sampler's arrays ---------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Nodes:
+    """One record's nodes as the five laws' observations (nodes without mass dropped).
+
+    ``obs[l]`` is what law ``l`` sees at each node (f_n, zeta, m1, log m2, log m3) and
+    ``var[l]`` its variance given the node (0, 0, s1^2, (s2/m2)^2, (s3/m3)^2); ``base`` is
+    the node's log likelihood ``log_weight - log_prior`` with the log-scale Jacobians
+    ``-log m2 - log m3``.
+    """
+
+    obs: FloatArray  # (L, B)
+    var: FloatArray  # (L, B)
+    base: FloatArray  # (B,)
+    point: FloatArray  # (L,) likelihood-weighted mean of obs: the dispersed starts' centre
+
+
+def _record_nodes(rec: RecordLikelihood) -> _Nodes:
+    """Check one record and return its nodes; every refusal names the record and the fix."""
+    name = f"record {rec.path!r}"
+
+    def arr(field: str, value: ArrayLike) -> FloatArray:
+        try:
+            return np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise UsageError(
+                f"{name}: {field} is not an array of numbers; give it as floats"
+            ) from None
+
+    fn = arr("natural_frequency_hz", rec.natural_frequency_hz)
+    zeta = arr("damping_ratio", rec.damping_ratio)
+    lw = arr("log_weight", rec.log_weight)
+    lp = arr("log_prior", rec.log_prior)
+    m = arr("blf_mean", rec.blf_mean)
+    s = arr("blf_sd", rec.blf_sd)
+    if fn.ndim != 1 or fn.size == 0:
+        raise UsageError(
+            f"{name}: natural_frequency_hz has shape {fn.shape}, not one value per node; give "
+            "a 1-D array of at least one node"
+        )
+    b = fn.size
+    for field, a, shape in (
+        ("damping_ratio", zeta, (b,)),
+        ("log_weight", lw, (b,)),
+        ("log_prior", lp, (b,)),
+        ("blf_mean", m, (b, 3)),
+        ("blf_sd", s, (b, 3)),
+    ):
+        if a.shape != shape:
+            raise UsageError(
+                f"{name}: {field} has shape {a.shape} but the record has {b} nodes (shape "
+                f"{shape} expected); give every per-node array the nodes of natural_frequency_hz"
+            )
+    try:
+        fp = float(rec.pacing_hz)
+    except (TypeError, ValueError):
+        fp = math.nan
+    if not math.isfinite(fp) or fp <= 0:
+        raise UsageError(
+            f"{name}: pacing_hz is {rec.pacing_hz!r}, not a positive frequency; give the "
+            "record's identified pacing in Hz"
+        )
+    for field, a in (
+        ("natural_frequency_hz", fn),
+        ("damping_ratio", zeta),
+        ("log_prior", lp),
+        ("blf_mean", m),
+        ("blf_sd", s),
+    ):
+        if not np.all(np.isfinite(a)):
+            raise UsageError(
+                f"{name}: {field} holds {int(np.sum(~np.isfinite(a)))} non-finite value(s); "
+                "drop those nodes or give finite values"
+            )
+    if np.any(np.isnan(lw)) or np.any(lw == np.inf):
+        raise UsageError(
+            f"{name}: log_weight holds NaN or +inf; give finite log masses (-inf for a node "
+            "without mass)"
+        )
+    if np.any(s < 0):
+        raise UsageError(f"{name}: blf_sd holds negative values; give standard deviations >= 0")
+    if np.any(m[:, 1:] <= 0):
+        raise UsageError(
+            f"{name}: blf_mean of BLF2 or BLF3 is not positive at some node, so its log is "
+            "undefined; give positive load factors"
+        )
+    keep = np.isfinite(lw)
+    if not np.any(keep):
+        raise UsageError(f"{name}: every node's log_weight is -inf; give the posterior's masses")
+    fn, zeta, lw, lp, m, s = fn[keep], zeta[keep], lw[keep], lp[keep], m[keep], s[keep]
+    log_m = np.log(m[:, 1:])
+    obs = np.stack([fn, zeta, m[:, 0], log_m[:, 0], log_m[:, 1]])
+    rel = (s[:, 1:] / m[:, 1:]) ** 2  # delta method: sd of log BLF = sd / mean
+    var = np.stack([np.zeros_like(fn), np.zeros_like(fn), s[:, 0] ** 2, rel[:, 0], rel[:, 1]])
+    base = lw - lp - log_m.sum(axis=1)
+    w = np.exp(lw - lp - np.max(lw - lp))
+    point = obs @ (w / w.sum())
+    return _Nodes(obs=obs, var=var, base=base, point=point)
+
+
+@dataclass(frozen=True, eq=False)
+class _Packed:
+    """All records as padded arrays, sorted so that each walker's records are contiguous."""
+
+    obs: FloatArray  # (L, R, B_max), padding 0
+    var: FloatArray  # (L, R, B_max), padding 1
+    base: FloatArray  # (R, B_max), padding -inf
+    point: FloatArray  # (L, R)
+    d: FloatArray  # (R,) pacing - PACING_REF_HZ [Hz]
+    walker: NDArray[np.intp]  # (R,) walker index of every record
+    starts: NDArray[np.intp]  # (J,) first record of every walker
+    n_w: FloatArray  # (J,) records per walker
+
+
+def _pack(records: Sequence[RecordLikelihood]) -> _Packed:
+    nodes = [_record_nodes(r) for r in records]
+    ids: dict[object, int] = {}
+    walker_of = []
+    for i, rec in enumerate(records):
+        key: object = ("subject", rec.subject) if rec.subject is not None else ("record", i)
+        walker_of.append(ids.setdefault(key, len(ids)))
+    order = np.argsort(np.asarray(walker_of), kind="stable")
+    walker = np.asarray(walker_of)[order]
+    n_r, b_max = len(records), max(n.base.size for n in nodes)
+    obs = np.zeros((_N_LAWS, n_r, b_max))
+    var = np.ones((_N_LAWS, n_r, b_max))
+    base = np.full((n_r, b_max), -np.inf)
+    for row, i in enumerate(order):
+        b = nodes[i].base.size
+        obs[:, row, :b], var[:, row, :b], base[row, :b] = nodes[i].obs, nodes[i].var, nodes[i].base
+    starts = np.flatnonzero(np.r_[True, walker[1:] != walker[:-1]])
+    return _Packed(
+        obs=obs,
+        var=var,
+        base=base,
+        point=np.stack([nodes[i].point for i in order], axis=1),
+        d=np.array([float(records[i].pacing_hz) for i in order]) - PACING_REF_HZ,
+        walker=np.searchsorted(starts, np.arange(n_r), side="right") - 1,
+        starts=starts,
+        n_w=np.diff(np.r_[starts, n_r]).astype(np.float64),
+    )
+
+
+# -- the Gibbs sweep ---------------------------------------------------------------------
+
+
+@dataclass
+class _State:
+    """One chain's population parameters, per law (L = 5)."""
+
+    beta: FloatArray  # (L, 2): intercept at PACING_REF_HZ, slope (0 for the lognormal laws)
+    sigma2: FloatArray  # (L,)
+    tau2: FloatArray  # (L,), 0 without walker effects
+    u: FloatArray  # (L, J)
+
+
+def _sum_by_walker(x: FloatArray, starts: NDArray[np.intp]) -> FloatArray:
+    """Sum ``x`` (..., R) over each walker's contiguous records, giving (..., J)."""
+    return np.add.reduceat(x, starts, axis=-1)
+
+
+def _draw_latents(p: _Packed, st: _State, rng: np.random.Generator) -> FloatArray:
+    """Draw every record's node (Gumbel-max) and latent values (L, R): steps 1 and 2."""
+    mean = st.beta[:, :1] + st.beta[:, 1:] * p.d + st.u[:, p.walker]  # (L, R)
+    # Node log-probabilities with the load factors integrated out, constants dropped. f_n
+    # and zeta have no variance at a node, so their log(sigma^2) is the same at every node
+    # and drops out too; the arithmetic is in place (this is most of a sweep's time).
+    sq = p.obs - mean[:, :, None]
+    sq *= sq
+    logp = p.base - 0.5 * np.einsum("lrb,l->rb", sq[:2], 1.0 / st.sigma2[:2])
+    total = p.var[2:] + st.sigma2[2:, None, None]
+    blf = sq[2:]
+    blf /= total
+    blf += np.log(total)
+    logp -= 0.5 * blf.sum(axis=0)
+    # Gumbel-max: standard Gumbel draws as -log of standard exponentials (numpy's
+    # exponential sampler is about twice as fast as its gumbel).
+    node = np.argmax(logp - np.log(rng.standard_exponential(logp.shape)), axis=1)
+    rows = np.arange(node.size)
+    obs, var = p.obs[:, rows, node], p.var[:, rows, node]
+    # Product of the node's normal (obs, var) and the population normal (mean, sigma^2),
+    # written so that a node with var = 0 (f_n, zeta) gives the node's value exactly.
+    s2 = st.sigma2[:, None]
+    t = var + s2
+    latent_mean = (obs * s2 + mean * var) / t
+    latent_sd = np.sqrt(s2 * var / t)
+    return latent_mean + latent_sd * rng.standard_normal(obs.shape)
+
+
+def _log_tau_target(
+    eta: FloatArray, s_w: FloatArray, n_w: FloatArray, sigma2: FloatArray
+) -> FloatArray:
+    """Log conditional density of ``eta = log tau`` per law, the walker effects integrated out.
+
+    Walker ``w``'s residuals are ``N(0, sigma^2 I + tau^2 11')``; what depends on tau is
+    ``-1/2 [log(sigma^2 + n_w tau^2) - tau^2 S_w^2 / (sigma^2 (sigma^2 + n_w tau^2))]``
+    summed over walkers (``S_w`` the walker's sum of residuals), plus ``eta``, the Jacobian
+    of the uniform prior on tau.
+    """
+    tau2 = np.exp(2.0 * eta)[:, None]
+    s2 = sigma2[:, None]
+    total = s2 + n_w * tau2
+    return eta - 0.5 * np.sum(np.log(total) - tau2 * s_w**2 / (s2 * total), axis=1)
+
+
+def _slice_log_tau(
+    eta0: FloatArray, target: Callable[[FloatArray], FloatArray], rng: np.random.Generator
+) -> FloatArray:
+    """One slice-sampling update (Neal 2003, stepping out and shrinkage) per law at once."""
+    level = target(eta0) - rng.exponential(size=eta0.shape)
+    left = eta0 - _SLICE_WIDTH * rng.random(eta0.shape)
+    right = left + _SLICE_WIDTH
+    for _ in range(_SLICE_STEPS):
+        out = target(left) > level
+        if not out.any():
+            break
+        left = np.where(out, left - _SLICE_WIDTH, left)
+    for _ in range(_SLICE_STEPS):
+        out = target(right) > level
+        if not out.any():
+            break
+        right = np.where(out, right + _SLICE_WIDTH, right)
+    eta = eta0.copy()
+    active = np.ones(eta0.shape, dtype=bool)
+    for _ in range(_SLICE_STEPS):
+        proposal = left + rng.random(eta0.shape) * (right - left)
+        accept = active & (target(proposal) > level)
+        eta = np.where(accept, proposal, eta)
+        active &= ~accept
+        if not active.any():
+            break
+        below = proposal < eta0
+        left = np.where(active & below, proposal, left)
+        right = np.where(active & ~below, proposal, right)
+    return eta
+
+
+def _update_laws(
+    p: _Packed, st: _State, x: FloatArray, effects: bool, rng: np.random.Generator
+) -> None:
+    """Step 3, every law at once: tau, (a, b), the walker effects, sigma^2."""
+    n = float(p.d.size)
+    d = p.d
+    if effects:
+        s_w = _sum_by_walker(x - st.beta[:, :1] - st.beta[:, 1:] * d, p.starts)
+
+        def target(eta: FloatArray) -> FloatArray:
+            return _log_tau_target(eta, s_w, p.n_w, st.sigma2)
+
+        st.tau2 = np.exp(2.0 * _slice_log_tau(0.5 * np.log(st.tau2), target, rng))
+    # (a, b) by generalised least squares with the walker effects integrated out: walker w's
+    # covariance sigma^2 I + tau^2 11' has inverse (I - c_w 11') / sigma^2, c_w = tau^2 /
+    # (sigma^2 + n_w tau^2). With g_w = 1 - n_w c_w = sigma^2 / (sigma^2 + n_w tau^2), the
+    # walker's share of the between-walker information, X' Sigma^-1 X sigma^2 is the
+    # within-walker sums plus g_w times the between-walker ones, written so (no difference
+    # of near-equal sums when tau dwarfs sigma). Without walker effects g_w = 1: OLS.
+    g = st.sigma2[:, None] / (st.sigma2[:, None] + p.n_w * st.tau2[:, None])  # (L, J)
+    d_w = _sum_by_walker(d, p.starts)
+    x_w = _sum_by_walker(x, p.starts)
+    a00 = np.sum(g * p.n_w, axis=1)
+    a01 = np.sum(g * d_w, axis=1)
+    a11 = np.sum(d * d) - np.sum(d_w**2 / p.n_w) + np.sum(g * d_w**2 / p.n_w, axis=1)
+    r0 = np.sum(g * x_w, axis=1)
+    r1 = x @ d - x_w @ (d_w / p.n_w) + np.sum(g * d_w * x_w / p.n_w, axis=1)
+    # The lognormal laws have no slope: their 2x2 system is made diagonal, and b set to 0.
+    a01 = np.where(_HAS_SLOPE, a01, 0.0)
+    a11 = np.where(_HAS_SLOPE, a11, 1.0)
+    r1 = np.where(_HAS_SLOPE, r1, 0.0)
+    det = a00 * a11 - a01**2
+    mean0, mean1 = (a11 * r0 - a01 * r1) / det, (a00 * r1 - a01 * r0) / det
+    # Draw N(mean, sigma^2 A^-1) through the Cholesky factor of the precision A / sigma^2.
+    sd = np.sqrt(st.sigma2)
+    l00 = np.sqrt(a00)
+    l10 = a01 / l00
+    l11 = np.sqrt(a11 - l10**2)
+    z = rng.standard_normal((2, _N_LAWS))
+    b = mean1 + sd * z[1] / l11
+    a = mean0 + sd * (z[0] - l10 * z[1] / l11) / l00
+    st.beta = np.stack([a, np.where(_HAS_SLOPE, b, 0.0)], axis=1)
+    resid = x - st.beta[:, :1] - st.beta[:, 1:] * d
+    if effects:
+        precision = p.n_w / st.sigma2[:, None] + 1.0 / st.tau2[:, None]
+        u_mean = _sum_by_walker(resid, p.starts) / st.sigma2[:, None] / precision
+        st.u = u_mean + rng.standard_normal(u_mean.shape) / np.sqrt(precision)
+        resid = resid - st.u[:, p.walker]
+    ss = np.sum(resid**2, axis=1)
+    st.sigma2 = np.maximum(ss / rng.chisquare(n - 1.0, size=_N_LAWS), _TINY)
+
+
+def _ols_start(p: _Packed) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per law: least-squares (a, b), their standard errors and the residual sd.
+
+    Fitted to the records' likelihood-weighted mean values: the centre the chains' dispersed
+    starts are drawn around.
+    """
+    n = p.d.size
+    beta = np.zeros((_N_LAWS, 2))
+    se = np.zeros((_N_LAWS, 2))
+    sd = np.zeros(_N_LAWS)
+    for law in range(_N_LAWS):
+        y = p.point[law]
+        design = np.column_stack([np.ones(n), p.d]) if _HAS_SLOPE[law] else np.ones((n, 1))
+        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+        resid = y - design @ coef
+        scale = max(
+            float(np.sqrt(resid @ resid / (n - design.shape[1]))),
+            1e-6 * (1.0 + abs(float(np.mean(y)))),  # identical values would give sd 0
+        )
+        cov = scale**2 * np.linalg.inv(design.T @ design)
+        beta[law, : coef.size] = coef
+        se[law, : coef.size] = np.sqrt(np.diag(cov))
+        sd[law] = scale
+    return beta, se, sd
+
+
+def _run_chain(
+    p: _Packed,
+    effects: bool,
+    rng: np.random.Generator,
+    burn: int,
+    draws: int,
+    start: tuple[FloatArray, FloatArray, FloatArray],
+) -> FloatArray:
+    """One chain: dispersed start, ``burn`` sweeps discarded, then (draws, L, 4) kept.
+
+    The kept values per law are intercept at the reference, slope, sigma, tau.
+    """
+    beta0, se0, sd0 = start
+    # Dispersed: three standard errors around the least-squares fit, a factor of about
+    # e^(+-1) on sigma, tau between a tenth and one and a half of sigma.
+    st = _State(
+        beta=beta0 + 3.0 * se0 * rng.standard_normal(beta0.shape),
+        sigma2=(sd0 * np.exp(0.5 * rng.standard_normal(_N_LAWS))) ** 2,
+        tau2=(sd0 * rng.uniform(0.1, 1.5, _N_LAWS)) ** 2 if effects else np.zeros(_N_LAWS),
+        u=np.zeros((_N_LAWS, p.starts.size)),
+    )
+    kept = np.empty((draws, _N_LAWS, 4))
+    for it in range(burn + draws):
+        x = _draw_latents(p, st, rng)
+        _update_laws(p, st, x, effects, rng)
+        if it >= burn:
+            k = kept[it - burn]
+            k[:, :2] = st.beta
+            k[:, 2] = np.sqrt(st.sigma2)
+            k[:, 3] = np.sqrt(st.tau2)
+    return kept
+
+
+# -- the result ----------------------------------------------------------------------------
+
+
+def _parameter_names(effects: bool) -> tuple[str, ...]:
+    names: list[str] = []
+    for law in LAWS:
+        if law in LAW_COLUMNS:
+            names += [f"{law}.slope", f"{law}.intercept_at_ref", f"{law}.intercept"]
+        else:
+            names.append(f"{law}.mu")
+        names.append(f"{law}.residual_sd")
+        if effects:
+            names.append(f"{law}.walker_sd")
+    return tuple(names)
+
+
+def _reported(kept: FloatArray, effects: bool) -> FloatArray:
+    """(chains, draws, L, 4) sampler values -> (chains, draws, d) in :func:`_parameter_names`."""
+    cols: list[FloatArray] = []
+    for law, name in enumerate(LAWS):
+        at_ref, slope, sigma, tau = (kept[:, :, law, j] for j in range(4))
+        if name in LAW_COLUMNS:
+            cols += [slope, at_ref, at_ref - slope * PACING_REF_HZ]
+        else:
+            cols.append(at_ref)
+        cols.append(sigma)
+        if effects:
+            cols.append(tau)
+    return np.stack(cols, axis=-1)
+
+
+def _rhat_ess(draws: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Rank-normalised split R-hat, bulk and tail ESS of every parameter of (E, n, d) draws.
+
+    arviz's functions on each parameter's (chain, draw) array, as the cross-check's
+    diagnostics compute them (that helper is private to its subpackage, so the few lines are
+    repeated here rather than imported).
+    """
+    # arviz is imported here: its import takes seconds, which importing this module
+    # should not cost.
+    import arviz as az
+
+    out = np.empty((3, draws.shape[2]))
+    for i in range(draws.shape[2]):
+        x = np.ascontiguousarray(draws[:, :, i])
+        out[0, i] = az.rhat(x)
+        out[1, i] = az.ess(x, method="bulk")
+        out[2, i] = az.ess(x, method="tail")
+    return out[0], out[1], out[2]
+
+
+@dataclass(frozen=True, eq=False)
+class HierarchicalFit:
+    """The posterior of the population laws from :func:`fit_hierarchical`.
+
+    Attributes
+    ----------
+    parameter_names : tuple of str
+        ``<law>.<parameter>``: for the linear laws (``natural_frequency_hz``,
+        ``damping_ratio``, ``blf1``) ``slope``, ``intercept_at_ref`` (the law's value at
+        :data:`PACING_REF_HZ`), ``intercept`` (at f_p = 0, the seed's ``slope * f_p +
+        intercept``; derived from each draw), ``residual_sd`` and ``walker_sd``; for the
+        lognormal laws (``blf2``, ``blf3``, on the log scale) ``mu``, ``residual_sd`` and
+        ``walker_sd``. Without walker effects the ``walker_sd`` entries are left out (tau is
+        fixed to 0). Slopes are per Hz of pacing; f_n's values are in Hz.
+    draws : ndarray, shape (chains, draws, d)
+        The kept draws, burn-in discarded.
+    rhat, ess_bulk, ess_tail : ndarray, shape (d,)
+        Rank-normalised split R-hat, bulk and tail ESS of every parameter.
+    records_used : int
+        Records in the fit (every record given: none is dropped).
+    walkers : int
+        Distinct walkers (a record without a subject is a walker of its own).
+    walker_effects : bool
+        Whether walker effects were fitted.
+    seed, burn : int
+        The seed and the discarded sweeps per chain.
+    notes : tuple of str
+        Sentences about the fit, such as why walker effects were left out.
+    """
+
+    parameter_names: tuple[str, ...]
+    draws: FloatArray
+    rhat: FloatArray
+    ess_bulk: FloatArray
+    ess_tail: FloatArray
+    records_used: int
+    walkers: int
+    walker_effects: bool
+    seed: int = 0
+    burn: int = 0
+    notes: tuple[str, ...] = ()
+
+    def _flat(self) -> FloatArray:
+        return self.draws.reshape(-1, self.draws.shape[2])
+
+    @property
+    def params(self) -> pd.Series:
+        """Posterior means, indexed by parameter name."""
+        return pd.Series(self._flat().mean(axis=0), index=list(self.parameter_names))
+
+    @property
+    def bse(self) -> pd.Series:
+        """Posterior standard deviations, indexed by parameter name."""
+        return pd.Series(self._flat().std(axis=0, ddof=1), index=list(self.parameter_names))
+
+    def conf_int(self, alpha: float = 0.05) -> pd.DataFrame:
+        """Equal-tailed posterior intervals of probability ``1 - alpha``.
+
+        Parameters
+        ----------
+        alpha : float, default 0.05
+            Tail probability, split equally between the two tails.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns ``lower``, ``upper``, indexed by parameter name.
+        """
+        if not 0.0 < alpha < 1.0:
+            raise UsageError(f"'alpha' must lie between 0 and 1, got {alpha!r}; pass e.g. 0.05")
+        q = np.quantile(self._flat(), [alpha / 2.0, 1.0 - alpha / 2.0], axis=0)
+        return pd.DataFrame({"lower": q[0], "upper": q[1]}, index=list(self.parameter_names))
+
+    @property
+    def flagged(self) -> tuple[str, ...]:
+        """Parameters whose R-hat exceeds :data:`RHAT_MAX` or whose ESS is below :data:`ESS_MIN`."""
+        bad = ~((self.rhat <= RHAT_MAX) & (self.ess_bulk >= ESS_MIN) & (self.ess_tail >= ESS_MIN))
+        return tuple(n for n, b in zip(self.parameter_names, bad, strict=True) if b)
+
+    def _column(self, name: str) -> FloatArray:
+        try:
+            i = self.parameter_names.index(name)
+        except ValueError:
+            raise UsageError(
+                f"the fit has no parameter {name!r}; give one of {', '.join(self.parameter_names)}"
+            ) from None
+        return self._flat()[:, i]
+
+    def law_band(self, law: str, pacing_hz: ArrayLike) -> pd.DataFrame:
+        """Return the posterior mean law and the 95 % band of the mean law on a pacing grid.
+
+        Parameters
+        ----------
+        law : str
+            One of :data:`LAWS`. For ``blf2`` and ``blf3`` the band is of the lognormal's
+            median ``exp(mu)``, on the load factor's scale and the same at every pacing.
+        pacing_hz : array_like
+            Pacing frequencies [Hz].
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns ``law, pacing_hz, mean, ci_low, ci_high`` (as the ordinary fit's bands).
+        """
+        if law not in LAWS:
+            raise UsageError(f"'law' must be one of {', '.join(LAWS)}, got {law!r}")
+        grid = np.atleast_1d(np.asarray(pacing_hz, dtype=np.float64))
+        if grid.ndim != 1 or not np.all(np.isfinite(grid)):
+            raise UsageError("'pacing_hz' must be a finite 1-D grid of pacings; give e.g. 1.5-2.5")
+        if law in LAW_COLUMNS:
+            at_ref, slope = self._column(f"{law}.intercept_at_ref"), self._column(f"{law}.slope")
+            values = at_ref[:, None] + slope[:, None] * (grid - PACING_REF_HZ)
+        else:
+            values = np.repeat(np.exp(self._column(f"{law}.mu"))[:, None], grid.size, axis=1)
+        lo, hi = np.quantile(values, [0.025, 0.975], axis=0)
+        return pd.DataFrame(
+            {
+                "law": law,
+                "pacing_hz": grid,
+                "mean": values.mean(axis=0),
+                "ci_low": lo,
+                "ci_high": hi,
+            }
+        )
+
+    def to_inference_data(self) -> arviz.InferenceData:
+        """Return the draws as an arviz InferenceData (posterior group, a variable a parameter)."""
+        # arviz is imported here: its import takes seconds.
+        import arviz as az
+
+        return az.from_dict(
+            posterior={name: self.draws[:, :, i] for i, name in enumerate(self.parameter_names)}
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the fit as a JSON-able dict: each law's parameters, the diagnostics, the counts.
+
+        Every parameter is ``{"mean", "sd", "ci95": [low, high]}``; ``walker_sd`` is null
+        when walker effects were not fitted.
+        """
+        mean, sd, ci = self.params, self.bse, self.conf_int(0.05)
+
+        def entry(name: str) -> dict[str, Any] | None:
+            if name not in self.parameter_names:
+                return None
+            return {
+                "mean": float(mean[name]),
+                "sd": float(sd[name]),
+                "ci95": [float(ci.loc[name, "lower"]), float(ci.loc[name, "upper"])],
+            }
+
+        laws: dict[str, Any] = {}
+        for law in LAWS:
+            keys = (
+                ("slope", "intercept_at_ref", "intercept", "residual_sd", "walker_sd")
+                if law in LAW_COLUMNS
+                else ("mu", "residual_sd", "walker_sd")
+            )
+            laws[law] = {k: entry(f"{law}.{k}") for k in keys}
+            laws[law]["scale"] = "linear" if law in LAW_COLUMNS else "log"
+
+        def finite(a: FloatArray) -> list[float | None]:
+            return [float(v) if math.isfinite(v) else None for v in a]
+
+        return {
+            "model": "hierarchical",
+            "laws": laws,
+            "pacing_ref_hz": PACING_REF_HZ,
+            "priors": "flat on slopes, intercepts and mu; uniform on residual and walker sds",
+            "records_used": self.records_used,
+            "walkers": self.walkers,
+            "walker_effects": self.walker_effects,
+            "notes": list(self.notes),
+            "chains": int(self.draws.shape[0]),
+            "draws_per_chain": int(self.draws.shape[1]),
+            "burn": self.burn,
+            "seed": self.seed,
+            "diagnostics": {
+                "parameters": list(self.parameter_names),
+                "rhat": finite(self.rhat),
+                "ess_bulk": finite(self.ess_bulk),
+                "ess_tail": finite(self.ess_tail),
+                "rhat_max": float(np.max(self.rhat)),
+                "ess_bulk_min": float(np.min(self.ess_bulk)),
+                "ess_tail_min": float(np.min(self.ess_tail)),
+                "rhat_limit": RHAT_MAX,
+                "ess_limit": ESS_MIN,
+                "flagged": list(self.flagged),
+                "converged": not self.flagged,
+            },
+        }
+
+
+# -- the public functions ------------------------------------------------------------------
+
+
+def _walker_effects(p: _Packed, asked: bool | None) -> tuple[bool, tuple[str, ...]]:
+    """Whether to fit walker effects, and the note that says why not."""
+    repeated = bool(np.any(p.n_w >= 2))
+    walkers = int(p.starts.size)
+    if not repeated:
+        why = (
+            "no walker has two or more records, so the walker sd is not separable from the "
+            "residual sd: walker effects are left out (walker sd fixed to 0)"
+        )
+    elif walkers < MIN_WALKERS:
+        why = (
+            f"only {walkers} walker(s), fewer than the {MIN_WALKERS} a walker sd needs: walker "
+            "effects are left out (walker sd fixed to 0)"
+        )
+    else:
+        why = ""
+    if asked is None:
+        return (not why), ((why,) if why else ())
+    if asked and why:
+        raise UsageError(
+            f"fit_hierarchical: walker_effects=True but {why.split(':')[0]}; pass "
+            "walker_effects=None or False, or give records of more walkers",
+            parameter="walker_effects",
+        )
+    if not asked:
+        return False, ("walker effects left out on request (walker sd fixed to 0)",)
+    return True, ()
+
+
+def fit_hierarchical(
+    records: Sequence[RecordLikelihood],
+    *,
+    seed: int = 0,
+    chains: int = 4,
+    draws: int = 1000,
+    burn: int = 500,
+    walker_effects: bool | None = None,
+) -> HierarchicalFit:
+    """Fit the population laws as a hierarchical model to every record's likelihood.
+
+    Parameters
+    ----------
+    records : sequence of RecordLikelihood
+        At least ``MIN_RECORDS`` (5) records, at two or more pacings.
+    seed : int, default 0
+        Fixes every draw: chain ``c`` uses ``np.random.default_rng([seed, c])``.
+    chains, draws, burn : int
+        Chains (two or more: R-hat compares them), kept sweeps per chain (four or more),
+        discarded sweeps per chain.
+    walker_effects : bool or None, default None
+        None: fit walker effects when some walker has two or more records and there are
+        at least :data:`MIN_WALKERS` walkers. False: never. True: require them.
+
+    Returns
+    -------
+    HierarchicalFit
+
+    Raises
+    ------
+    UsageError
+        Too few records, records at a single pacing, a record with mismatched or
+        non-finite arrays (naming the record), walker effects asked for where they cannot be
+        fitted, or sampler settings out of range.
+    """
+    seed = check_seed(seed, "fit_hierarchical")
+    for name, value, low in (("chains", chains, 2), ("draws", draws, 4), ("burn", burn, 0)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+            raise UsageError(
+                f"fit_hierarchical: {name!r} must be a whole number of {low} or more, got "
+                f"{value!r}",
+                parameter=name,
+            )
+    records = list(records)
+    if len(records) < MIN_RECORDS:
+        raise UsageError(
+            f"fit_hierarchical: {len(records)} record(s) given, fewer than the {MIN_RECORDS} "
+            "a population fit needs; give more records"
+        )
+    p = _pack(records)
+    if float(np.ptp(p.d)) < PACING_SPREAD_HZ:
+        raise UsageError(
+            f"fit_hierarchical: all {len(records)} records share one pacing "
+            f"({p.d[0] + PACING_REF_HZ:.4g} Hz), so no law against pacing can be fitted; add "
+            "records walked at other pacings"
+        )
+    effects, notes = _walker_effects(p, walker_effects)
+    start = _ols_start(p)
+    kept = np.stack(
+        [
+            _run_chain(p, effects, np.random.default_rng([seed, c]), int(burn), int(draws), start)
+            for c in range(int(chains))
+        ]
+    )
+    out = _reported(kept, effects)
+    rhat, ess_bulk, ess_tail = _rhat_ess(out)
+    return HierarchicalFit(
+        parameter_names=_parameter_names(effects),
+        draws=out,
+        rhat=rhat,
+        ess_bulk=ess_bulk,
+        ess_tail=ess_tail,
+        records_used=len(records),
+        walkers=int(p.starts.size),
+        walker_effects=effects,
+        seed=seed,
+        burn=int(burn),
+        notes=notes,
+    )
+
+
+def _law_value(parameters: Mapping[str, float] | pd.Series, *keys: str) -> float:
+    """Return the first of ``keys`` that ``parameters`` holds, as a float."""
+    for key in keys:
+        if key in parameters:
+            return float(parameters[key])
+    raise UsageError(
+        f"record_log_marginal: the population parameters lack {' or '.join(map(repr, keys))}; "
+        "give them as HierarchicalFit.params names them"
+    )
+
+
+def record_log_marginal(
+    record: RecordLikelihood, law_parameters: Mapping[str, float] | pd.Series
+) -> float:
+    """Log marginal likelihood of one record under given population laws, no walker effect.
+
+    The log-sum-exp over the record's nodes of ``log_weight - log_prior`` plus the log
+    population density of the node's f_n and zeta, with each load factor integrated against
+    its population normal (module docstring). Exact to the record's quadrature, up to the
+    constants its ``log_weight`` and ``log_prior`` carry (differences between two sets of
+    parameters are exact).
+
+    Parameters
+    ----------
+    record : RecordLikelihood
+    law_parameters : mapping or pandas.Series
+        Per law ``<law>.slope`` and ``<law>.intercept_at_ref`` (or ``<law>.intercept``, at
+        f_p = 0) for the linear laws, ``<law>.mu`` for the lognormal ones, and
+        ``<law>.residual_sd`` for all: :attr:`HierarchicalFit.params` will do.
+
+    Returns
+    -------
+    float
+    """
+    nodes = _record_nodes(record)
+    d = float(record.pacing_hz) - PACING_REF_HZ
+    mean = np.empty(_N_LAWS)
+    sigma = np.empty(_N_LAWS)
+    for law, name in enumerate(LAWS):
+        if name in LAW_COLUMNS:
+            slope = _law_value(law_parameters, f"{name}.slope")
+            if f"{name}.intercept_at_ref" in law_parameters or f"{name}.intercept" not in (
+                law_parameters
+            ):
+                at_ref = _law_value(law_parameters, f"{name}.intercept_at_ref")
+            else:  # the seed's form, intercept at f_p = 0
+                at_ref = _law_value(law_parameters, f"{name}.intercept") + slope * PACING_REF_HZ
+            mean[law] = at_ref + slope * d
+        else:
+            mean[law] = _law_value(law_parameters, f"{name}.mu")
+        sigma[law] = _law_value(law_parameters, f"{name}.residual_sd")
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(sigma)) and np.all(sigma > 0)):
+        raise UsageError(
+            "record_log_marginal: the population parameters hold a non-finite value or a "
+            "residual sd that is not positive; give finite parameters and positive sds"
+        )
+    total = nodes.var + sigma[:, None] ** 2
+    log_density = -0.5 * np.sum(
+        _LOG_2PI + np.log(total) + (nodes.obs - mean[:, None]) ** 2 / total, axis=0
+    )
+    terms = nodes.base + log_density
+    top = float(np.max(terms))
+    return top + math.log(float(np.sum(np.exp(terms - top))))
