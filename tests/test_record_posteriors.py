@@ -74,7 +74,8 @@ def test_the_prior_in_modal_terms_is_minus_the_log_jacobian() -> None:
     c = np.array([300.0, 900.0, 2500.0])
     k = np.array([5000.0, 20000.0, 41000.0])
     one = np.ones(3)
-    nodes = NodePosterior(c, k, one / 3, 1.0, np.ones((3, 3)), np.ones((3, 3)), box, 71.0)
+    edges = np.array([[12.0, 3.0], [-40.0, 250.0]])  # columns: the cell's two edges in (C, K)
+    nodes = NodePosterior(c, k, one / 3, 1.0, np.ones((3, 3)), np.ones((3, 3)), box, 71.0, edges)
     m = 71.0
 
     def modal(cc, kk):
@@ -87,6 +88,15 @@ def test_the_prior_in_modal_terms_is_minus_the_log_jacobian() -> None:
     expected = -np.log(fk * zc)
     got = nodes.log_prior_modal()
     np.testing.assert_allclose(got - got[0], expected - expected[0], rtol=1e-8, atol=1e-8)
+    # The cell's spread in (f_n, zeta): the uniform parallelogram's covariance (e1 e1' + e2
+    # e2') / 12 through the finite-difference Jacobian (same O(h^2) accuracy).
+    fc = (modal(c + h_c, k)[0] - modal(c - h_c, k)[0]) / (2 * h_c)
+    zk = (modal(c, k + h_k)[1] - modal(c, k - h_k)[1]) / (2 * h_k)
+    cov = (np.outer(edges[:, 0], edges[:, 0]) + np.outer(edges[:, 1], edges[:, 1])) / 12.0
+    var_fn, var_zeta = nodes.modal_cell_variance()
+    for got_var, (dc, dk) in ((var_fn, (fc, fk)), (var_zeta, (zc, zk))):
+        want = dc**2 * cov[0, 0] + 2 * dc * dk * cov[0, 1] + dk**2 * cov[1, 1]
+        np.testing.assert_allclose(got_var, want, rtol=1e-6)
 
 
 def test_the_json_round_trip_and_a_malformed_posterior(deck_result) -> None:
@@ -98,6 +108,7 @@ def test_the_json_round_trip_and_a_malformed_posterior(deck_result) -> None:
     np.testing.assert_allclose(back.weight, nodes.weight, rtol=1e-9)
     np.testing.assert_allclose(back.stiffness_n_per_m, nodes.stiffness_n_per_m, rtol=1e-9)
     np.testing.assert_allclose(back.blf_mean, nodes.blf_mean, rtol=1e-9)
+    np.testing.assert_allclose(back.cell_edges, nodes.cell_edges, rtol=1e-9)
     broken = json.loads(text)
     broken["nodes"]["weight"] = broken["nodes"]["weight"][:-1]
     with pytest.raises(UsageError, match=r"rec\.json, key 'posterior'.*one entry per node"):

@@ -105,6 +105,7 @@ __all__ = [
     "RHAT_MAX",
     "HierarchicalFit",
     "RecordLikelihood",
+    "fit_collapsed",
     "fit_hierarchical",
     "record_log_marginal",
 ]
@@ -163,6 +164,10 @@ class RecordLikelihood:
         BLF1-3 posterior mean given the node's (C, K).
     blf_sd : ndarray, shape (B, 3)
         BLF1-3 posterior sd given the node's (C, K).
+    natural_frequency_var, damping_ratio_var : ndarray, shape (B,), optional
+        Variance of f_n and zeta over each node's cell, when a node stands for a cell of a
+        grid (:meth:`~workbench.inference.core.node_posterior.NodePosterior.modal_cell_variance`);
+        None: the nodes are points (draws).
     """
 
     path: str
@@ -174,6 +179,8 @@ class RecordLikelihood:
     log_prior: FloatArray
     blf_mean: FloatArray
     blf_sd: FloatArray
+    natural_frequency_var: FloatArray | None = None
+    damping_ratio_var: FloatArray | None = None
 
 
 # -- the records as the sampler's arrays ---------------------------------------------------
@@ -213,6 +220,15 @@ def _record_nodes(rec: RecordLikelihood) -> _Nodes:
     lp = arr("log_prior", rec.log_prior)
     m = arr("blf_mean", rec.blf_mean)
     s = arr("blf_sd", rec.blf_sd)
+    zeros = np.zeros_like(fn)
+    fn_var = (
+        zeros
+        if rec.natural_frequency_var is None
+        else arr("natural_frequency_var", rec.natural_frequency_var)
+    )
+    zeta_var = (
+        zeros if rec.damping_ratio_var is None else arr("damping_ratio_var", rec.damping_ratio_var)
+    )
     if fn.ndim != 1 or fn.size == 0:
         raise UsageError(
             f"{name}: natural_frequency_hz has shape {fn.shape}, not one value per node; give "
@@ -225,6 +241,8 @@ def _record_nodes(rec: RecordLikelihood) -> _Nodes:
         ("log_prior", lp, (b,)),
         ("blf_mean", m, (b, 3)),
         ("blf_sd", s, (b, 3)),
+        ("natural_frequency_var", fn_var, (b,)),
+        ("damping_ratio_var", zeta_var, (b,)),
     ):
         if a.shape != shape:
             raise UsageError(
@@ -246,6 +264,8 @@ def _record_nodes(rec: RecordLikelihood) -> _Nodes:
         ("log_prior", lp),
         ("blf_mean", m),
         ("blf_sd", s),
+        ("natural_frequency_var", fn_var),
+        ("damping_ratio_var", zeta_var),
     ):
         if not np.all(np.isfinite(a)):
             raise UsageError(
@@ -257,8 +277,11 @@ def _record_nodes(rec: RecordLikelihood) -> _Nodes:
             f"{name}: log_weight holds NaN or +inf; give finite log masses (-inf for a node "
             "without mass)"
         )
-    if np.any(s < 0):
-        raise UsageError(f"{name}: blf_sd holds negative values; give standard deviations >= 0")
+    if np.any(s < 0) or np.any(fn_var < 0) or np.any(zeta_var < 0):
+        raise UsageError(
+            f"{name}: blf_sd or a cell variance holds negative values; give standard "
+            "deviations and variances >= 0"
+        )
     if np.any(m[:, 1:] <= 0):
         raise UsageError(
             f"{name}: blf_mean of BLF2 or BLF3 is not positive at some node, so its log is "
@@ -268,10 +291,11 @@ def _record_nodes(rec: RecordLikelihood) -> _Nodes:
     if not np.any(keep):
         raise UsageError(f"{name}: every node's log_weight is -inf; give the posterior's masses")
     fn, zeta, lw, lp, m, s = fn[keep], zeta[keep], lw[keep], lp[keep], m[keep], s[keep]
+    fn_var, zeta_var = fn_var[keep], zeta_var[keep]
     log_m = np.log(m[:, 1:])
     obs = np.stack([fn, zeta, m[:, 0], log_m[:, 0], log_m[:, 1]])
     rel = (s[:, 1:] / m[:, 1:]) ** 2  # delta method: sd of log BLF = sd / mean
-    var = np.stack([np.zeros_like(fn), np.zeros_like(fn), s[:, 0] ** 2, rel[:, 0], rel[:, 1]])
+    var = np.stack([fn_var, zeta_var, s[:, 0] ** 2, rel[:, 0], rel[:, 1]])
     base = lw - lp - log_m.sum(axis=1)
     w = np.exp(lw - lp - np.max(lw - lp))
     point = obs @ (w / w.sum())
@@ -342,24 +366,22 @@ def _sum_by_walker(x: FloatArray, starts: NDArray[np.intp]) -> FloatArray:
 def _draw_latents(p: _Packed, st: _State, rng: np.random.Generator) -> FloatArray:
     """Draw every record's node (Gumbel-max) and latent values (L, R): steps 1 and 2."""
     mean = st.beta[:, :1] + st.beta[:, 1:] * p.d + st.u[:, p.walker]  # (L, R)
-    # Node log-probabilities with the load factors integrated out, constants dropped. f_n
-    # and zeta have no variance at a node, so their log(sigma^2) is the same at every node
-    # and drops out too; the arithmetic is in place (this is most of a sweep's time).
+    # Node log-probabilities with each node's spread (its cell's for f_n and zeta, the load
+    # factors' given (C, K)) integrated against the population normal, constants dropped;
+    # the arithmetic is in place (this is most of a sweep's time).
     sq = p.obs - mean[:, :, None]
     sq *= sq
-    logp = p.base - 0.5 * np.einsum("lrb,l->rb", sq[:2], 1.0 / st.sigma2[:2])
-    total = p.var[2:] + st.sigma2[2:, None, None]
-    blf = sq[2:]
-    blf /= total
-    blf += np.log(total)
-    logp -= 0.5 * blf.sum(axis=0)
+    total = p.var + st.sigma2[:, None, None]
+    sq /= total
+    sq += np.log(total)
+    logp = p.base - 0.5 * sq.sum(axis=0)
     # Gumbel-max: standard Gumbel draws as -log of standard exponentials (numpy's
     # exponential sampler is about twice as fast as its gumbel).
     node = np.argmax(logp - np.log(rng.standard_exponential(logp.shape)), axis=1)
     rows = np.arange(node.size)
     obs, var = p.obs[:, rows, node], p.var[:, rows, node]
     # Product of the node's normal (obs, var) and the population normal (mean, sigma^2),
-    # written so that a node with var = 0 (f_n, zeta) gives the node's value exactly.
+    # written so that a node with var = 0 (a point) gives the node's value exactly.
     s2 = st.sigma2[:, None]
     t = var + s2
     latent_mean = (obs * s2 + mean * var) / t
@@ -679,7 +701,8 @@ class HierarchicalFit:
         Returns
         -------
         pandas.DataFrame
-            Columns ``law, pacing_hz, mean, ci_low, ci_high`` (as the ordinary fit's bands).
+            Columns ``law, pacing_hz, mean, sd, ci_low, ci_high`` (as the ordinary fit's
+            bands, with the posterior sd of the mean law).
         """
         if law not in LAWS:
             raise UsageError(f"'law' must be one of {', '.join(LAWS)}, got {law!r}")
@@ -697,6 +720,7 @@ class HierarchicalFit:
                 "law": law,
                 "pacing_hz": grid,
                 "mean": values.mean(axis=0),
+                "sd": values.std(axis=0, ddof=1),
                 "ci_low": lo,
                 "ci_high": hi,
             }
@@ -880,6 +904,174 @@ def fit_hierarchical(
         seed=seed,
         burn=int(burn),
         notes=notes,
+    )
+
+
+# -- without walker effects: the nodes summed out, emcee ------------------------------------
+#: Walkers of each emcee ensemble (a few times the 13 dimensions).
+COLLAPSED_WALKERS = 32
+
+
+def _collapsed_log_posterior(p: _Packed, theta: FloatArray) -> FloatArray:
+    """Log posterior of (W, 13) law parameters with every record's nodes summed out.
+
+    ``theta`` per row: for f_n, zeta and BLF1 the intercept at the reference pacing, the
+    slope and log sigma; for BLF2 and BLF3 mu and log sigma. Each record's term is the
+    log-sum-exp over its nodes of :func:`record_log_marginal`'s summand; the uniform prior
+    on every sigma is ``+ log sigma`` in log sigma.
+    """
+    w = theta.shape[0]
+    mean = np.empty((w, _N_LAWS, p.d.size))
+    log_sigma = np.empty((w, _N_LAWS))
+    col = 0
+    for law in range(_N_LAWS):
+        if _HAS_SLOPE[law]:
+            mean[:, law] = theta[:, col, None] + theta[:, col + 1, None] * p.d
+            col += 2
+        else:
+            mean[:, law] = theta[:, col, None]
+            col += 1
+        log_sigma[:, law] = theta[:, col]
+        col += 1
+    total = p.var[None] + np.exp(2.0 * log_sigma)[:, :, None, None]  # (W, L, R, B)
+    term = (p.obs[None] - mean[..., None]) ** 2 / total + np.log(total)
+    log_node = p.base[None] - 0.5 * term.sum(axis=1)  # (W, R, B)
+    top = np.max(log_node, axis=2, keepdims=True)
+    per_record = top[..., 0] + np.log(np.sum(np.exp(log_node - top), axis=2))
+    out = per_record.sum(axis=1) + log_sigma.sum(axis=1)
+    return np.where(np.isfinite(out), out, -np.inf)
+
+
+def fit_collapsed(
+    records: Sequence[RecordLikelihood],
+    *,
+    seed: int = 0,
+    chains: int = 4,
+    draws: int = 1000,
+    burn: int = 1000,
+) -> HierarchicalFit:
+    """Fit the laws without walker effects, every record's nodes summed out exactly, by emcee.
+
+    The data-augmentation sweep of :func:`fit_hierarchical` moves the laws and the records'
+    latent values in turn; when a law's residual sd is small against the records' own
+    widths -- one walker's crossings, the laws of :mod:`workbench.population.walker` -- each
+    move is small and the chains crawl. Without walker effects the laws' posterior is a
+    13-dimensional density whose likelihood is a product over records of sums over their
+    nodes (exact to the records' quadrature, as :func:`record_log_marginal`), so emcee
+    samples it directly: ``chains`` independent ensembles of :data:`COLLAPSED_WALKERS`
+    walkers, each from ``np.random.default_rng([seed, chain])``, started around the least
+    squares fit of the records' likelihood-weighted means. R-hat compares the ensembles; the
+    ESS is emcee's, from each ensemble's integrated autocorrelation time.
+
+    Its cost grows with records x nodes x walkers per step, so it suits tens of records (a
+    walker), not a population of thousands.
+
+    Parameters
+    ----------
+    records : sequence of RecordLikelihood
+        At least ``MIN_RECORDS`` (5) records, at two or more pacings.
+    seed : int, default 0
+        Fixes every draw.
+    chains, draws, burn : int
+        Ensembles (two or more), kept steps per walker (four or more), discarded steps.
+
+    Returns
+    -------
+    HierarchicalFit
+        Without walker effects.
+    """
+    import emcee
+
+    seed = check_seed(seed, "fit_collapsed")
+    for name, value, low in (("chains", chains, 2), ("draws", draws, 4), ("burn", burn, 0)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+            raise UsageError(
+                f"fit_collapsed: {name!r} must be a whole number of {low} or more, got {value!r}",
+                parameter=name,
+            )
+    records = list(records)
+    if len(records) < MIN_RECORDS:
+        raise UsageError(
+            f"fit_collapsed: {len(records)} record(s) given, fewer than the {MIN_RECORDS} "
+            "a fit needs; give more records"
+        )
+    p = _pack(records)
+    if float(np.ptp(p.d)) < PACING_SPREAD_HZ:
+        raise UsageError(
+            f"fit_collapsed: all {len(records)} records share one pacing "
+            f"({p.d[0] + PACING_REF_HZ:.4g} Hz), so no law against pacing can be fitted; add "
+            "records walked at other pacings"
+        )
+    beta0, se0, sd0 = _ols_start(p)
+    centre, spread = [], []
+    for law in range(_N_LAWS):
+        centre += [beta0[law, 0], beta0[law, 1]] if _HAS_SLOPE[law] else [beta0[law, 0]]
+        spread += [se0[law, 0], se0[law, 1]] if _HAS_SLOPE[law] else [se0[law, 0]]
+        centre.append(math.log(sd0[law]))
+        spread.append(0.3)
+    ndim = len(centre)
+
+    def target(theta: FloatArray) -> FloatArray:
+        return _collapsed_log_posterior(p, np.atleast_2d(theta))
+
+    kept = []
+    for c in range(int(chains)):
+        rng = np.random.default_rng([seed, c])
+        start = np.asarray(centre) + np.asarray(spread) * rng.standard_normal(
+            (COLLAPSED_WALKERS, ndim)
+        )
+        state = np.random.RandomState(np.random.MT19937(rng.integers(2**63))).get_state()
+        sampler = emcee.EnsembleSampler(COLLAPSED_WALKERS, ndim, target, vectorize=True)
+        sampler.run_mcmc(
+            emcee.State(start, log_prob=target(start), random_state=state),
+            int(burn) + int(draws),
+            progress=False,
+        )
+        kept.append(sampler.get_chain()[int(burn) :])  # (draws, walkers, ndim)
+    chain = np.stack(kept)  # (chains, draws, walkers, d)
+    values = np.zeros((*chain.shape[:3], _N_LAWS, 4))
+    col = 0
+    for law in range(_N_LAWS):
+        values[..., law, 0] = chain[..., col]
+        if _HAS_SLOPE[law]:
+            values[..., law, 1] = chain[..., col + 1]
+            col += 2
+        else:
+            col += 1
+        values[..., law, 2] = np.exp(chain[..., col])
+        col += 1
+    per_step = np.stack([_reported(v, False) for v in values])  # (chains, draws, walkers, d)
+    # R-hat between the independent ensembles, each flattened step by step; the ESS from
+    # emcee's integrated autocorrelation time of each ensemble (its walkers are not
+    # independent chains, and an ESS of the flattened sequence would overstate it).
+    n_chains, n_draws, n_walkers, n_par = per_step.shape
+    out = per_step.reshape(n_chains, n_draws * n_walkers, n_par)
+    rhat, _, _ = _rhat_ess(out)
+    tau = np.stack([emcee.autocorr.integrated_time(per_step[c], tol=0) for c in range(n_chains)])
+    ess = np.sum(n_draws * n_walkers / np.maximum(tau, 1.0), axis=0)
+    notes = [
+        "the records' nodes summed out exactly and the laws sampled by emcee; R-hat "
+        "between its ensembles, ESS (bulk and tail alike) from its autocorrelation time"
+    ]
+    if n_draws < 50.0 * float(np.max(tau)):
+        # emcee's own rule: below 50 autocorrelation times its estimate of them, hence the
+        # ESS, is itself uncertain (typically too small a time, too large an ESS).
+        notes.append(
+            f"the chains are {n_draws} steps, under 50 autocorrelation times "
+            f"({float(np.max(tau)):.0f} steps): the ESS may be overstated; run more draws"
+        )
+    return HierarchicalFit(
+        parameter_names=_parameter_names(False),
+        draws=out,
+        rhat=rhat,
+        ess_bulk=ess,
+        ess_tail=ess,
+        records_used=len(records),
+        walkers=int(p.starts.size),
+        walker_effects=False,
+        seed=seed,
+        burn=int(burn),
+        notes=tuple(notes),
     )
 
 

@@ -18,10 +18,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pandas as pd
+
 from workbench.errors import InputError, UsageError
 from workbench.inference.core.node_posterior import NodePosterior
+from workbench.population.hierarchy import RecordLikelihood
 
-__all__ = ["StoredRecord", "likelihood_use", "read_record_posteriors"]
+__all__ = ["StoredRecord", "likelihood_use", "read_record_posteriors", "record_likelihoods"]
 
 #: Grades under which a record counts as identified.
 IDENTIFIED = ("well identified", "weakly identified")
@@ -82,8 +86,7 @@ def likelihood_use(record: StoredRecord) -> str | None:
         return record.problem
     if record.posterior is None:
         return (
-            "no stored posterior (the particle filters keep none; identify with the exact "
-            "method)"
+            "no stored posterior (the particle filters keep none; identify with the exact method)"
         )
     if not math.isfinite(record.pacing_hz):
         return "no pacing"
@@ -167,3 +170,52 @@ def read_record_posteriors(batch_dir: str | os.PathLike[str]) -> list[StoredReco
             )
         )
     return sorted(out, key=lambda r: r.path)
+
+
+def record_likelihoods(
+    stored: list[StoredRecord],
+) -> tuple[list[RecordLikelihood], pd.DataFrame]:
+    """Turn a batch's stored records into the hierarchical fit's likelihoods.
+
+    Parameters
+    ----------
+    stored : list of StoredRecord
+        From :func:`read_record_posteriors`.
+
+    Returns
+    -------
+    records : list of RecordLikelihood
+        The records :func:`likelihood_use` lets a fit use: each node's f_n and zeta, its
+        log mass, the log density of the uniform (C, K) prior in (f_n, zeta) (to divide
+        out) and its BLF1-3 given (C, K).
+    left_out : pandas.DataFrame
+        ``path, reason`` of the others, sorted by path.
+    """
+    used, left = [], []
+    for rec in stored:
+        reason = likelihood_use(rec)
+        nodes = rec.posterior
+        if reason is None and nodes is not None and nodes.blf_mean.shape[1] < 3:
+            reason = "fewer than three load factors per node (a model of under three harmonics)"
+        if reason is not None or nodes is None:
+            left.append({"path": rec.path, "reason": reason or "no stored posterior"})
+            continue
+        with np.errstate(divide="ignore"):
+            log_weight = np.log(nodes.weight)
+        var_fn, var_zeta = nodes.modal_cell_variance()
+        used.append(
+            RecordLikelihood(
+                path=rec.path,
+                subject=rec.subject,
+                pacing_hz=rec.pacing_hz,
+                natural_frequency_hz=nodes.natural_frequency_hz,
+                damping_ratio=nodes.damping_ratio,
+                log_weight=log_weight,
+                log_prior=nodes.log_prior_modal(),
+                blf_mean=nodes.blf_mean[:, :3],
+                blf_sd=nodes.blf_sd[:, :3],
+                natural_frequency_var=var_fn,
+                damping_ratio_var=var_zeta,
+            )
+        )
+    return used, pd.DataFrame(left, columns=["path", "reason"])

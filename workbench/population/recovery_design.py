@@ -29,6 +29,7 @@ __all__ = [
     "recovery_plan",
     "simulate_recovery_record",
     "truth_laws",
+    "walker_plan",
 ]
 
 #: Floors the walkers walk on.
@@ -279,7 +280,116 @@ def simulate_recovery_record(row: Any, sample_rate_hz: float) -> Any:
         ground_acc_m_s2=deck,
         seed=int(row["seed"]),
     )
-    return sim.record.replace(subject=str(row["record"]))
+    subject = row.get("subject") if hasattr(row, "get") else None
+    return sim.record.replace(subject=str(subject or row["record"]))
+
+
+#: A walker's own spread from crossing to crossing about their mean law (sd of f_n [Hz],
+#: zeta, BLF1, log BLF2, log BLF3): an assumption, a fraction of the population's residual
+#: sd, since one person varies less than a population does.
+CROSSING_SD = {
+    "natural_frequency_hz": 0.03,
+    "damping_ratio": 0.01,
+    "blf1": 0.01,
+    "blf2": 0.1,
+    "blf3": 0.1,
+}
+#: A walker's mean self-chosen pacing is drawn over this range [Hz] (the seed's slow to fast
+#: self-chosen cases), and each crossing's pacing about it with this sd [Hz].
+WALKER_PACING_HZ = (1.65, 2.05)
+CROSSING_PACING_SD_HZ = 0.08
+
+
+def walker_plan(
+    *,
+    seed: int,
+    crossings: int = 10,
+    truth: PopulationLaws | None = None,
+    deck_rms_m_s2: tuple[float, float] = (0.2, 0.3),
+    duration_s: float = 30.0,
+) -> pd.DataFrame:
+    """Draw one walker and their crossings of a deck moving in one mode (a sine).
+
+    The walker is one member of the ``truth`` population: their mean law of f_n, zeta and
+    BLF1 against pacing is the population's shifted by one residual draw (BLF2 and BLF3:
+    one lognormal draw each), and every crossing adds its own small spread about it
+    (:data:`CROSSING_SD`), at its own pacing. Each crossing's deck is a sine of RMS
+    uniform over ``deck_rms_m_s2`` at a ratio to that crossing's pacing drawn from
+    :data:`DECK_RATIOS` (between the gait's harmonics).
+
+    Parameters
+    ----------
+    seed : int
+        Fixes every draw.
+    crossings : int, default 10
+        Records of the walker.
+    truth : PopulationLaws, optional
+        The population (default the seed's laws).
+    deck_rms_m_s2 : (float, float), default (0.2, 0.3)
+        Range of the deck's RMS acceleration [m/s^2].
+    duration_s : float, default 30
+        Length of every crossing's record [s].
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per crossing with the columns of :func:`recovery_plan` (the record's truth)
+        plus ``subject`` and ``walker_<law>``: the walker's mean law at the crossing's
+        pacing (BLF2 and BLF3: the walker's median), the target of a walker fit.
+    """
+    from workbench.population.sampler import BLF1_BOUNDS, FN_BOUNDS_HZ, ZETA_BOUNDS
+
+    laws = truth if truth is not None else truth_laws("seed")
+    rng = np.random.default_rng([check_seed(seed, "walker_plan"), 0x3A1C])
+    if isinstance(crossings, bool) or not isinstance(crossings, int | np.integer) or crossings < 1:
+        raise UsageError(
+            f"'crossings' must be a whole number of at least 1, got {crossings!r}",
+            parameter="crossings",
+        )
+    n = int(crossings)
+    mass = float(_masses(rng, 1, laws)[0])
+    mean_pacing = float(rng.uniform(*WALKER_PACING_HZ))
+    pacing = mean_pacing + rng.normal(0.0, CROSSING_PACING_SD_HZ, n)
+    plan = pd.DataFrame(
+        {
+            "record": [f"w{seed:04d}_c{i:02d}" for i in range(n)],
+            "subject": f"walker{seed:04d}",
+            "mass_kg": mass,
+            "pacing_hz": pacing,
+        }
+    )
+    plan.insert(1, "path", [f"records/{r}.csv" for r in plan["record"]])
+    bounds = {
+        "natural_frequency_hz": (FN_BOUNDS_HZ[0], 10.0),
+        "damping_ratio": ZETA_BOUNDS,
+        "blf1": BLF1_BOUNDS,
+    }
+    for name, (lo, hi) in bounds.items():
+        law: LinearLaw = getattr(laws, name)
+        own = law.mean(pacing) + rng.normal(0.0, law.residual_sd)
+        plan[f"walker_{name}"] = own
+        plan[name] = np.clip(own + rng.normal(0.0, CROSSING_SD[name], n), lo * 1.01, hi * 0.99)
+    for name in ("blf2", "blf3"):
+        lognormal = getattr(laws, name)
+        median = float(np.exp(rng.normal(lognormal.mu, lognormal.sigma)))
+        plan[f"walker_{name}"] = median
+        plan[name] = median * np.exp(rng.normal(0.0, CROSSING_SD[name], n))
+    phases = rng.uniform(0.0, 2.0 * np.pi, (n, 3))
+    for i in range(3):
+        plan[f"phase{i + 1}_rad"] = phases[:, i]
+    plan["duration_s"] = float(duration_s)
+    for key in ("noise_sd_n", "amplitude_sd", "step_duration_sd", "phase_sd_rad"):
+        plan[key] = rng.uniform(*RECORD_RANGES[key], n)
+    which = rng.random(n) < 0.5
+    ratio = np.where(which, rng.uniform(*DECK_RATIOS[0], n), rng.uniform(*DECK_RATIOS[1], n))
+    plan["deck_kind"] = "sine"
+    plan["deck_rms_m_s2"] = rng.uniform(*deck_rms_m_s2, n)
+    plan["deck_frequency_hz"] = pacing * ratio
+    plan["deck_bandwidth_fraction"] = 0.0
+    plan["deck_phase_rad"] = rng.uniform(0.0, 2.0 * np.pi, n)
+    plan["deck_seed"] = rng.integers(0, 2**31 - 1, n)
+    plan["seed"] = rng.integers(0, 2**31 - 1, n)
+    return plan
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,8 @@ identification keeps them:
   uses, :mod:`workbench.inference.methods.exact_force`), their posterior mass renormalised
   over them, and the share of the whole grid's mass they hold;
 - the prior they were computed under: uniform over the prior box in (C, K), so within the
-  box the likelihood is proportional to the mass (the cells are alike);
+  box the likelihood is proportional to the mass (the cells are alike), and the cells'
+  edges, since a node stands for its cell (:meth:`NodePosterior.modal_cell_variance`);
 - each node's walk load factors BLF1-3 (those the population laws use) given its (C, K),
   mean and sd (:func:`~workbench.inference.core.load_factors.point_load_factors`).
 
@@ -67,6 +68,9 @@ class NodePosterior:
         The uniform prior box over (C, K) the posterior was computed under.
     mass_kg : float
         Body mass [kg].
+    cell_edges : ndarray, shape (2, 2)
+        Edge vectors of every node's cell as columns, in (C [N s/m], K [N/m]): a node
+        stands for its cell, a parallelogram centred on it (NaN where unknown).
     kind : str
         ``"grid"``: the exact posterior's nodes, masses their cells'.
     """
@@ -79,6 +83,7 @@ class NodePosterior:
     blf_sd: FloatArray
     prior: StiffnessDampingPrior
     mass_kg: float
+    cell_edges: FloatArray
     kind: str = "grid"
 
     @property
@@ -100,6 +105,26 @@ class NodePosterior:
         jac = (self.natural_frequency_hz / (2.0 * k)) / (2.0 * np.sqrt(k * self.mass_kg))
         return np.asarray(-np.log(jac), dtype=np.float64)
 
+    def modal_cell_variance(self) -> tuple[FloatArray, FloatArray]:
+        """Variance of f_n and of zeta over every node's cell, (B,) each.
+
+        A cell is uniform over its parallelogram, whose covariance in (C, K) is ``(e1 e1' +
+        e2 e2') / 12``; mapped through the Jacobian at the node (``d f_n / d C = 0``, ``d f_n
+        / d K = f_n / 2K``, ``d zeta / d C = zeta / C``, ``d zeta / d K = -zeta / 2K``). A
+        fit that treats the node as a point would let a population sd narrower than a cell
+        pick single nodes; with this spread it sees the cell.
+        """
+        e = np.asarray(self.cell_edges, dtype=np.float64)
+        cov = (np.outer(e[:, 0], e[:, 0]) + np.outer(e[:, 1], e[:, 1])) / 12.0
+        k = self.stiffness_n_per_m
+        fn, zeta = self.natural_frequency_hz, self.damping_ratio
+        df_dk = fn / (2.0 * k)
+        dz_dc = 1.0 / (2.0 * np.sqrt(k * self.mass_kg))
+        dz_dk = -zeta / (2.0 * k)
+        var_fn = df_dk**2 * cov[1, 1]
+        var_zeta = dz_dc**2 * cov[0, 0] + 2.0 * dz_dc * dz_dk * cov[0, 1] + dz_dk**2 * cov[1, 1]
+        return np.asarray(var_fn, dtype=np.float64), np.asarray(var_zeta, dtype=np.float64)
+
     def to_json(self) -> dict[str, Any]:
         """Return a JSON-able dict (numbers to ten significant digits)."""
         return {
@@ -111,6 +136,7 @@ class NodePosterior:
             },
             "mass_kg": float(self.mass_kg),
             "mass_held": float(f"{self.mass_held:.{_DIGITS}g}"),
+            "cell_edges": _rounded(self.cell_edges),
             "nodes": {
                 "damping_ns_per_m": _rounded(self.damping_ns_per_m),
                 "stiffness_n_per_m": _rounded(self.stiffness_n_per_m),
@@ -131,7 +157,7 @@ class NodePosterior:
         where : str
             What the dict came from (a file and key), for the error's sentence.
         """
-        fix = "identify the record again with this version (its batch with --resume)"
+        fix = "identify the record again with this version (its batch into a new folder)"
         try:
             nodes = obj["nodes"]
             prior = obj["prior"]
@@ -146,6 +172,7 @@ class NodePosterior:
             )
             mass_kg = float(obj["mass_kg"])
             held = float(obj["mass_held"])
+            edges = np.asarray(obj["cell_edges"], dtype=np.float64)
             kind = str(obj.get("kind", "grid"))
         except (KeyError, TypeError, ValueError, UsageError) as err:
             raise UsageError(f"{where}: the stored posterior is malformed ({err}); {fix}") from None
@@ -158,15 +185,15 @@ class NodePosterior:
             and blf_mean.ndim == 2
             and blf_mean.shape[0] == c.size
             and blf_sd.shape == blf_mean.shape
+            and edges.shape == (2, 2)
         )
         if not shapes_ok:
             raise UsageError(
-                f"{where}: the stored posterior's node arrays do not have one entry per node; "
-                f"{fix}"
+                f"{where}: the stored posterior's node arrays do not have one entry per node; {fix}"
             )
-        finite = all(np.all(np.isfinite(a)) for a in (c, k, w, blf_mean, blf_sd))
+        finite = all(np.all(np.isfinite(a)) for a in (c, k, w, blf_mean, blf_sd, edges))
         if not finite or np.any(w < 0) or w.sum() <= 0 or np.any(k <= 0) or mass_kg <= 0:
             raise UsageError(
                 f"{where}: the stored posterior holds non-finite or negative numbers; {fix}"
             )
-        return cls(c, k, w / w.sum(), held, blf_mean, blf_sd, box, mass_kg, kind)
+        return cls(c, k, w / w.sum(), held, blf_mean, blf_sd, box, mass_kg, edges, kind)

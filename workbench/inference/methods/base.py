@@ -619,6 +619,7 @@ def exact_result(
         blf_sd=np.sqrt(np.maximum(blf_var[:, :NODE_LOAD_FACTORS], 0.0)),
         prior=post.prior,
         mass_kg=problem.mass_kg,
+        cell_edges=np.asarray(post.cell_edges, dtype=np.float64),
     )
     return IdentificationResult(
         method="exact",

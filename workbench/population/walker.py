@@ -1,0 +1,170 @@
+"""One walker from all their records: the walker's laws against pacing, fitted jointly.
+
+The seed's Fig. 11 is one walker's f_n, zeta and BLFs against pacing from point estimates.
+:func:`fit_walker` fits the same laws to every usable record of one subject (the decision of
+docs/science.md 8, :func:`~workbench.population.posteriors.likelihood_use`) as the
+hierarchical model of :mod:`workbench.population.hierarchy` with one walker: f_n, zeta and
+BLF1 linear in pacing with a normal residual from crossing to crossing, BLF2 and BLF3
+lognormal, each record counting for what its posterior says. The walker's mean law at a
+pacing, with its band, is then known better the more records there are; at the walker's
+mean pacing its sd falls about as one over the square root of their number while the
+crossing-to-crossing residual is small against each record's own sd.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from workbench.errors import UsageError
+from workbench.population.hierarchy import LAWS, HierarchicalFit, fit_collapsed
+from workbench.population.posteriors import read_record_posteriors, record_likelihoods
+
+__all__ = ["WalkerFit", "fit_walker"]
+
+#: Law names in words, for sentences.
+_WORDS = {
+    "natural_frequency_hz": "natural frequency",
+    "damping_ratio": "damping ratio",
+    "blf1": "BLF1",
+    "blf2": "BLF2",
+    "blf3": "BLF3",
+}
+
+
+@dataclass(frozen=True, eq=False)
+class WalkerFit:
+    """One walker's laws from all their usable records.
+
+    Attributes
+    ----------
+    subject : str
+        The walker.
+    fit : HierarchicalFit
+        The laws' posterior (one walker, so no walker effects).
+    pacing_hz : ndarray
+        The pacing of every record used [Hz].
+    left_out : pandas.DataFrame
+        ``path, reason`` of the walker's records left out.
+    """
+
+    subject: str
+    fit: HierarchicalFit
+    pacing_hz: np.ndarray
+    left_out: pd.DataFrame
+
+    @property
+    def mean_pacing_hz(self) -> float:
+        """The walker's mean pacing over the records used [Hz]."""
+        return float(np.mean(self.pacing_hz))
+
+    def at_pacing(self, pacing_hz: float | None = None) -> pd.DataFrame:
+        """Return each law's posterior at one pacing (default the walker's mean pacing).
+
+        Returns
+        -------
+        pandas.DataFrame
+            Index the laws; columns ``pacing_hz, mean, sd, ci_low, ci_high`` (BLF2 and BLF3:
+            the lognormal's median).
+        """
+        fp = self.mean_pacing_hz if pacing_hz is None else float(pacing_hz)
+        rows = [self.fit.law_band(law, [fp]).iloc[0] for law in LAWS]
+        out = pd.DataFrame(rows).set_index("law")
+        return out[["pacing_hz", "mean", "sd", "ci_low", "ci_high"]]
+
+    def to_json(self) -> dict[str, Any]:
+        """Return the walker's fit as a JSON-able dict."""
+        at = self.at_pacing()
+        return {
+            "subject": self.subject,
+            "records_used": int(self.pacing_hz.size),
+            "records_left_out": self.left_out.to_dict(orient="records"),
+            "mean_pacing_hz": self.mean_pacing_hz,
+            "pacing_range_hz": [float(self.pacing_hz.min()), float(self.pacing_hz.max())],
+            "at_mean_pacing": {
+                law: {
+                    "mean": float(at.loc[law, "mean"]),
+                    "sd": float(at.loc[law, "sd"]),
+                    "ci95": [float(at.loc[law, "ci_low"]), float(at.loc[law, "ci_high"])],
+                }
+                for law in LAWS
+            },
+            "laws": self.fit.to_json(),
+        }
+
+    def summary(self) -> str:
+        """Return the walker's fit in words and a table."""
+        at = self.at_pacing()
+        lines = [
+            f"Walker {self.subject}: {self.pacing_hz.size} records used "
+            f"(pacing {self.pacing_hz.min():.2f}-{self.pacing_hz.max():.2f} Hz), "
+            f"{len(self.left_out)} left out.",
+            f"At the walker's mean pacing {self.mean_pacing_hz:.3f} Hz:",
+        ]
+        for law in LAWS:
+            row = at.loc[law]
+            lines.append(
+                f"  {_WORDS[law]:<18} {row['mean']:.4g} (sd {row['sd']:.2g}) "
+                f"[{row['ci_low']:.4g}, {row['ci_high']:.4g}]"
+            )
+        for reason, group in self.left_out.groupby("reason"):
+            lines.append(f"left out: {len(group)} record(s): {reason}")
+        flagged = self.fit.flagged
+        if flagged:
+            lines.append(f"convergence: check {', '.join(flagged)} (R-hat or ESS)")
+        return "\n".join(lines)
+
+
+def fit_walker(
+    batch_dir: str | os.PathLike[str],
+    subject: str,
+    *,
+    seed: int = 0,
+    draws: int = 4000,
+) -> WalkerFit:
+    """Fit one walker's laws to all their usable records of a batch (module docstring).
+
+    Parameters
+    ----------
+    batch_dir : path-like
+        The ``--out`` folder of ``workbench batch`` (its records keep their posteriors).
+    subject : str
+        The walker, as the manifest's ``subject`` column names them.
+    seed : int, default 0
+        Fixes the sampler's draws.
+    draws : int, default 4000
+        Kept steps of every emcee walker (over 50 of their autocorrelation times, about 80
+        steps, so that the ESS reported is itself reliable).
+
+    Returns
+    -------
+    WalkerFit
+
+    Raises
+    ------
+    UsageError
+        No record of that subject, or too few usable records (five, at two or more pacings).
+    """
+    stored = [r for r in read_record_posteriors(batch_dir) if r.subject == str(subject)]
+    if not stored:
+        raise UsageError(
+            f"no record of subject {subject!r} in {batch_dir}; give a subject the manifest's "
+            "'subject' column names"
+        )
+    used, left_out = record_likelihoods(stored)
+    if len(used) < 5:
+        reasons = "; ".join(sorted(set(left_out["reason"]))) or "none left out"
+        raise UsageError(
+            f"subject {subject!r} has {len(used)} usable record(s) of {len(stored)} (left out: "
+            f"{reasons}); a walker's laws need at least five records at two or more pacings"
+        )
+    fit = fit_collapsed(used, seed=seed, draws=draws)
+    pacing = np.array([r.pacing_hz for r in used])
+    if not math.isfinite(float(pacing.mean())):  # pragma: no cover - record_likelihoods checks
+        raise UsageError(f"subject {subject!r}: a record used has no pacing")
+    return WalkerFit(str(subject), fit, pacing, left_out)
