@@ -184,3 +184,47 @@ def test_a_batch_keeps_every_records_posterior_and_reads_it_back(tmp_path) -> No
     again = {r.path: r for r in read_record_posteriors(out)}
     assert again["deck.csv"].posterior is None
     assert "cannot be read" in likelihood_use(again["deck.csv"])
+
+
+@pytest.mark.slow
+def test_workbench_walker_fits_one_subjects_records(tmp_path, capsys) -> None:
+    """Six deck crossings of one walker (``walker_plan`` seed 2, 20 s) and one rigid-floor
+    walk of the same subject through a batch: ``workbench walker`` uses the six, leaves the
+    rigid one out with its reason, and knows f_n at the walker's mean pacing better than the
+    median single crossing does. An unknown subject is one sentence and exit status 2."""
+    from workbench.cli import main
+    from workbench.population.recovery_design import simulate_recovery_record, walker_plan
+
+    plan = walker_plan(seed=2, crossings=6, duration_s=20.0)
+    recs = tmp_path / "recs"
+    paths = []
+    for row in plan.to_dict(orient="records"):
+        save_record(simulate_recovery_record(row, 200.0), recs / row["path"])
+        paths.append(row["path"])
+    subject = str(plan["subject"].iloc[0])
+    rigid = simulate_walking(
+        mass_kg=70.0, pacing_hz=1.8, duration_s=20.0, sample_rate_hz=200, seed=4
+    ).record
+    save_record(rigid.replace(subject=subject), recs / "records" / "rigid.csv")
+    (recs / "manifest.csv").write_text(
+        "path\n" + "".join(f"{p}\n" for p in paths) + "records/rigid.csv\n"
+    )
+    out = tmp_path / "batch"
+    run_batch(recs / "manifest.csv", out)
+    code = main(["walker", str(out), "--subject", subject, "--out", str(tmp_path / "w"), "--json"])
+    assert code == 0
+    obj = json.loads(capsys.readouterr().out)
+    assert obj["records_used"] == 6
+    assert [r["path"] for r in obj["records_left_out"]] == ["records/rigid.csv"]
+    assert "force-model check failed" in obj["records_left_out"][0]["reason"]
+    assert (tmp_path / "w" / "walker.json").exists()
+    singles = [
+        json.loads(f.read_text())["row"]
+        for f in (out / "records").glob("*.json")
+        if "rigid" not in f.name
+    ]
+    single_sd = np.median([r["natural_frequency_hz_sd"] for r in singles])
+    assert obj["at_mean_pacing"]["natural_frequency_hz"]["sd"] < single_sd
+    code = main(["walker", str(out), "--subject", "nobody"])
+    err = capsys.readouterr().err
+    assert code == 2 and "no record of subject 'nobody'" in err and "Traceback" not in err

@@ -1,4 +1,4 @@
-"""``workbench sample``, ``batch``, ``population`` and ``report``: the population subcommands."""
+"""The population subcommands: ``sample``, ``batch``, ``population``, ``report``, ``walker``."""
 
 from __future__ import annotations
 
@@ -168,8 +168,27 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------------------------------------
+# walker
+# ---------------------------------------------------------------------------------------------
+def _cmd_walker(args: argparse.Namespace) -> int:
+    from workbench.fileutil import atomic_write_json
+    from workbench.population.walker import fit_walker
+
+    fit = fit_walker(args.results_dir, args.subject, seed=args.seed)
+    obj = fit.to_json()
+    text = fit.summary()
+    if args.out:
+        path = Path(args.out) / "walker.json"
+        atomic_write_json(path, obj)
+        obj = {**obj, "files": {"walker": str(path)}}
+        text += f"\nwritten to {path}"
+    emit(args, obj, text)
+    return 0
+
+
 def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
-    """Register the ``sample``, ``batch``, ``population`` and ``report`` subcommands.
+    """Register the ``sample``, ``batch``, ``population``, ``report`` and ``walker`` subcommands.
 
     Parameters
     ----------
@@ -269,3 +288,18 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "what the pipeline recovers and words its conclusions from it",
     )
     p.set_defaults(handler=_cmd_report)
+
+    p = sub.add_parser(
+        "walker",
+        parents=[out_opts],
+        help="one walker's laws against pacing from all their records",
+        description="Fit one walker's natural frequency, damping ratio and BLF1 against "
+        "pacing (BLF2 and BLF3 lognormal) to every usable record of the subject in a batch, "
+        "each record counting for what its posterior says (docs/science.md 8), and print "
+        "them at the walker's mean pacing with 95 % bands.",
+    )
+    p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
+    p.add_argument("--subject", required=True, metavar="ID", help="the manifest's subject")
+    p.add_argument("--out", metavar="DIR", help="also write DIR/walker.json")
+    p.add_argument("--seed", type=seed_int, default=0, help="sampler seed (default 0)")
+    p.set_defaults(handler=_cmd_walker)
