@@ -204,7 +204,7 @@ def _moments_at(
     point_weights: FloatArray,
     map_x: FloatArray,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The filter's force moments at the MAP and at points of (C, K), in chunks.
+    """Return the filter's force moments at the MAP and at points of (C, K), in chunks.
 
     Returns the MAP's mean and covariance, every point's mean and variance, and the
     covariances summed with ``point_weights`` (the full covariances are not kept).
