@@ -2,8 +2,8 @@
 
 Records whose step-to-step variability is measured, and simulated ones.
 
-Run: ``python analyses/deck_bound.py [--out DIR] [--records N] [--workers W]`` (about ten
-minutes on two cores), and ``python analyses/deck_bound.py --ideal 40`` (the bound where
+Run: ``python analyses/deck_bound.py [--out DIR] [--records N] [--workers W]`` (about
+a minute on two cores), and ``python analyses/deck_bound.py --ideal 40`` (the bound where
 the model is exactly true, :func:`ideal`). The figures printed are quoted in
 docs/validation/deck-information.md.
 
