@@ -50,7 +50,8 @@ conjugate normal regressions. One sweep:
 
 1. each record's node, from its categorical distribution with the load factors integrated
    out (log-probabilities ``log_weight - log_prior`` plus the population terms above),
-   drawn with the Gumbel-max trick on a (records, nodes) array padded with -inf;
+   drawn by inverting its cumulative distribution at one uniform per record, in one
+   compiled pass over a (records, nodes) array padded with -inf;
 2. each record's latent BLF1, log BLF2 and log BLF3 given its node: the product of the
    node's normal and the population normal, in closed form;
 3. per law, vectorised over the laws: tau by slice sampling of log tau with the walker
@@ -92,6 +93,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError, check_seed
+from workbench.population._node_kernel import draw_nodes
 from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, MIN_RECORDS, PACING_SPREAD_HZ
 
 if TYPE_CHECKING:
@@ -364,20 +366,13 @@ def _sum_by_walker(x: FloatArray, starts: NDArray[np.intp]) -> FloatArray:
 
 
 def _draw_latents(p: _Packed, st: _State, rng: np.random.Generator) -> FloatArray:
-    """Draw every record's node (Gumbel-max) and latent values (L, R): steps 1 and 2."""
+    """Draw every record's node and latent values (L, R): steps 1 and 2."""
     mean = st.beta[:, :1] + st.beta[:, 1:] * p.d + st.u[:, p.walker]  # (L, R)
-    # Node log-probabilities with each node's spread (its cell's for f_n and zeta, the load
-    # factors' given (C, K)) integrated against the population normal, constants dropped;
-    # the arithmetic is in place (this is most of a sweep's time).
-    sq = p.obs - mean[:, :, None]
-    sq *= sq
-    total = p.var + st.sigma2[:, None, None]
-    sq /= total
-    sq += np.log(total)
-    logp = p.base - 0.5 * sq.sum(axis=0)
-    # Gumbel-max: standard Gumbel draws as -log of standard exponentials (numpy's
-    # exponential sampler is about twice as fast as its gumbel).
-    node = np.argmax(logp - np.log(rng.standard_exponential(logp.shape)), axis=1)
+    # Step 1, compiled (:mod:`workbench.population._node_kernel`): each node's log-probability
+    # with its spread (its cell's for f_n and zeta, the load factors' given (C, K))
+    # integrated against the population normal, and the draw at one uniform per record.
+    uniform = np.asarray(rng.random(size=(mean.shape[1],)), dtype=np.float64)
+    node = draw_nodes(p.obs, p.var, p.base, mean, st.sigma2, uniform)
     rows = np.arange(node.size)
     obs, var = p.obs[:, rows, node], p.var[:, rows, node]
     # Product of the node's normal (obs, var) and the population normal (mean, sigma^2),
