@@ -658,3 +658,34 @@ def test_one_walkers_mean_law_is_covered_when_the_records_are_wide():
     # its posterior reaches about 0.1 and the band is about half of one record's 95 % width
     # (0.39) rather than a third.
     assert max(widths) < 0.6 * 3.92 * 0.1, widths
+
+
+# -- selection by the records' own f_n ------------------------------------------------------
+@pytest.mark.slow
+def test_selection_on_f_n_biases_the_two_stage_fit_and_not_the_hierarchical_one():
+    """``selected_population`` seeds 0-3 (fixed in advance): records pass only when strong
+    and estimated below 2.1 Hz. The two-stage fit keeps the lower residuals, so its residual
+    sd of f_n falls short of the truth (0.15 Hz): analyses/population_selection.py measures
+    -0.022 +- 0.002 over 20 seeds, a seed-to-seed sd of 0.010, so the mean of four is below
+    0.14 but for a 2.4-sd chance. The hierarchical fit's 95 % intervals of the
+    f_n slope, intercept and residual sd each hold the truth on at least 3 of 4 seeds
+    (P(X <= 2) = 1.4 % at 95 % coverage)."""
+    from workbench.population.fit import fit_population
+    from workbench.population.selection import selected_population
+
+    truth = {
+        "natural_frequency_hz.slope": 0.3049,
+        "natural_frequency_hz.intercept": 1.367,
+        "natural_frequency_hz.residual_sd": 0.15,
+    }
+    held = dict.fromkeys(truth, 0)
+    two_stage_sd = []
+    for seed in range(4):
+        records, table = selected_population(seed)
+        two = fit_population(table, source="selected").to_json()["laws"]
+        two_stage_sd.append(two["natural_frequency_hz"]["residual_sd"])
+        ci = fit_hierarchical(records, seed=seed).conf_int(0.05)
+        for name, value in truth.items():
+            held[name] += ci.loc[name, "lower"] <= value <= ci.loc[name, "upper"]
+    assert all(count >= 3 for count in held.values()), held
+    assert np.mean(two_stage_sd) < 0.14, two_stage_sd
