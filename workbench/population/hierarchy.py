@@ -821,6 +821,38 @@ def _walker_effects(p: _Packed, asked: bool | None) -> tuple[bool, tuple[str, ..
     return True, ()
 
 
+def _checked(
+    records: Sequence[RecordLikelihood],
+    seed: int,
+    chains: int,
+    draws: int,
+    burn: int,
+    where: str,
+) -> tuple[int, list[RecordLikelihood], _Packed]:
+    """Check a fit's settings and records; return the seed, the records and their arrays."""
+    seed = check_seed(seed, where)
+    for name, value, low in (("chains", chains, 2), ("draws", draws, 4), ("burn", burn, 0)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+            raise UsageError(
+                f"{where}: {name!r} must be a whole number of {low} or more, got {value!r}",
+                parameter=name,
+            )
+    records = list(records)
+    if len(records) < MIN_RECORDS:
+        raise UsageError(
+            f"{where}: {len(records)} record(s) given, fewer than the {MIN_RECORDS} a "
+            "population fit needs; give more records"
+        )
+    p = _pack(records)
+    if float(np.ptp(p.d)) < PACING_SPREAD_HZ:
+        raise UsageError(
+            f"{where}: all {len(records)} records share one pacing "
+            f"({p.d[0] + PACING_REF_HZ:.4g} Hz), so no law against pacing can be fitted; add "
+            "records walked at other pacings"
+        )
+    return seed, records, p
+
+
 def fit_hierarchical(
     records: Sequence[RecordLikelihood],
     *,
@@ -856,27 +888,7 @@ def fit_hierarchical(
         non-finite arrays (naming the record), walker effects asked for where they cannot be
         fitted, or sampler settings out of range.
     """
-    seed = check_seed(seed, "fit_hierarchical")
-    for name, value, low in (("chains", chains, 2), ("draws", draws, 4), ("burn", burn, 0)):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
-            raise UsageError(
-                f"fit_hierarchical: {name!r} must be a whole number of {low} or more, got "
-                f"{value!r}",
-                parameter=name,
-            )
-    records = list(records)
-    if len(records) < MIN_RECORDS:
-        raise UsageError(
-            f"fit_hierarchical: {len(records)} record(s) given, fewer than the {MIN_RECORDS} "
-            "a population fit needs; give more records"
-        )
-    p = _pack(records)
-    if float(np.ptp(p.d)) < PACING_SPREAD_HZ:
-        raise UsageError(
-            f"fit_hierarchical: all {len(records)} records share one pacing "
-            f"({p.d[0] + PACING_REF_HZ:.4g} Hz), so no law against pacing can be fitted; add "
-            "records walked at other pacings"
-        )
+    seed, records, p = _checked(records, seed, chains, draws, burn, "fit_hierarchical")
     effects, notes = _walker_effects(p, walker_effects)
     start = _ols_start(p)
     kept = np.stack(
@@ -977,26 +989,7 @@ def fit_collapsed(
     """
     import emcee
 
-    seed = check_seed(seed, "fit_collapsed")
-    for name, value, low in (("chains", chains, 2), ("draws", draws, 4), ("burn", burn, 0)):
-        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
-            raise UsageError(
-                f"fit_collapsed: {name!r} must be a whole number of {low} or more, got {value!r}",
-                parameter=name,
-            )
-    records = list(records)
-    if len(records) < MIN_RECORDS:
-        raise UsageError(
-            f"fit_collapsed: {len(records)} record(s) given, fewer than the {MIN_RECORDS} "
-            "a fit needs; give more records"
-        )
-    p = _pack(records)
-    if float(np.ptp(p.d)) < PACING_SPREAD_HZ:
-        raise UsageError(
-            f"fit_collapsed: all {len(records)} records share one pacing "
-            f"({p.d[0] + PACING_REF_HZ:.4g} Hz), so no law against pacing can be fitted; add "
-            "records walked at other pacings"
-        )
+    seed, records, p = _checked(records, seed, chains, draws, burn, "fit_collapsed")
     beta0, se0, sd0 = _ols_start(p)
     centre, spread = [], []
     for law in range(_N_LAWS):
