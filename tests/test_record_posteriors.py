@@ -186,17 +186,15 @@ def test_a_batch_keeps_every_records_posterior_and_reads_it_back(tmp_path) -> No
     assert "cannot be read" in likelihood_use(again["deck.csv"])
 
 
-@pytest.mark.slow
-def test_workbench_walker_fits_one_subjects_records(tmp_path, capsys) -> None:
+@pytest.fixture(scope="module")
+def walker_batch(tmp_path_factory):
     """Six deck crossings of one walker (``walker_plan`` seed 2, 20 s) and one rigid-floor
-    walk of the same subject through a batch: ``workbench walker`` uses the six, leaves the
-    rigid one out with its reason, and knows f_n at the walker's mean pacing better than the
-    median single crossing does. An unknown subject is one sentence and exit status 2."""
-    from workbench.cli import main
+    walk of the same subject, through a batch with the default settings."""
     from workbench.population.recovery_design import simulate_recovery_record, walker_plan
 
+    root = tmp_path_factory.mktemp("walker")
     plan = walker_plan(seed=2, crossings=6, duration_s=20.0)
-    recs = tmp_path / "recs"
+    recs = root / "recs"
     paths = []
     for row in plan.to_dict(orient="records"):
         save_record(simulate_recovery_record(row, 200.0), recs / row["path"])
@@ -206,11 +204,21 @@ def test_workbench_walker_fits_one_subjects_records(tmp_path, capsys) -> None:
         mass_kg=70.0, pacing_hz=1.8, duration_s=20.0, sample_rate_hz=200, seed=4
     ).record
     save_record(rigid.replace(subject=subject), recs / "records" / "rigid.csv")
-    (recs / "manifest.csv").write_text(
-        "path\n" + "".join(f"{p}\n" for p in paths) + "records/rigid.csv\n"
-    )
-    out = tmp_path / "batch"
+    lines = "".join(f"{p}\n" for p in [*paths, "records/rigid.csv"])
+    (recs / "manifest.csv").write_text("path\n" + lines)
+    out = root / "batch"
     run_batch(recs / "manifest.csv", out)
+    return out, subject
+
+
+@pytest.mark.slow
+def test_workbench_walker_fits_one_subjects_records(walker_batch, tmp_path, capsys) -> None:
+    """``workbench walker`` uses the six crossings, leaves the rigid walk out with its
+    reason, and knows f_n at the walker's mean pacing better than the median single
+    crossing does. An unknown subject is one sentence and exit status 2."""
+    from workbench.cli import main
+
+    out, subject = walker_batch
     code = main(["walker", str(out), "--subject", subject, "--out", str(tmp_path / "w"), "--json"])
     assert code == 0
     obj = json.loads(capsys.readouterr().out)
@@ -228,3 +236,25 @@ def test_workbench_walker_fits_one_subjects_records(tmp_path, capsys) -> None:
     code = main(["walker", str(out), "--subject", "nobody"])
     err = capsys.readouterr().err
     assert code == 2 and "no record of subject 'nobody'" in err and "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_workbench_population_adds_the_hierarchical_laws(walker_batch, tmp_path, capsys) -> None:
+    """Given the batch folder, ``workbench population`` writes the hierarchical laws beside
+    the two-stage ones, from the six deck records, with the rigid walk left out and why;
+    given only its results table, it says the folder is needed."""
+    from workbench.cli import main
+
+    out, _ = walker_batch
+    code = main(["population", str(out), "--out", str(tmp_path / "p"), "--json"])
+    assert code == 0
+    obj = json.loads(capsys.readouterr().out)
+    laws = obj["hierarchical"]
+    assert laws["fit"]["records_used"] == 6 and laws["records_left_out"] == 1
+    reason = next(iter(laws["left_out_reasons"]))
+    assert "force-model check failed" in reason
+    assert (tmp_path / "p" / "hierarchical.json").exists()
+    assert obj["files"]["hierarchical"].endswith("hierarchical.json")
+    code = main(["population", str(out / "results.csv"), "--out", str(tmp_path / "q")])
+    text = capsys.readouterr().out
+    assert code == 0 and "give the batch folder" in text

@@ -129,8 +129,30 @@ def _cmd_population(args: argparse.Namespace) -> int:
     )
     files = write_population(fit, args.out)
     obj = {**fit.to_json(), "files": files}
-    emit(args, obj, fit.summary() + f"\nwritten to {args.out}")
+    text = fit.summary()
+    hierarchical = _hierarchical(args.results_dir, args.out)
+    if hierarchical is not None:
+        laws, path = hierarchical
+        obj["hierarchical"] = laws.to_json()
+        files["hierarchical"] = path
+        text += "\n" + laws.summary()
+    else:
+        text += "\nhierarchical laws: give the batch folder (its records keep their posteriors)"
+    emit(args, obj, text + f"\nwritten to {args.out}")
     return 0
+
+
+def _hierarchical(results: str, out: str) -> tuple[Any, str] | None:
+    """Write the batch's hierarchical laws to OUT/hierarchical.json (None for a table)."""
+    from workbench.fileutil import atomic_write_json
+    from workbench.population.batch_hierarchy import hierarchical_laws
+
+    if not (Path(results) / "records").is_dir():
+        return None
+    laws = hierarchical_laws(results)
+    path = Path(out) / "hierarchical.json"
+    atomic_write_json(path, laws.to_json())
+    return laws, str(path)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -262,7 +284,9 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         description="Fit the population laws to a batch's results: OLS of natural frequency, "
         "damping ratio and BLF1 on pacing with confidence and prediction bands, normality "
         "tests of the residuals, lognormal BLF2 and BLF3 beside GEV by AIC. Records whose C "
-        "or K is not identified are excluded (counted in the output).",
+        "or K is not identified are excluded (counted in the output). Given the batch "
+        "folder, also the hierarchical laws fitted to every usable record's likelihood "
+        "(DIR/hierarchical.json), with the records left out and why.",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.set_defaults(handler=_cmd_population)

@@ -109,6 +109,7 @@ __all__ = [
     "RecordLikelihood",
     "fit_collapsed",
     "fit_hierarchical",
+    "fit_laws",
     "record_log_marginal",
 ]
 
@@ -1126,3 +1127,33 @@ def record_log_marginal(
     terms = nodes.base + log_density
     top = float(np.max(terms))
     return top + math.log(float(np.sum(np.exp(terms - top))))
+
+
+#: Records up to which a fit without walker effects sums the nodes out (:func:`fit_laws`).
+COLLAPSED_MAX_RECORDS = 300
+
+
+def fit_laws(records: Sequence[RecordLikelihood], *, seed: int = 0) -> HierarchicalFit:
+    """Fit the laws with the sampler that suits the records: the fit a population report runs.
+
+    With walker effects (records sharing subjects, three walkers or more) the Gibbs sampler
+    of :func:`fit_hierarchical`; without them, up to :data:`COLLAPSED_MAX_RECORDS` records,
+    :func:`fit_collapsed` (emcee with the nodes summed out, which mixes where a law's spread
+    is small against the records' widths), and beyond that the Gibbs sampler again (whose
+    cost does not grow with emcee's walkers).
+
+    Parameters
+    ----------
+    records : sequence of RecordLikelihood
+    seed : int, default 0
+
+    Returns
+    -------
+    HierarchicalFit
+    """
+    records = list(records)
+    if len(records) >= MIN_RECORDS:
+        effects, _ = _walker_effects(_pack(records), None)
+        if not effects and len(records) <= COLLAPSED_MAX_RECORDS:
+            return fit_collapsed(records, seed=seed, draws=4000)
+    return fit_hierarchical(records, seed=seed)
