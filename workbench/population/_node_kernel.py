@@ -53,6 +53,11 @@ def draw_nodes(
             if logp[b] > -np.inf:
                 cumulative += math.exp(logp[b] - top)
             logp[b] = cumulative
+        if not cumulative > 0.0:
+            # Every node's probability underflowed or is undefined: -1 says so, and the
+            # caller refuses the record rather than take a node at random.
+            out[r] = -1
+            continue
         target = uniform[r] * cumulative
         chosen = n_nodes - 1
         for b in range(n_nodes):

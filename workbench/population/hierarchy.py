@@ -20,13 +20,16 @@ The intercept is reported at the reference pacing (``intercept_at_ref``) and, de
 every draw, at f_p = 0 (``intercept``, the seed's form ``slope * f_p + intercept``).
 Records without a subject are each their own walker. Walker effects are left out (tau = 0)
 when no walker has two or more records, since sigma and tau are then not separately
-identified, and when there are fewer than :data:`MIN_WALKERS` walkers, since under the
-uniform prior on tau the posterior of tau is then improper; the result says which.
+identified, and when there are fewer than :data:`MIN_WALKERS` walkers: under the uniform
+prior on tau its posterior tail falls as ``tau^-(J-1)`` for J walkers, so with three its
+mean does not exist and with four its variance does not (and the sampler's diagnostics
+mean little); from five on both exist. The result says which.
 
-Priors: flat on every a, b and mu; uniform on every sigma and tau over (0, infinity),
-Gelman's (2006) recommendation for the scale of a variance component with a few groups
-(under an inverse-gamma(eps, eps) prior on the variance the posterior depends on eps
-whenever tau may be near zero; a uniform prior on the variance pushes tau upwards).
+Priors: flat on every a, b and mu; uniform on every sigma and tau over (0, infinity).
+Gelman (2006) recommends the uniform prior on a group-level sd once there are more than a
+few groups (an inverse-gamma(eps, eps) prior on the variance makes the posterior depend on
+eps whenever tau may be near zero), and a half-t where there are very few; hence the
+minimum of five walkers rather than a different prior.
 
 The likelihood of a record
 --------------------------
@@ -120,9 +123,9 @@ FloatArray = NDArray[np.float64]
 PACING_REF_HZ = 1.8
 #: The laws, in the order of the sampler's arrays: three linear in pacing, two lognormal.
 LAWS: tuple[str, ...] = (*LAW_COLUMNS, *LOGNORMAL_COLUMNS)
-#: Fewest walkers a fit with walker effects needs (with two, the posterior of tau under its
-#: uniform prior is improper).
-MIN_WALKERS = 3
+#: Fewest walkers a fit with walker effects needs (module docstring: with fewer, the
+#: posterior of tau under its uniform prior has no mean or no variance).
+MIN_WALKERS = 5
 #: A parameter is flagged when its R-hat exceeds this ...
 RHAT_MAX = 1.01
 #: ... or its bulk or tail ESS falls below this.
@@ -374,6 +377,12 @@ def _draw_latents(p: _Packed, st: _State, rng: np.random.Generator) -> FloatArra
     # integrated against the population normal, and the draw at one uniform per record.
     uniform = np.asarray(rng.random(size=(mean.shape[1],)), dtype=np.float64)
     node = draw_nodes(p.obs, p.var, p.base, mean, st.sigma2, uniform)
+    if np.any(node < 0):
+        raise UsageError(
+            f"{int(np.sum(node < 0))} record(s) have no node with a finite probability under "
+            "the current laws (every node's log-probability is -inf or NaN); check their "
+            "stored posteriors"
+        )
     rows = np.arange(node.size)
     obs, var = p.obs[:, rows, node], p.var[:, rows, node]
     # Product of the node's normal (obs, var) and the population normal (mean, sigma^2),
@@ -771,6 +780,7 @@ class HierarchicalFit:
             "walker_effects": self.walker_effects,
             "notes": list(self.notes),
             "chains": int(self.draws.shape[0]),
+            # For fit_collapsed a chain is one emcee ensemble, its draws every walker's steps.
             "draws_per_chain": int(self.draws.shape[1]),
             "burn": self.burn,
             "seed": self.seed,
@@ -1129,8 +1139,10 @@ def record_log_marginal(
     return top + math.log(float(np.sum(np.exp(terms - top))))
 
 
-#: Records up to which a fit without walker effects sums the nodes out (:func:`fit_laws`).
-COLLAPSED_MAX_RECORDS = 300
+#: Records up to which a fit without walker effects sums the nodes out (:func:`fit_laws`):
+#: its cost grows with records x nodes x emcee walkers per step, about ten times the Gibbs
+#: sampler's per record, so beyond a walker's worth of records the Gibbs sampler runs.
+COLLAPSED_MAX_RECORDS = 50
 
 
 def fit_laws(records: Sequence[RecordLikelihood], *, seed: int = 0) -> HierarchicalFit:

@@ -94,7 +94,10 @@ def likelihood_use(record: StoredRecord) -> str | None:
         return None
     if record.force_model_check_passed is False:
         return "C and K follow the force model's misfit (the force-model check failed)"
-    if record.force_model_check_passed is None and record.identifiability not in IDENTIFIED:
+    if record.identifiability not in IDENTIFIED:
+        # Also where the check passed: a time history graded not identified for another
+        # reason (a deck only near the gait's harmonics, a mode on the prior box's edge)
+        # says its numbers are not estimates.
         return f"C and K from the time history, graded {record.identifiability}"
     return None
 

@@ -6,9 +6,9 @@ docs/science.md 8, :func:`~workbench.population.posteriors.likelihood_use`) as t
 hierarchical model of :mod:`workbench.population.hierarchy` with one walker: f_n, zeta and
 BLF1 linear in pacing with a normal residual from crossing to crossing, BLF2 and BLF3
 lognormal, each record counting for what its posterior says. The walker's mean law at a
-pacing, with its band, is then known better the more records there are; at the walker's
-mean pacing its sd falls about as one over the square root of their number while the
-crossing-to-crossing residual is small against each record's own sd.
+pacing, with its band, is then known better the more records there are; the records
+cannot tell a crossing-to-crossing spread below their own sd from none, so the band
+narrows more slowly than one over the square root of their number.
 """
 
 from __future__ import annotations

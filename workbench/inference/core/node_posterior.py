@@ -6,9 +6,13 @@ to 2 % against one that leaves it at 20 %, and uses both (docs/science.md 8). Th
 posterior (and the deck route's, which is one) holds that likelihood on its nodes, so an
 identification keeps them:
 
-- the nodes that hold all but a thousandth of the posterior mass (those the force mixture
-  uses, :mod:`workbench.inference.methods.exact_force`), their posterior mass renormalised
-  over them, and the share of the whole grid's mass they hold;
+- the nodes that hold all but a thousandth of the posterior mass, their posterior mass
+  renormalised over them, and the share of the whole grid's mass they hold. At most
+  :data:`MAX_NODES`: a wide posterior (a weak deck's, flat over much of the prior box)
+  would need many more, so its grid is coarsened first, k x k cells merged into one node
+  at their mass's centroid with the merged cell's edges, for the smallest k at which that
+  many nodes suffice (:func:`node_posterior_from_grid`). A wide likelihood is then kept
+  whole, at a coarser resolution, rather than cut to its highest part;
 - the prior they were computed under: uniform over the prior box in (C, K), so within the
   box the likelihood is proportional to the mass (the cells are alike), and the cells'
   edges, since a node stands for its cell (:meth:`NodePosterior.modal_cell_variance`);
@@ -35,12 +39,16 @@ from numpy.typing import NDArray
 from workbench.errors import UsageError
 from workbench.inference.core.problem import StiffnessDampingPrior
 
-__all__ = ["NODE_LOAD_FACTORS", "NodePosterior"]
+__all__ = ["NODE_LOAD_FACTORS", "NodePosterior", "node_posterior_from_grid"]
 
 FloatArray = NDArray[np.float64]
 
 #: Load factors kept per node: BLF1-3, those the population laws use.
 NODE_LOAD_FACTORS = 3
+#: Nodes a record keeps at most ...
+MAX_NODES = 160
+#: ... holding all but this much of the posterior's mass.
+MASS_TAIL = 1e-3
 #: Significant digits the JSON keeps (as ``results.csv`` does).
 _DIGITS = 10
 
@@ -197,3 +205,75 @@ class NodePosterior:
                 f"{where}: the stored posterior holds non-finite or negative numbers; {fix}"
             )
         return cls(c, k, w / w.sum(), held, blf_mean, blf_sd, box, mass_kg, edges, kind)
+
+
+def node_posterior_from_grid(
+    nodes: FloatArray,
+    weights: FloatArray,
+    cell_edges: FloatArray,
+    blf_nodes: FloatArray,
+    blf_mean: FloatArray,
+    blf_sd: FloatArray,
+    prior: StiffnessDampingPrior,
+    mass_kg: float,
+) -> NodePosterior:
+    """Keep a grid posterior on at most :data:`MAX_NODES` nodes (module docstring).
+
+    Parameters
+    ----------
+    nodes, weights : ndarray, shapes (M, 2), (M,)
+        The grid's (C, K) nodes and posterior masses.
+    cell_edges : ndarray, shape (2, 2)
+        The grid's cell edges as columns.
+    blf_nodes, blf_mean, blf_sd : ndarray, shapes (B, 2), (B, n), (B, n)
+        Points of (C, K) where the load factors given (C, K) are known (the force mixture's
+        nodes), and their mean and sd there; every kept node takes those of the nearest such
+        point (in cells), the load factors changing little over a few cells.
+    prior : StiffnessDampingPrior
+    mass_kg : float
+
+    Returns
+    -------
+    NodePosterior
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    edges = np.asarray(cell_edges, dtype=np.float64)
+    inverse = np.linalg.inv(edges)
+    origin = nodes[int(np.argmax(w))]
+    lattice = np.rint((nodes - origin) @ inverse.T).astype(np.int64)
+    k = 1
+    while True:
+        block = np.floor_divide(lattice + k // 2, k)
+        keys, which = np.unique(block, axis=0, return_inverse=True)
+        which = which.reshape(-1)
+        mass = np.bincount(which, weights=w, minlength=keys.shape[0])
+        order = np.argsort(mass)[::-1]
+        count = int(np.searchsorted(np.cumsum(mass[order]), 1.0 - MASS_TAIL)) + 1
+        count = min(count, order.size)
+        if count <= MAX_NODES or keys.shape[0] <= MAX_NODES:
+            break
+        k += 1
+    kept = order[: min(count, MAX_NODES)]
+    centroid = (
+        np.stack(
+            [np.bincount(which, weights=w * nodes[:, j], minlength=keys.shape[0]) for j in (0, 1)],
+            axis=1,
+        )[kept]
+        / mass[kept, None]
+    )
+    # The load factors of the nearest point where they are known, distance in cells.
+    offset = (centroid[:, None, :] - np.asarray(blf_nodes)[None, :, :]) @ inverse.T
+    nearest = np.argmin(np.sum(offset * offset, axis=2), axis=1)
+    held = float(mass[kept].sum())
+    return NodePosterior(
+        damping_ns_per_m=centroid[:, 0].copy(),
+        stiffness_n_per_m=centroid[:, 1].copy(),
+        weight=mass[kept] / held,
+        mass_held=held,
+        blf_mean=np.asarray(blf_mean)[nearest],
+        blf_sd=np.asarray(blf_sd)[nearest],
+        prior=prior,
+        mass_kg=float(mass_kg),
+        cell_edges=edges * k,
+    )

@@ -56,7 +56,7 @@ from workbench.inference.core.load_factors import (
     mix_load_factors,
     point_load_factors,
 )
-from workbench.inference.core.node_posterior import NODE_LOAD_FACTORS, NodePosterior
+from workbench.inference.core.node_posterior import NODE_LOAD_FACTORS, node_posterior_from_grid
 from workbench.inference.kalman import record_loglik
 from workbench.inference.methods.pf import PF_PARTICLES
 from workbench.inference.methods.rbpf import RBPF_PARTICLES, REJUVENATE
@@ -610,16 +610,15 @@ def exact_result(
     blf_mean, blf_var, _ = point_load_factors(
         force.node_theta_mean, force.node_theta_var, problem.mass_kg, problem.harmonics
     )
-    nodes = NodePosterior(
-        damping_ns_per_m=force.node_damping,
-        stiffness_n_per_m=force.node_stiffness,
-        weight=force.node_weights,
-        mass_held=force.mass_held,
-        blf_mean=blf_mean[:, :NODE_LOAD_FACTORS],
-        blf_sd=np.sqrt(np.maximum(blf_var[:, :NODE_LOAD_FACTORS], 0.0)),
-        prior=post.prior,
-        mass_kg=problem.mass_kg,
-        cell_edges=np.asarray(post.cell_edges, dtype=np.float64),
+    nodes = node_posterior_from_grid(
+        post.nodes,
+        post.weights,
+        post.cell_edges,
+        np.column_stack([force.node_damping, force.node_stiffness]),
+        blf_mean[:, :NODE_LOAD_FACTORS],
+        np.sqrt(np.maximum(blf_var[:, :NODE_LOAD_FACTORS], 0.0)),
+        post.prior,
+        problem.mass_kg,
     )
     return IdentificationResult(
         method="exact",
