@@ -1148,7 +1148,7 @@ COLLAPSED_MAX_RECORDS = 50
 def fit_laws(records: Sequence[RecordLikelihood], *, seed: int = 0) -> HierarchicalFit:
     """Fit the laws with the sampler that suits the records: the fit a population report runs.
 
-    With walker effects (records sharing subjects, three walkers or more) the Gibbs sampler
+    With walker effects (records sharing subjects, five walkers or more) the Gibbs sampler
     of :func:`fit_hierarchical`; without them, up to :data:`COLLAPSED_MAX_RECORDS` records,
     :func:`fit_collapsed` (emcee with the nodes summed out, which mixes where a law's spread
     is small against the records' widths), and beyond that the Gibbs sampler again (whose
