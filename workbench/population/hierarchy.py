@@ -126,6 +126,9 @@ LAWS: tuple[str, ...] = (*LAW_COLUMNS, *LOGNORMAL_COLUMNS)
 #: Fewest walkers a fit with walker effects needs (module docstring: with fewer, the
 #: posterior of tau under its uniform prior has no mean or no variance).
 MIN_WALKERS = 5
+#: Posterior draws the JSON keeps for the pedestrian sampler
+#: (:meth:`HierarchicalFit.thinned_draws`).
+PREDICTIVE_DRAWS = 400
 #: A parameter is flagged when its R-hat exceeds this ...
 RHAT_MAX = 1.01
 #: ... or its bulk or tail ESS falls below this.
@@ -692,6 +695,18 @@ class HierarchicalFit:
             ) from None
         return self._flat()[:, i]
 
+    def thinned_draws(self, count: int = PREDICTIVE_DRAWS) -> dict[str, list[float]]:
+        """Every parameter's values at ``count`` posterior draws, evenly spaced over the chains.
+
+        The same draws for every parameter, so each keeps the others' values it came with.
+        """
+        flat = self.draws.reshape(-1, self.draws.shape[2])
+        pick = np.unique(np.linspace(0, flat.shape[0] - 1, min(count, flat.shape[0])).astype(int))
+        return {
+            name: [float(f"{v:.10g}") for v in flat[pick, i]]
+            for i, name in enumerate(self.parameter_names)
+        }
+
     def law_band(self, law: str, pacing_hz: ArrayLike) -> pd.DataFrame:
         """Return the posterior mean law and the 95 % band of the mean law on a pacing grid.
 
@@ -779,6 +794,8 @@ class HierarchicalFit:
             "walkers": self.walkers,
             "walker_effects": self.walker_effects,
             "notes": list(self.notes),
+            # Thinned posterior draws, for the pedestrian sampler's posterior predictive.
+            "predictive_draws": self.thinned_draws(),
             "chains": int(self.draws.shape[0]),
             # For fit_collapsed a chain is one emcee ensemble, its draws every walker's steps.
             "draws_per_chain": int(self.draws.shape[1]),

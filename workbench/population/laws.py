@@ -42,6 +42,8 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from workbench.errors import InputError, UsageError
 from workbench.models.seed_laws import (
     SEED_DAMPING_RATIO,
@@ -233,6 +235,11 @@ class PopulationLaws:
         Step length against pacing.
     source : str
         Where the laws come from (``"seed defaults"`` or the fitted results).
+    parameter_draws : mapping of str to ndarray, optional
+        Posterior draws of the laws' parameters (a hierarchical fit's,
+        :meth:`from_hierarchical_json`): the sampler then draws every pedestrian from the
+        posterior predictive, each with the parameters of one draw. The point laws above
+        are then the posterior means, with the residual and walker sds combined.
     """
 
     natural_frequency_hz: LinearLaw = field(default_factory=_seed_fn)
@@ -244,6 +251,7 @@ class PopulationLaws:
     mass: MassDistribution = field(default_factory=MassDistribution)
     step_length: StepLengthLaw = field(default_factory=StepLengthLaw)
     source: str = "seed defaults"
+    parameter_draws: Mapping[str, np.ndarray] | None = field(default=None, compare=False)
 
     @classmethod
     def seed_defaults(cls) -> PopulationLaws:
@@ -308,6 +316,52 @@ class PopulationLaws:
             ) from None
         return cls(**kwargs)
 
+    @classmethod
+    def from_hierarchical_json(
+        cls, obj: Mapping[str, Any], *, source: str = "hierarchical laws"
+    ) -> PopulationLaws:
+        """Read the hierarchical laws ``workbench population`` writes (``hierarchical.json``).
+
+        The point laws are the posterior means, each residual sd combined with its walker sd
+        (a new pedestrian is a new walker); ``parameter_draws`` keeps the posterior draws.
+        """
+        fit = obj.get("fit")
+        if not isinstance(fit, Mapping):
+            raise UsageError(
+                "the hierarchical laws hold no fit ("
+                f"{obj.get('no_fit') or 'too few usable records'}); sample from the two-stage "
+                "laws (population.json) or fit more records"
+            )
+        try:
+            laws, draws = fit["laws"], fit["predictive_draws"]
+            values = {k: np.asarray(v, dtype=np.float64) for k, v in draws.items()}
+            flat: dict[str, Any] = {"laws": {}, "lognormal": {}}
+            for key in ("natural_frequency_hz", "damping_ratio", "blf1", "blf2", "blf3"):
+                law = laws[key]
+                walker = law.get("walker_sd") or {"mean": 0.0}
+                spread = math.hypot(float(law["residual_sd"]["mean"]), float(walker["mean"]))
+                if key.startswith("blf") and key != "blf1":
+                    flat["lognormal"][key] = {"mu": law["mu"]["mean"], "sigma": spread}
+                else:
+                    flat["laws"][key] = {
+                        "slope": law["slope"]["mean"],
+                        "intercept": law["intercept"]["mean"],
+                        "residual_sd": spread,
+                    }
+        except (KeyError, TypeError, ValueError) as err:
+            raise UsageError(
+                f"the hierarchical laws lack the entry {err}; give the hierarchical.json that "
+                "'workbench population BATCH_DIR --out DIR' writes"
+            ) from None
+        sizes = {v.shape for v in values.values()}
+        if len(sizes) != 1 or not all(np.all(np.isfinite(v)) for v in values.values()):
+            raise UsageError(
+                "the hierarchical laws' predictive_draws are not one finite value per draw for "
+                "every parameter; write them again with 'workbench population'"
+            )
+        point = cls.from_json(flat, source=source)
+        return point.replace(parameter_draws=values)
+
     def to_json(self) -> dict[str, Any]:
         """Return the laws in the shape :meth:`from_json` reads, with the sampler's inputs."""
         return {
@@ -362,7 +416,8 @@ def read_laws(path: str | os.PathLike[str] | None) -> PopulationLaws:
     Parameters
     ----------
     path : path-like or None
-        ``population.json`` of a population fit; None gives the seed's laws
+        ``population.json`` of a population fit, or its ``hierarchical.json`` (the sampler
+        then draws from the posterior predictive); None gives the seed's laws
         (:class:`PopulationLaws` defaults).
 
     Returns
@@ -410,6 +465,8 @@ def read_laws(path: str | os.PathLike[str] | None) -> PopulationLaws:
             path, "whole file", "the JSON is not an object", "give a population JSON object"
         )
     try:
+        if "fit" in obj and "laws" not in obj:  # hierarchical.json
+            return PopulationLaws.from_hierarchical_json(obj, source=str(path))
         return PopulationLaws.from_json(obj, source=str(path))
     except UsageError as err:
         raise InputError(path, "whole file", str(err).rstrip("."), "fix or regenerate it") from None

@@ -13,10 +13,15 @@ step length from its linear law in pacing with normal scatter (redrawn below a f
 f_n, zeta and BLF1 from their linear laws plus normal residuals, truncated to physical values
 (f_n above 0.5 Hz, zeta in (0.01, 0.99), BLF1 in (0, 1)) -- with the seed's laws and
 residual sds the truncation removes far less than 0.1 % of the probability, so it does not
-bias the sample; BLF2 and BLF3 lognormal; phases uniform.
+bias the sample; BLF2 and BLF3 lognormal; phases uniform. Laws read from a hierarchical
+fit (``hierarchical.json``) carry posterior draws: then each pedestrian takes the laws of
+one draw, with the residual and walker sds combined (a new pedestrian is a new walker),
+which is the posterior predictive of a new walker's record.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 import pandas as pd
@@ -56,15 +61,24 @@ BLF1_BOUNDS = (0.0, 1.0)
 
 
 def _truncnorm(
-    rng: np.random.Generator, mean: np.ndarray, sd: float, low: float, high: float
+    rng: np.random.Generator, mean: np.ndarray, sd: float | np.ndarray, low: float, high: float
 ) -> np.ndarray:
     mean = np.asarray(mean, dtype=float)
-    if sd == 0:
+    if np.all(np.asarray(sd) == 0):
         return np.clip(mean, low, high)
+    # A zero sd among others (a draw with no residual) is a point: a tiny sd keeps it there.
+    sd = np.maximum(np.asarray(sd, dtype=float), 1e-12)
     a = (low - mean) / sd
     b = (high - mean) / sd
     draws = stats.truncnorm.rvs(a, b, loc=mean, scale=sd, size=mean.shape, random_state=rng)
     return np.asarray(draws, dtype=float).reshape(mean.shape)
+
+
+def _spread(draws: Mapping[str, np.ndarray], name: str, pick: np.ndarray) -> np.ndarray:
+    """Residual sd combined with the walker sd (a new pedestrian is a new walker)."""
+    sd = draws[f"{name}.residual_sd"][pick]
+    walker = draws.get(f"{name}.walker_sd")
+    return np.asarray(sd if walker is None else np.hypot(sd, walker[pick]), dtype=float)
 
 
 def _law_draw(
@@ -73,8 +87,14 @@ def _law_draw(
     name: str,
     pacing: np.ndarray,
     bounds: tuple[float, float],
+    pick: np.ndarray | None = None,
 ) -> np.ndarray:
     law: LinearLaw = getattr(laws, name)
+    draws = laws.parameter_draws
+    if draws is not None and pick is not None:
+        # The posterior predictive: each pedestrian with the laws of one posterior draw.
+        mean = draws[f"{name}.slope"][pick] * pacing + draws[f"{name}.intercept"][pick]
+        return _truncnorm(rng, mean, _spread(draws, name, pick), *bounds)
     mean = law.mean(pacing)
     if np.any(mean <= bounds[0]) or np.any(mean >= bounds[1]):
         # Name the laws' file: an edited or foreign population.json is the usual cause.
@@ -139,11 +159,19 @@ def sample_pedestrians(n: int, *, seed: int, laws: PopulationLaws | None = None)
     step = _truncnorm(
         rng, sl.slope_m_per_hz * pacing + sl.intercept_m, sl.residual_sd_m, sl.min_m, np.inf
     )
-    fn = _law_draw(rng, laws, "natural_frequency_hz", pacing, FN_BOUNDS_HZ)
-    zeta = _law_draw(rng, laws, "damping_ratio", pacing, ZETA_BOUNDS)
-    blf1 = _law_draw(rng, laws, "blf1", pacing, BLF1_BOUNDS)
-    blf2 = np.exp(rng.normal(laws.blf2.mu, laws.blf2.sigma, n))
-    blf3 = np.exp(rng.normal(laws.blf3.mu, laws.blf3.sigma, n))
+    draws = laws.parameter_draws
+    pick = None
+    if draws is not None:
+        pick = rng.integers(0, len(next(iter(draws.values()))), n)
+    fn = _law_draw(rng, laws, "natural_frequency_hz", pacing, FN_BOUNDS_HZ, pick)
+    zeta = _law_draw(rng, laws, "damping_ratio", pacing, ZETA_BOUNDS, pick)
+    blf1 = _law_draw(rng, laws, "blf1", pacing, BLF1_BOUNDS, pick)
+    if draws is not None and pick is not None:
+        blf2 = np.exp(rng.normal(draws["blf2.mu"][pick], _spread(draws, "blf2", pick)))
+        blf3 = np.exp(rng.normal(draws["blf3.mu"][pick], _spread(draws, "blf3", pick)))
+    else:
+        blf2 = np.exp(rng.normal(laws.blf2.mu, laws.blf2.sigma, n))
+        blf3 = np.exp(rng.normal(laws.blf3.mu, laws.blf3.sigma, n))
     phases = rng.uniform(0.0, 2 * np.pi, size=(3, n))
     stiffness = mass * (2 * np.pi * fn) ** 2
     damping = 2 * zeta * np.sqrt(stiffness * mass)
