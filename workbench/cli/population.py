@@ -133,7 +133,11 @@ def _cmd_population(args: argparse.Namespace) -> int:
     hierarchical = _hierarchical(args.results_dir, args.out)
     if hierarchical is not None:
         laws, path = hierarchical
-        obj["hierarchical"] = laws.to_json()
+        summary = laws.to_json()
+        if summary["fit"] is not None:
+            # The posterior draws are for the sampler (in the file), not for reading.
+            summary["fit"] = {k: v for k, v in summary["fit"].items() if k != "predictive_draws"}
+        obj["hierarchical"] = summary
         files["hierarchical"] = path
         text += "\n" + laws.summary()
     else:
