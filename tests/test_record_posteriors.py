@@ -232,6 +232,8 @@ def test_workbench_walker_fits_one_subjects_records(walker_batch, tmp_path, caps
     truth = float(np.polyval(coef, obj["mean_pacing_hz"]))
     lo, hi = obj["at_mean_pacing"]["natural_frequency_hz"]["ci95"]
     assert lo <= truth <= hi, (lo, truth, hi)
+    # A band, not the prior box: narrower than a third of f_n.
+    assert 0 < hi - lo < truth / 3, (lo, hi)
     code = main(["walker", str(out), "--subject", "nobody"])
     err = capsys.readouterr().err
     assert code == 2 and "no record of subject 'nobody'" in err and "Traceback" not in err

@@ -73,8 +73,6 @@ class ForcePosterior:
         from the sub-lattice when the filter ran on one.
     filtered_points : int
         How many (C, K) points the filter ran at, besides the MAP.
-    mass_held : float
-        Share of the grid posterior's mass the nodes hold (before renormalising).
     """
 
     coefficient_names: tuple[str, ...]
@@ -90,7 +88,6 @@ class ForcePosterior:
     node_theta_mean: FloatArray
     node_theta_var: FloatArray
     filtered_points: int = 0
-    mass_held: float = 1.0
 
 
 def _sublattice(
@@ -197,7 +194,6 @@ def _force_posterior(
         node_theta_mean=node_mean,
         node_theta_var=node_var,
         filtered_points=int(points.shape[0]),
-        mass_held=float(weights[sel].sum() / weights.sum()),
     )
 
 
