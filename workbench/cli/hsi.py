@@ -43,12 +43,22 @@ def _sampler(args: argparse.Namespace) -> tuple[Any, str]:
     if args.pedestrians is not None:
         if args.laws is not None:
             raise UsageError("give either --pedestrians or --laws, not both")
+        if args.cohort is not None:
+            raise UsageError(
+                "--cohort draws its walkers from the laws; give --laws (or neither), not "
+                "--pedestrians"
+            )
         table = read_pedestrians(args.pedestrians)
         return TableSampler(table, str(args.pedestrians)), str(args.pedestrians)
     from workbench.population.laws import read_laws
     from workbench.population.sampler import sample_pedestrians
 
     laws = read_laws(args.laws)
+    if args.cohort is not None:
+        from workbench.population.cohort import CohortSampler
+
+        cohort = CohortSampler.from_laws(args.cohort, seed=args.seed, laws=laws)
+        return cohort, f"a cohort of {args.cohort} walkers drawn from {laws.source}"
     return partial(sample_pedestrians, laws=laws), f"population sampler ({laws.source})"
 
 
@@ -423,6 +433,13 @@ def add_hsi_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "--laws",
         metavar="POPULATION.json",
         help="draw pedestrians from these laws (default: the seed's laws)",
+    )
+    g.add_argument(
+        "--cohort",
+        type=positive_int,
+        metavar="N",
+        help="every pedestrian is one of N walkers drawn once from the laws, crossing again "
+        "at their own pacing (their records share the walker as subject)",
     )
     g.add_argument(
         "--crowd",

@@ -123,7 +123,7 @@ def draw_crossing(
     table_seed = int(ss.generate_state(1)[0])
     span = spec.structure.span_m
     if spec.crowd == "single":
-        frame = validate_pedestrians(spec.sampler(1, seed=table_seed), "the sampler's table")
+        frame = _with_walker_ids(spec.sampler(1, seed=table_seed))
         v = frame["speed_m_s"].to_numpy(float)
         return frame, np.zeros(1), v, float(span / v[0])
     # Arrivals start one slow crossing before t = 0 so the deck is already populated.
@@ -133,11 +133,23 @@ def draw_crossing(
     if n == 0:
         return empty_table(), np.zeros(0), np.zeros(0), spec.duration_s
     entry = rng.uniform(-lead_s, spec.duration_s, size=n)
-    frame = validate_pedestrians(spec.sampler(n, seed=table_seed), "the sampler's table")
+    frame = _with_walker_ids(spec.sampler(n, seed=table_seed))
     v = frame["speed_m_s"].to_numpy(float)
     keep = (entry + span / v > 0) & (entry < spec.duration_s)
     frame = frame[keep].reset_index(drop=True)
     return frame, -v[keep] * entry[keep], v[keep], spec.duration_s
+
+
+def _with_walker_ids(raw: pd.DataFrame) -> pd.DataFrame:
+    """Check the sampler's table; keep its ``walker_id`` column, if any, for the records.
+
+    A cohort sampler (:class:`~workbench.population.cohort.CohortSampler`) names the walker
+    behind each pedestrian, so that records of one person's crossings group by subject.
+    """
+    frame = validate_pedestrians(raw, "the sampler's table")
+    if isinstance(raw, pd.DataFrame) and "walker_id" in raw.columns:
+        frame["walker_id"] = raw["walker_id"].to_numpy(int)
+    return frame
 
 
 def empty_table() -> pd.DataFrame:

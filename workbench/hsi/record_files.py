@@ -8,6 +8,9 @@ The records of :mod:`workbench.hsi.records` are written into a folder as::
     records/crossingCCCC_walkerWWW.json   sidecar: mass_kg, pacing_hz, subject, notes, truth
     records/crossingCCCC_walkerWWW.truth.json   the truth alone (as `workbench simulate`)
 
+(a record's subject is its file stem, except a cohort member's, which is the person:
+``walker007``, so that one walker's crossings group in a population fit)
+
 every file atomically, the manifest last, so a manifest always lists complete records;
 the CSV and sidecar are those of :func:`workbench.records.io.save_record`, so
 :func:`workbench.load_record` and ``workbench batch manifest.csv`` read them.
@@ -25,7 +28,7 @@ from typing import Any
 import pandas as pd
 
 from workbench.errors import InputError, UsageError
-from workbench.hsi.records import crossing_records
+from workbench.hsi.records import crossing_records, record_name
 from workbench.records.record import Record
 
 __all__ = [
@@ -132,11 +135,11 @@ def write_walker_records(
     from workbench.records.io import save_record
     from workbench.records.validation import validate_record
 
-    names = [r.subject or "" for r in records]
+    names = [_file_stem(r) for r in records]
     for i, name in enumerate(names):
         if not name or names.index(name) != i:
-            # The subject names the files: a repeat would overwrite a record.
-            what = "a record without a subject" if not name else f"the subject {name!r} twice"
+            # The stem names the files: a repeat would overwrite a record.
+            what = "a record without a subject" if not name else f"the record {name!r} twice"
             raise UsageError(
                 f"'records' has {what}; give each record its own subject (walker_records "
                 "names them by crossing and walker, so pass distinct crossing_ids)",
@@ -156,8 +159,9 @@ def write_walker_records(
         if truth:
             atomic_write_json(out / f"records/{name}.truth.json", truth)
         written.append(csv_path)
-        rows.append([rel, repr(record.mass_kg), repr(record.pacing_hz), name])
-        truths.append({"path": rel, "subject": name, **_truth_row(truth)})
+        subject = record.subject or name
+        rows.append([rel, repr(record.mass_kg), repr(record.pacing_hz), subject])
+        truths.append({"path": rel, "subject": subject, **_truth_row(truth)})
     if not rows:
         # An earlier run's manifest would list records this run did not write.
         for stale in ("manifest.csv", "truth.csv"):
@@ -169,6 +173,18 @@ def write_walker_records(
     text = "path,mass_kg,pacing_hz,subject\n" + "".join(",".join(r) + "\n" for r in rows)
     atomic_write_text(manifest, text)
     return RecordsWritten(out, manifest, written, skipped)
+
+
+def _file_stem(record: Record) -> str:
+    """Name a record's files by its crossing and walker, else by its subject.
+
+    A cohort member's records share their subject (the person), so the subject cannot name
+    the files of several crossings; the crossing and the walker's place in it can.
+    """
+    truth = record.metadata.get("truth") or {}
+    if "walker_id" in truth and "crossing" in truth and "walker" in truth:
+        return record_name(int(truth["crossing"]), int(truth["walker"]))
+    return record.subject or ""
 
 
 #: Scalar truth entries that go into ``truth.csv``, in column order.
@@ -189,6 +205,8 @@ _TRUTH_COLUMNS = (
 
 def _truth_row(truth: Mapping[str, Any]) -> dict[str, Any]:
     row = {k: truth.get(k) for k in _TRUTH_COLUMNS}
+    if "walker_id" in truth:  # a cohort's member (workbench.population.cohort)
+        row["walker_id"] = truth["walker_id"]
     for i, value in enumerate(truth.get("blf") or [], start=1):
         row[f"blf{i}"] = value
     return row

@@ -402,4 +402,17 @@ def crossing_records(spec: Any, seed: int, index: int) -> list[Record]:
         static_weight=spec.static_weight,
         keep_walkers=True,
     )
-    return walker_records(history, crossing_ids=[index], truth_extra={"monte_carlo_seed": seed})
+    records = walker_records(history, crossing_ids=[index], truth_extra={"monte_carlo_seed": seed})
+    if "walker_id" not in frame.columns:
+        return records
+    # A cohort's pedestrian: the record's subject is the person, so their crossings group.
+    from workbench.population.cohort import walker_name
+
+    ids = frame["walker_id"].to_numpy(int)
+    out = []
+    for record in records:
+        truth = record.metadata["truth"]
+        member = int(ids[int(truth["walker"])])
+        metadata = {**record.metadata, "truth": {**truth, "walker_id": member}}
+        out.append(record.replace(subject=walker_name(member), metadata=metadata))
+    return out
