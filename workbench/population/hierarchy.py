@@ -587,26 +587,6 @@ def _reported(kept: FloatArray, effects: bool) -> FloatArray:
     return np.stack(cols, axis=-1)
 
 
-def _rhat_ess(draws: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Rank-normalised split R-hat, bulk and tail ESS of every parameter of (E, n, d) draws.
-
-    arviz's functions on each parameter's (chain, draw) array, as the cross-check's
-    diagnostics compute them (that helper is private to its subpackage, so the few lines are
-    repeated here rather than imported).
-    """
-    # arviz is imported here: its import takes seconds, which importing this module
-    # should not cost.
-    import arviz as az
-
-    out = np.empty((3, draws.shape[2]))
-    for i in range(draws.shape[2]):
-        x = np.ascontiguousarray(draws[:, :, i])
-        out[0, i] = az.rhat(x)
-        out[1, i] = az.ess(x, method="bulk")
-        out[2, i] = az.ess(x, method="tail")
-    return out[0], out[1], out[2]
-
-
 @dataclass(frozen=True, eq=False)
 class HierarchicalFit:
     """The posterior of the population laws from :func:`fit_hierarchical`.
@@ -926,7 +906,10 @@ def fit_hierarchical(
         ]
     )
     out = _reported(kept, effects)
-    rhat, ess_bulk, ess_tail = _rhat_ess(out)
+    # The cross-check's estimators, imported here: its package takes seconds to import.
+    from workbench.inference.crosscheck.mcmc_diagnostics import rhat_ess
+
+    rhat, ess_bulk, ess_tail = rhat_ess(out)
     return HierarchicalFit(
         parameter_names=_parameter_names(effects),
         draws=out,
@@ -1062,7 +1045,10 @@ def fit_collapsed(
     # independent chains, and an ESS of the flattened sequence would overstate it).
     n_chains, n_draws, n_walkers, n_par = per_step.shape
     out = per_step.reshape(n_chains, n_draws * n_walkers, n_par)
-    rhat, _, _ = _rhat_ess(out)
+    # The cross-check's estimators, imported here: its package takes seconds to import.
+    from workbench.inference.crosscheck.mcmc_diagnostics import rhat_ess
+
+    rhat, _, _ = rhat_ess(out)
     tau = np.stack([emcee.autocorr.integrated_time(per_step[c], tol=0) for c in range(n_chains)])
     ess = np.sum(n_draws * n_walkers / np.maximum(tau, 1.0), axis=0)
     notes = [

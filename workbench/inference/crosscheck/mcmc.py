@@ -87,7 +87,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError
-from workbench.inference.crosscheck.mcmc_diagnostics import _integrated_time, _rhat_ess
+from workbench.inference.crosscheck.mcmc_diagnostics import _integrated_time, rhat_ess
 from workbench.inference.crosscheck.mcmc_lockstep import (
     _BatchedEnsemble,
     _EnsembleError,
@@ -371,7 +371,7 @@ def run_ensembles(
     acceptance = np.array([float(np.mean(s.acceptance_fraction)) for s in samplers])
     stuck = np.array([int(_stuck_walkers(s.get_chain()).sum()) for s in samplers])
 
-    rhat, ess_bulk, ess_tail = _rhat_ess(draws)
+    rhat, ess_bulk, ess_tail = rhat_ess(draws)
 
     reasons = _reasons(
         names=names,

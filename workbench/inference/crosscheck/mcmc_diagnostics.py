@@ -1,7 +1,7 @@
 """The numbers the runner's convergence checks read: autocorrelation time, R-hat and ESS.
 
 :func:`_integrated_time` is emcee's integrated autocorrelation time with the walkers' FFTs
-batched; :func:`_rhat_ess` is arviz's rank-normalised split R-hat and bulk and tail ESS on
+batched; `rhat_ess` is arviz's rank-normalised split R-hat and bulk and tail ESS on
 each parameter's array. Both give the numbers of the library functions they stand for
 (``tests/test_mcmc.py``) without their per-walker and per-dataset fixed costs, which at
 the cross-check's few hundred steps per run exceed the arithmetic.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__: list[str] = []
+__all__ = ["rhat_ess"]
 
 FloatArray = NDArray[np.float64]
 
@@ -49,12 +49,13 @@ def _integrated_time(x: FloatArray, c: float = 5.0) -> FloatArray:
     return tau
 
 
-def _rhat_ess(draws: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+def rhat_ess(draws: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Rank-normalised split R-hat, bulk and tail ESS of every parameter of (E, n, d) draws.
 
     arviz's functions on each parameter's (chain, draw) array: the numbers its
     InferenceData path gives (``tests/test_mcmc.py``) without building the InferenceData
-    and its xarray wrapping, which cost more than the sampling of a cheap step.
+    and its xarray wrapping, which cost more than the sampling of a cheap step. The
+    hierarchical population fit reads its chains with it too.
     """
     # arviz is imported here, not at module level: its import takes seconds (it loads its
     # plotting stack), which every command importing this module would otherwise pay.
