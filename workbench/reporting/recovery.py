@@ -252,7 +252,8 @@ def _both_fits_sentence(
     if len(findings) == 2:
         reading = f"either fit's {short} slope can be read as a finding within its interval"
     elif findings:
-        reading = f"read the {findings[0]} fit's {short} slope as the finding, not the other's"
+        other = next(label for label in fits if label != findings[0])
+        reading = f"read the {findings[0]} fit's {short} slope as the finding, not the {other} one"
     else:
         reading = f"neither fit's {short} slope is a finding here"
     true_slope = obj["truth"]["laws"][law]["slope"]
@@ -282,8 +283,9 @@ def recovery_conclusions(
         The report's own hierarchical laws (``HierarchicalFit.to_json()["laws"]``), named
         beside the two-stage slope.
 
-    A run with the hierarchical part (``workbench recovery`` fits both) also gets, per law,
-    a sentence saying which fit's slope can be read as a finding, from the two verdicts.
+    A run with the hierarchical part (``workbench recovery`` fits both) gets instead, per
+    law, one sentence saying what each fit does with the true slope and which fit's slope
+    can be read as a finding, from the two verdicts.
     """
     hier = hierarchical_laws or {}
     out = []
@@ -297,6 +299,16 @@ def recovery_conclusions(
                 continue
             mine = fitted_laws.get(law)
             own = f" (this report: slope {mine['slope']:.4g})" if mine else ""
+            slope = (hier.get(law) or {}).get("slope")
+            both_own = own
+            if slope:
+                both_own = f" (this report: hierarchical slope {slope['mean']:.4g}" + (
+                    f", two-stage slope {mine['slope']:.4g})" if mine else ")"
+                )
+            both = _both_fits_sentence(obj, law, short, where, both_own)
+            if both is not None:  # a run of both fits: one sentence says which to read
+                out.append(both)
+                continue
             true_slope = truth["laws"][law]["slope"]
             verdict = obj["verdict"]["pipeline"][law]["slope"] if "laws" in fit else ""
             got = interval_text(fit, law, "slope") if "laws" in fit else ""
@@ -325,13 +337,4 @@ def recovery_conclusions(
                     f"{true_slope:.4g} came back as {got}, so a slope of this size here is a "
                     f"property of the walkers within its interval{own}."
                 )
-            slope = (hier.get(law) or {}).get("slope")
-            both_own = own
-            if slope:
-                both_own = f" (this report: hierarchical slope {slope['mean']:.4g}" + (
-                    f", two-stage slope {mine['slope']:.4g})" if mine else ")"
-                )
-            both = _both_fits_sentence(obj, law, short, where, both_own)
-            if both is not None:
-                out.append(both)
     return out
