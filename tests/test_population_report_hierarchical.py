@@ -151,7 +151,11 @@ def test_without_a_hierarchical_fit_the_row_says_why(tmp_path):
     Table 2 from a summary alone (as the demo builds it) keeps one "This study" row."""
     results = _results(60)
     ols = fit_population(results, source="test")
-    population_report(results, ols, tmp_path / "a")
+    p01 = results[results.subject == "P01"]
+    walker = WalkerFit("P01", _fit(2), p01.pacing_hz.to_numpy(), LEFT_OUT.iloc[0:0])
+    files = population_report(results, ols, tmp_path / "a", walkers=[walker])
+    # The walker panels need no population fit of the hierarchical kind (the OLS law is drawn).
+    assert "population_walkers.png" in files and "population_hierarchical.png" not in files
     row = pd.read_csv(tmp_path / "a" / "table2.csv").iloc[-2]
     assert row.iloc[0] == "This study, hierarchical"
     assert row.iloc[2].startswith("not fitted: no hierarchical fit was given to this report")

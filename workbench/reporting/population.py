@@ -405,9 +405,9 @@ def _hierarchical_sections(
             "'workbench report' fits them when given the batch folder, and skips them with "
             "--no-hierarchical."
         )
-        return files
-    sec.paragraph(ph.records_sentence(hierarchical))
-    hfit = hierarchical.fit
+    else:
+        sec.paragraph(ph.records_sentence(hierarchical))
+    hfit = None if hierarchical is None else hierarchical.fit
     if hfit is not None:
         table = ph.hierarchical_laws_table(hfit)
         files["hierarchical_laws_csv"] = str(_write_table_csv(table, out / "hierarchical_laws.csv"))
@@ -426,12 +426,12 @@ def _hierarchical_sections(
             "(posterior mean) with its 95 % band, beside the two-stage OLS law with its 95 % "
             "confidence interval and the records the OLS used.",
         )
-    left = ph.left_out_table(hierarchical)
-    sec.table(left)
-    path = out / "left_out.csv"
-    with atomic_path(path) as tmp:
-        hierarchical.left_out[["path", "reason"]].to_csv(tmp, index=False, lineterminator="\n")
-    files["left_out_csv"] = str(path)
+    if hierarchical is not None:
+        sec.table(ph.left_out_table(hierarchical))
+        path = out / "left_out.csv"
+        with atomic_path(path) as tmp:
+            hierarchical.left_out[["path", "reason"]].to_csv(tmp, index=False, lineterminator="\n")
+        files["left_out_csv"] = str(path)
     shown = sorted(walkers or [], key=lambda w: (-int(w.pacing_hz.size), w.subject))
     shown = shown[: ph.MAX_WALKER_PANELS]
     if shown:
