@@ -23,8 +23,11 @@ def test_report_cli_writes_table2_figures_and_self_contained_html(tmp_path, caps
     obj = json.loads(capsys.readouterr().out)
     assert obj["records_used"] == 293 and obj["records_excluded"] == 7
     table2 = pd.read_csv(out / "table2.csv")
-    assert len(table2) == len(SEED_TABLE2) + 1
-    assert table2.iloc[-1, 0] == "This study"
+    # A row per fit; from a results table alone the hierarchical one says why it is absent.
+    assert len(table2) == len(SEED_TABLE2) + 2
+    assert table2.iloc[-1, 0] == "This study, two-stage OLS (293 records)"
+    assert table2.iloc[-2, 0] == "This study, hierarchical"
+    assert table2.iloc[-2, 2].startswith("not fitted: no hierarchical fit was given")
     fn = obj["laws"]["natural_frequency_hz"]
     lo, hi = (fn["slope"] * f + fn["intercept"] for f in (1.5, 2.5))
     assert f"({lo:.2f}-{hi:.2f} at f_p 1.5-2.5 Hz)" in table2.iloc[-1, 2]

@@ -190,9 +190,14 @@ def test_a_batch_keeps_every_records_posterior_and_reads_it_back(tmp_path) -> No
 def walker_batch(tmp_path_factory):
     """Six deck crossings of one walker (``walker_plan`` seed 2, 20 s) and one rigid-floor
     walk of the same subject, through a batch with the default settings."""
+    return make_walker_batch(tmp_path_factory.mktemp("walker"))
+
+
+def make_walker_batch(root):
+    """Write :func:`walker_batch`'s records under ``root`` and run the batch; return the
+    batch folder, the subject and the walker's plan."""
     from workbench.population.recovery_design import simulate_recovery_record, walker_plan
 
-    root = tmp_path_factory.mktemp("walker")
     plan = walker_plan(seed=2, crossings=6, duration_s=20.0)
     recs = root / "recs"
     paths = []

@@ -366,7 +366,32 @@ def test_small_recovery_on_decks_recovers_the_seed_law(tmp_path):
     assert again["recovered"] == obj["recovered"]
     with pytest.raises(UsageError, match="already holds a recovery"):
         run_recovery(tmp_path / "r", design, settings, seed=0)
-    # The report's wording follows the verdict.
+    # The hierarchical fit of the same batch's stored posteriors, judged the same way: every
+    # verdict follows from its interval and the truth (each record its own walker, so the
+    # residual sds are judged against the truth's), every record used or left out.
+    part = obj["hierarchical"]
+    rec = part["recovered"]
+    assert rec["records_used"] + part["records_left_out"] == obj["records"]["processed"]
+    assert rec["walkers"] == rec["records_used"] and rec["walker_effects"] is False
+    truth = design.truth
+    for law in ("natural_frequency_hz", "damping_ratio", "blf1"):
+        for par in ("slope", "intercept", "residual_sd"):
+            lo, hi = rec["laws"][law][f"{par}_ci"]
+            held = lo <= getattr(getattr(truth, law), par) <= hi
+            assert (part["verdict"][law][par] == "recovered") == held, (law, par)
+    for law in ("blf2", "blf3"):
+        for par in ("mu", "sigma"):
+            lo, hi = rec["lognormal"][law][f"{par}_ci"]
+            held = lo <= getattr(getattr(truth, law), par) <= hi
+            assert (part["verdict"][law][par] == "recovered") == held, (law, par)
+    assert part["convergence"]["rhat_max"] < 1.05
+    assert stored["hierarchical"]["verdict"] == part["verdict"]
+    assert "hierarchical    n=16" in res.summary()
+    # The report's wording follows the verdicts of both fits.
     lines = recovery_conclusions([obj], fit["laws"])
-    assert any("slope is recovered on deck floors" in line for line in lines)
+    words = {"recovered": "recovers", "biased": "biases", "manufactured": "manufactures"}
+    for line, law in zip(lines, ("natural_frequency_hz", "damping_ratio", "blf1"), strict=True):
+        hier = words[part["verdict"][law]["slope"]]
+        two = words[obj["verdict"]["pipeline"][law]["slope"]]
+        assert f"the hierarchical fit {hier} it" in line and f"the two-stage fit {two} it" in line
     assert recovery_section([obj]).title == "What this pipeline recovers"

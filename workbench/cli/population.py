@@ -179,9 +179,26 @@ def _cmd_report(args: argparse.Namespace) -> int:
         from workbench.reporting.recovery import read_recovery
 
         recovery = [read_recovery(path) for path in args.recovery]
-    files.update(population_report(results, fit, args.out, title=args.title, recovery=recovery))
+    hierarchical, walkers = None, None
+    if not args.no_hierarchical and (Path(args.results_dir) / "records").is_dir():
+        from workbench.population.batch_hierarchy import hierarchical_laws
+        from workbench.population.walker import fit_walkers
+
+        hierarchical = hierarchical_laws(args.results_dir)
+        walkers = fit_walkers(args.results_dir)
+    files.update(
+        population_report(
+            results,
+            fit,
+            args.out,
+            title=args.title,
+            recovery=recovery,
+            hierarchical=hierarchical,
+            walkers=walkers,
+        )
+    )
     laws = fit.to_json()
-    obj = {
+    obj: dict[str, Any] = {
         "report": files["html"],
         "markdown": files["markdown"],
         "files": files,
@@ -190,7 +207,26 @@ def _cmd_report(args: argparse.Namespace) -> int:
         "laws": laws["laws"],
         "lognormal": laws["lognormal"],
     }
-    emit(args, obj, fit.summary() + f"\nreport {files['html']}")
+    text = fit.summary()
+    if hierarchical is not None:
+        summary = hierarchical.to_json()
+        if summary["fit"] is not None:
+            # The posterior draws are for the sampler, not for reading.
+            summary["fit"] = {k: v for k, v in summary["fit"].items() if k != "predictive_draws"}
+        obj["hierarchical"] = summary
+        obj["walkers"] = [
+            {k: v for k, v in w.to_json().items() if k != "laws"} for w in walkers or []
+        ]
+        text += "\n" + hierarchical.summary()
+        if walkers:
+            text += "\nwalker panels: " + ", ".join(
+                f"{w.subject} ({w.pacing_hz.size} records)" for w in walkers
+            )
+    elif args.no_hierarchical:
+        text += "\nhierarchical laws: skipped (--no-hierarchical)"
+    else:
+        text += "\nhierarchical laws: give the batch folder (its records keep their posteriors)"
+    emit(args, obj, text + f"\nreport {files['html']}")
     return 0
 
 
@@ -302,7 +338,9 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         description="Fit the population laws to a batch's results and write a report: the "
         "seed's Table 2 beside this study, the laws with intervals and normality tests, "
         "BLF2/BLF3 fits, figures like the seed's figs. 11-14; self-contained HTML, Markdown "
-        "and every table as CSV.",
+        "and every table as CSV. Given the batch folder, also the hierarchical laws fitted "
+        "to every usable record's likelihood beside the two-stage ones, the records left out "
+        "and why, and the own laws of up to six walkers with five usable records or more.",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="report folder")
     p.add_argument(
@@ -314,6 +352,12 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         metavar="DIR",
         help="the --out folder of a 'workbench recovery' run (repeatable): the report shows "
         "what the pipeline recovers and words its conclusions from it",
+    )
+    p.add_argument(
+        "--no-hierarchical",
+        action="store_true",
+        help="skip the hierarchical laws and the walkers' own laws (faster; without it they "
+        "are fitted when RESULTS_DIR is a batch folder whose records keep their posteriors)",
     )
     p.set_defaults(handler=_cmd_report)
 

@@ -45,11 +45,18 @@ pacing the pipeline identified for each, which separates the error in the parame
 the population's sampling scatter and from an error in the pacing (a law whose records'
 truths come back biased too is biased by the pacing the laws are regressed on).
 
+Beside the two-stage fits, the hierarchical laws
+(:func:`~workbench.population.batch_hierarchy.hierarchical_laws`, docs/science.md 8) are
+fitted to every usable record's stored posterior in the batch and judged the same way on
+their 95 % posterior intervals (:func:`hierarchical_verdicts`), with each linear law's
+residual sd judged too: the recovery's records are each a walker of their own, so the
+fit's residual sd is the truth's.
+
 Files in ``out_dir``: ``plan.csv`` (the truth of every record), ``records/`` (CSV and JSON
-sidecar each) and ``manifest.csv``, ``batch/`` (the batch's files), ``recovery.json``.
-Every file is written atomically; ``resume`` keeps the records already simulated and the
-batch's finished records. The seed fixes every record and every identification, whatever
-the number of workers.
+sidecar each) and ``manifest.csv``, ``batch/`` (the batch's files), ``recovery.json`` (with
+its ``hierarchical`` part). Every file is written atomically; ``resume`` keeps the records
+already simulated and the batch's finished records. The seed fixes every record and every
+identification, whatever the number of workers.
 """
 
 from __future__ import annotations
@@ -92,6 +99,7 @@ __all__ = [
     "TRUTH_LAWS",
     "RecoveryDesign",
     "RecoveryResult",
+    "hierarchical_verdicts",
     "law_verdicts",
     "recovery_plan",
     "run_recovery",
@@ -149,6 +157,122 @@ def law_verdicts(
                 verdict = "biased"
         out.setdefault(law, {})[par] = verdict
     return out
+
+
+def hierarchical_verdicts(truth: PopulationLaws, recovered: dict[str, Any]) -> dict[str, Any]:
+    """Judge the hierarchical fit's law parameters against the truth (module docstring).
+
+    As :func:`law_verdicts`, on the fit's 95 % posterior intervals, and also each linear
+    law's residual sd: against the truth's residual sd when the fit has no walker effects (a
+    recovery's records are each a walker of their own, so the residual sd is the whole
+    spread about the law), ``not judged`` when it has them (the truth has no walker sd).
+
+    Parameters
+    ----------
+    truth : PopulationLaws
+        The true laws.
+    recovered : dict
+        The ``recovered`` object of the recovery's hierarchical part (``laws`` and
+        ``lognormal`` as a two-stage fit's, each linear law also with ``residual_sd_ci``),
+        or ``{"error": reason}``.
+
+    Returns
+    -------
+    dict
+        ``{law: {parameter: verdict}}``: :func:`law_verdicts`' parameters, and
+        ``residual_sd`` for the linear laws.
+    """
+    out = law_verdicts(truth, recovered.get("laws"), recovered.get("lognormal"))
+    laws = recovered.get("laws") or {}
+    for law in LINEAR_LAWS:
+        if law not in laws:
+            verdict = "not fitted"
+        elif recovered.get("walker_effects"):
+            verdict = "not judged"
+        else:
+            lo, hi = laws[law]["residual_sd_ci"]
+            verdict = "recovered" if lo <= getattr(truth, law).residual_sd <= hi else "biased"
+        out[law]["residual_sd"] = verdict
+    return out
+
+
+def _hierarchical_recovered(fit: Any) -> dict[str, Any]:
+    """Return a hierarchical fit's laws shaped as a two-stage fit's (posterior means, 95 %)."""
+    s = fit.to_json()["laws"]
+
+    def pair(entry: dict[str, Any]) -> tuple[float, list[float]]:
+        return float(entry["mean"]), [float(v) for v in entry["ci95"]]
+
+    laws: dict[str, Any] = {}
+    for law in LINEAR_LAWS:
+        entry: dict[str, Any] = {"n": int(fit.records_used)}
+        for par in ("slope", "intercept", "residual_sd", "walker_sd"):
+            if s[law].get(par) is not None:
+                entry[par], entry[f"{par}_ci"] = pair(s[law][par])
+        laws[law] = entry
+    lognormal: dict[str, Any] = {}
+    for law in LOGNORMAL_LAWS:
+        mu, mu_ci = pair(s[law]["mu"])
+        sigma, sigma_ci = pair(s[law]["residual_sd"])
+        lognormal[law] = {
+            "mu": mu,
+            "sigma": sigma,
+            "mu_ci": mu_ci,
+            "sigma_ci": sigma_ci,
+            "n": int(fit.records_used),
+        }
+        if s[law].get("walker_sd") is not None:
+            lognormal[law]["walker_sd"], lognormal[law]["walker_sd_ci"] = pair(s[law]["walker_sd"])
+    return {
+        "laws": laws,
+        "lognormal": lognormal,
+        "records_used": int(fit.records_used),
+        "walkers": int(fit.walkers),
+        "walker_effects": bool(fit.walker_effects),
+    }
+
+
+def _hierarchical_part(batch_dir: Path, truth: PopulationLaws, seed: int) -> dict[str, Any]:
+    """Fit the hierarchical laws to the batch's stored posteriors and judge them.
+
+    Returns the ``hierarchical`` part of ``recovery.json``: ``recovered`` (as
+    :func:`_hierarchical_recovered`, or ``{"error": reason}``), ``verdict``
+    (:func:`hierarchical_verdicts`), ``records_left_out`` with ``left_out_reasons`` (counts)
+    and ``left_out`` (path and reason of each), and ``convergence`` (R-hat max, ESS min,
+    the parameters flagged).
+    """
+    from workbench.population.batch_hierarchy import hierarchical_laws
+
+    try:
+        laws = hierarchical_laws(batch_dir, seed=seed)
+    except InputError as err:
+        recovered: dict[str, Any] = {"error": f"no record to fit ({err})"}
+        return {
+            "recovered": recovered,
+            "verdict": hierarchical_verdicts(truth, recovered),
+            "records_left_out": 0,
+            "left_out_reasons": {},
+            "left_out": [],
+            "convergence": None,
+        }
+    fit = laws.fit
+    recovered = {"error": laws.no_fit or "no fit"} if fit is None else _hierarchical_recovered(fit)
+    convergence = None
+    if fit is not None:
+        diag = fit.to_json()["diagnostics"]
+        convergence = {k: diag[k] for k in ("rhat_max", "ess_bulk_min", "ess_tail_min", "flagged")}
+    summary = laws.to_json()
+    return {
+        "recovered": recovered,
+        "verdict": hierarchical_verdicts(truth, recovered),
+        "records_left_out": summary["records_left_out"],
+        "left_out_reasons": summary["left_out_reasons"],
+        "left_out": [
+            {"path": str(r["path"]), "reason": str(r["reason"])}
+            for r in laws.left_out.to_dict(orient="records")
+        ],
+        "convergence": convergence,
+    }
 
 
 def _law_json(law: dict[str, Any]) -> dict[str, Any]:
@@ -277,6 +401,10 @@ class RecoveryResult:
         ``changed``, ``recovered`` and ``verdict`` of its pipeline fit, and ``slope_change``:
         the change of each law's slope from the baseline, paired over the records both
         identify, with its 95 % interval and whether the setting ``moves`` it.
+    hierarchical : dict or None
+        The hierarchical laws fitted to every usable record's stored posterior, judged the
+        same way (:func:`_hierarchical_part`): ``recovered``, ``verdict``, the records left
+        out with their reasons and the convergence diagnostics; None when not run.
     """
 
     truth: PopulationLaws
@@ -287,6 +415,7 @@ class RecoveryResult:
     records: dict[str, Any]
     out_dir: Path
     sensitivity: list[dict[str, Any]] = field(default_factory=list)
+    hierarchical: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """Return the ``workbench recovery --json`` object (docs/contracts.md)."""
@@ -312,6 +441,7 @@ class RecoveryResult:
             "verdict": self.verdict,
             "records": self.records,
             "sensitivity": self.sensitivity,
+            **({} if self.hierarchical is None else {"hierarchical": self.hierarchical}),
             "settings": self.settings.to_json(),
             "design": self.design.to_json(),
             "out": str(self.out_dir),
@@ -347,7 +477,8 @@ def run_recovery(
     settings : IdentifySettings, optional
         Identification settings, exactly as ``workbench batch`` takes them.
     seed : int
-        Seed of the population (the batch's seed is ``settings.seed``).
+        Seed of the population and of the hierarchical fit's sampler (the batch's seed is
+        ``settings.seed``).
     workers, scheduler : int, str
         As for :func:`~workbench.population.batch.run_batch`.
     resume : bool
@@ -461,8 +592,17 @@ def run_recovery(
     if factors:
         run = {"workers": workers, "scheduler": scheduler, "resume": resume, "progress": progress}
         sensitivity = _sensitivity(out, manifest, design, settings, results, factors, levels, run)
+    hierarchical = _hierarchical_part(out / "batch", design.truth, int(seed))
     result = RecoveryResult(
-        design.truth, design, settings, recovered, verdict, records, out.resolve(), sensitivity
+        design.truth,
+        design,
+        settings,
+        recovered,
+        verdict,
+        records,
+        out.resolve(),
+        sensitivity,
+        hierarchical,
     )
     atomic_write_json(out / "recovery.json", strict_json(result.to_json()))
     return result

@@ -14,6 +14,9 @@ __all__ = [
     "LAW_NAMES",
     "LOAD_FACTOR_NAMES",
     "LOGNORMAL_NAMES",
+    "NOT_RUN",
+    "fit_entries",
+    "hierarchical_text",
     "interval_text",
     "recovery_text",
     "settings_text",
@@ -28,6 +31,59 @@ LOAD_FACTOR_NAMES = {"blf1": "BLF1"}
 LOGNORMAL_NAMES = {"blf2": "BLF2", "blf3": "BLF3"}
 #: Labels of the three fits of a recovery.
 FIT_LABELS = {"pipeline": "pipeline", "flags_ignored": "flags ignored", "sample": "records' truth"}
+
+
+#: Label of the hierarchical fit of a recovery (the ``hierarchical`` part of recovery.json).
+HIERARCHICAL_LABEL = "hierarchical"
+#: What a recovery written before the hierarchical fit was added says of it.
+NOT_RUN = "not run (a recovery written before the hierarchical fit was added)"
+
+
+def fit_entries(obj: dict[str, Any]) -> list[tuple[str, str, dict[str, Any], dict[str, Any]]]:
+    """Every fit of a recovery: ``(key, label, fit, verdicts)``.
+
+    The three two-stage fits of :data:`FIT_LABELS`, then the hierarchical one (its
+    ``recovered`` and ``verdict``; ``{"error": NOT_RUN}`` for a recovery without the part).
+    """
+    out = [
+        (which, label, obj["recovered"].get(which, {}), obj["verdict"].get(which, {}))
+        for which, label in FIT_LABELS.items()
+    ]
+    part = obj.get("hierarchical")
+    if part is None:
+        out.append(("hierarchical", HIERARCHICAL_LABEL, {"error": NOT_RUN}, {}))
+    else:
+        out.append(
+            ("hierarchical", HIERARCHICAL_LABEL, part.get("recovered", {}), part.get("verdict", {}))
+        )
+    return out
+
+
+def hierarchical_text(obj: dict[str, Any]) -> str:
+    """One sentence on a recovery's hierarchical fit: records used and left out, convergence."""
+    part = obj.get("hierarchical")
+    if part is None:
+        return f"hierarchical fit: {NOT_RUN}"
+    fit = part.get("recovered", {})
+    reasons = "; ".join(f"{n} {why}" for why, n in part.get("left_out_reasons", {}).items())
+    left = f"{part.get('records_left_out', 0)} left out" + (f" ({reasons})" if reasons else "")
+    if "laws" not in fit:
+        return f"hierarchical fit: not fitted ({fit.get('error', '')}); {left}"
+    effects = "with walker effects" if fit.get("walker_effects") else "no walker effects"
+    conv = part.get("convergence") or {}
+    if conv.get("flagged"):
+        mixing = f"convergence: check {', '.join(conv['flagged'])} (R-hat or ESS)"
+    elif conv:
+        mixing = (
+            f"converged (R-hat max {conv['rhat_max']:.3f}, ESS min "
+            f"{min(conv['ess_bulk_min'], conv['ess_tail_min']):.0f})"
+        )
+    else:
+        mixing = "convergence not recorded"
+    return (
+        f"hierarchical fit: {fit['records_used']} records of {fit['walkers']} walkers used "
+        f"({effects}), {left}; {mixing}"
+    )
 
 
 def settings_text(obj: dict[str, Any]) -> str:
@@ -46,27 +102,37 @@ def interval_text(fit: dict[str, Any], law: str, par: str) -> str:
     return f"{fl[par]:.4g} [{lo:.4g}, {hi:.4g}]"
 
 
-def _fit_lines(obj: dict[str, Any], law: str, pars: tuple[str, str], group: str) -> list[str]:
-    """One line per fit of a law: its parameters with intervals and verdicts."""
+def _fit_lines(obj: dict[str, Any], law: str, pars: tuple[str, ...], group: str) -> list[str]:
+    """One line per fit of a law (two-stage and hierarchical): parameters, intervals, verdicts."""
     lines = []
-    for which, label in FIT_LABELS.items():
-        fit = obj["recovered"].get(which, {})
+    for _, label, fit, all_verdicts in fit_entries(obj):
+        if fit.get("error") == NOT_RUN:
+            lines.append(f"  {label:15s} {NOT_RUN}")
+            continue
         if "laws" not in fit:
             lines.append(f"  {label:15s} not fitted: {fit.get('error', '')}")
             continue
         if law not in fit.get(group, {}):  # a recovery written before the law was judged
             lines.append(f"  {label:15s} not judged in this recovery")
             continue
-        verdicts = obj["verdict"].get(which, {}).get(law, {})
+        verdicts = all_verdicts.get(law, {})
+        # The hierarchical fit also judges a linear law's residual sd (on its interval).
+        shown = (*pars, "residual_sd") if "residual_sd_ci" in fit[group][law] else pars
         parts = [
-            f"{par} {interval_text(fit, law, par)} {verdicts.get(par, '')}".rstrip() for par in pars
+            f"{par.replace('_', ' ')} {interval_text(fit, law, par)} "
+            f"{verdicts.get(par, '')}".rstrip()
+            for par in shown
         ]
         lines.append(f"  {label:15s} n={fit[group][law]['n']:<4d} " + "; ".join(parts))
     return lines
 
 
 def recovery_text(obj: dict[str, Any]) -> str:
-    """Format a ``recovery.json`` object as text (truth, each fit, verdicts, sensitivity)."""
+    """Format a ``recovery.json`` object as text (truth, each fit, verdicts, sensitivity).
+
+    Each law's lines give the two-stage fits and the hierarchical one (``not run`` for a
+    recovery written before it was fitted), each with its 95 % intervals and verdicts.
+    """
     truth, rec = obj["truth"], obj["records"]
     lines = [
         f"recovery of {truth['source']} on a {truth['floor']} floor; {settings_text(obj)}",
@@ -93,6 +159,7 @@ def recovery_text(obj: dict[str, Any]) -> str:
             continue
         lines.append(f"{name} lognormal: truth mu {tl['mu']:.4g}, sigma {tl['sigma']:.4g}")
         lines += _fit_lines(obj, law, ("mu", "sigma"), "lognormal")
+    lines.append(hierarchical_text(obj))
     for row in obj.get("sensitivity", []):
         change = row["slope_change"]
         parts = []

@@ -23,9 +23,13 @@ import pandas as pd
 
 from workbench.errors import UsageError
 from workbench.population.hierarchy import LAWS, HierarchicalFit, fit_collapsed
-from workbench.population.posteriors import read_record_posteriors, record_likelihoods
+from workbench.population.posteriors import (
+    likelihood_use,
+    read_record_posteriors,
+    record_likelihoods,
+)
 
-__all__ = ["WalkerFit", "fit_walker"]
+__all__ = ["WalkerFit", "fit_walker", "fit_walkers", "walker_subjects"]
 
 #: Law names in words, for sentences.
 _WORDS = {
@@ -168,3 +172,56 @@ def fit_walker(
     if not math.isfinite(float(pacing.mean())):  # pragma: no cover - record_likelihoods checks
         raise UsageError(f"subject {subject!r}: a record used has no pacing")
     return WalkerFit(str(subject), fit, pacing, left_out)
+
+
+def walker_subjects(
+    batch_dir: str | os.PathLike[str], *, least: int = 5, most: int = 6
+) -> list[str]:
+    """Return the subjects with the most usable records of a batch, most first.
+
+    Parameters
+    ----------
+    batch_dir : path-like
+        The ``--out`` folder of ``workbench batch``.
+    least : int, default 5
+        Fewest usable records (docs/science.md 8) a subject needs (a walker's laws need
+        five).
+    most : int, default 6
+        Most subjects returned.
+
+    Returns
+    -------
+    list of str
+        Ordered by usable records (most first), then by name.
+    """
+    usable: dict[str, int] = {}
+    for rec in read_record_posteriors(batch_dir):
+        if rec.subject is not None and likelihood_use(rec) is None:
+            usable[rec.subject] = usable.get(rec.subject, 0) + 1
+    ranked = sorted((-n, subject) for subject, n in usable.items() if n >= least)
+    return [subject for _, subject in ranked[: max(int(most), 0)]]
+
+
+def fit_walkers(
+    batch_dir: str | os.PathLike[str],
+    *,
+    seed: int = 0,
+    least: int = 5,
+    most: int = 6,
+) -> list[WalkerFit]:
+    """Fit every walker of :func:`walker_subjects` (the report's per-walker panels).
+
+    A subject whose fit cannot be made (records at one pacing) is skipped.
+
+    Returns
+    -------
+    list of WalkerFit
+        In the order of :func:`walker_subjects`.
+    """
+    out = []
+    for subject in walker_subjects(batch_dir, least=least, most=most):
+        try:
+            out.append(fit_walker(batch_dir, subject, seed=seed))
+        except UsageError:
+            continue
+    return out

@@ -24,8 +24,9 @@ from __future__ import annotations
 import base64
 import math
 import re
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -33,11 +34,20 @@ from matplotlib.figure import Figure
 from scipy import stats
 
 from workbench.fileutil import atomic_path, atomic_write_text
-from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, PopulationFit
+from workbench.population.fit import (
+    LAW_COLUMNS,
+    LOGNORMAL_COLUMNS,
+    RANGE_PACING_HZ,
+    PopulationFit,
+)
 from workbench.population.laws import PopulationLaws
 from workbench.reporting.document import Report, Section, Table
 from workbench.reporting.figures import save_figure
 from workbench.wording import count, p_value
+
+if TYPE_CHECKING:
+    from workbench.population.batch_hierarchy import BatchLaws
+    from workbench.population.walker import WalkerFit
 
 __all__ = ["SEED_TABLE2", "population_report", "run_population_demo", "table2_rows"]
 
@@ -84,20 +94,46 @@ def _law_text(law: dict[str, Any], digits: int = 4) -> str:
     return f"{law['slope']:.{digits}f} f_p {sign} {abs(law['intercept']):.{digits}f}"
 
 
-def table2_rows(summary: dict[str, Any]) -> list[list[str]]:
-    """Rows of the Table-2-style comparison: the seed's rows, then "this study"."""
-    laws = summary["laws"]
-    rng = summary["ranges_at_pacing_hz"]
-    lo, hi = rng["pacing_hz"]
-    fn, zeta = rng["natural_frequency_hz"], rng["damping_ratio"]
-    this = [
-        "This study",
-        "walking",
-        f"{_law_text(laws['natural_frequency_hz'])} ({fn[0]:.2f}-{fn[1]:.2f} at f_p "
-        f"{lo:g}-{hi:g} Hz)",
-        f"{_law_text(laws['damping_ratio'])} ({zeta[0]:.2f}-{zeta[1]:.2f})",
+def table2_rows(
+    summary: dict[str, Any],
+    hierarchical: BatchLaws | None = None,
+    *,
+    both: bool | None = None,
+) -> list[list[str]]:
+    """Rows of the Table-2-style comparison: the seed's rows, then "this study".
+
+    Parameters
+    ----------
+    summary : dict
+        The two-stage fit's JSON (``laws``; ``records_used`` where both fits are shown).
+    hierarchical : BatchLaws, optional
+        The hierarchical laws of the same batch.
+    both : bool, optional
+        Show a row per fit: "This study, hierarchical (N records of W walkers)" from the
+        posterior means of its slopes and intercepts (or, without a fit, why not in words)
+        and "This study, two-stage OLS (n records)". Default: when ``hierarchical`` is
+        given; otherwise one row "This study", as before the hierarchical fit.
+
+    Returns
+    -------
+    list of list of str
+        reference, posture, natural frequency, damping ratio; f_n and zeta also at f_p
+        1.5-2.5 Hz.
+    """
+    from workbench.reporting.population_hierarchy import hierarchical_row, study_row
+
+    if both is None:
+        both = hierarchical is not None
+    pacing = tuple(summary.get("ranges_at_pacing_hz", {}).get("pacing_hz", RANGE_PACING_HZ))
+    seed = [list(r) for r in SEED_TABLE2]
+    if not both:
+        return [*seed, study_row("This study", summary["laws"], (pacing[0], pacing[1]))]
+    ols = f"This study, two-stage OLS ({count(int(summary['records_used']), 'record')})"
+    return [
+        *seed,
+        hierarchical_row(hierarchical),
+        study_row(ols, summary["laws"], (pacing[0], pacing[1])),
     ]
-    return [list(r) for r in SEED_TABLE2] + [this]
 
 
 def _ci(pair: list[float], digits: int = 4) -> str:
@@ -350,6 +386,79 @@ def _counts_sentence(results: pd.DataFrame, s: dict[str, Any]) -> str:
     )
 
 
+def _hierarchical_sections(
+    report: Report,
+    results: pd.DataFrame,
+    fit: PopulationFit,
+    out: Path,
+    hierarchical: BatchLaws | None,
+    walkers: Sequence[WalkerFit] | None,
+) -> dict[str, str]:
+    """Add the hierarchical laws and the per-walker panels to the report; return the files."""
+    from workbench.reporting import population_hierarchy as ph
+
+    files: dict[str, str] = {}
+    sec = report.add(Section("Hierarchical laws from every usable record's likelihood"))
+    if hierarchical is None:
+        sec.paragraph(
+            "The hierarchical laws were " + ph.NOT_GIVEN.removeprefix("not fitted: ") + "; "
+            "'workbench report' fits them when given the batch folder, and skips them with "
+            "--no-hierarchical."
+        )
+    else:
+        sec.paragraph(ph.records_sentence(hierarchical))
+    hfit = None if hierarchical is None else hierarchical.fit
+    if hfit is not None:
+        table = ph.hierarchical_laws_table(hfit)
+        files["hierarchical_laws_csv"] = str(_write_table_csv(table, out / "hierarchical_laws.csv"))
+        sec.table(table)
+        if hfit.flagged:
+            sec.paragraph(
+                "Convergence: check " + ", ".join(hfit.flagged) + " (R-hat above 1.01 or an "
+                "ESS below 400): their intervals may be too narrow or too wide."
+            )
+        name = "population_hierarchical.png"
+        save_figure(ph.hierarchical_figure(fit, hfit), out / name)
+        files[name] = str(out / name)
+        sec.figure(
+            name,
+            "Natural frequency, damping ratio and BLF1 against pacing: the hierarchical law "
+            "(posterior mean) with its 95 % band, beside the two-stage OLS law with its 95 % "
+            "confidence interval and the records the OLS used.",
+        )
+    if hierarchical is not None:
+        sec.table(ph.left_out_table(hierarchical))
+        path = out / "left_out.csv"
+        with atomic_path(path) as tmp:
+            hierarchical.left_out[["path", "reason"]].to_csv(tmp, index=False, lineterminator="\n")
+        files["left_out_csv"] = str(path)
+    shown = sorted(walkers or [], key=lambda w: (-int(w.pacing_hz.size), w.subject))
+    shown = shown[: ph.MAX_WALKER_PANELS]
+    if shown:
+        if hfit is not None:
+            population = {
+                k: {**v, "label": "population law (hierarchical)"}
+                for k, v in ph.hierarchical_means(hfit).items()
+            }
+        else:
+            population = {
+                k: {**fit.population_json["laws"][k], "label": "population law (OLS)"}
+                for k in ("natural_frequency_hz", "damping_ratio")
+            }
+        sec = report.add(Section("Walkers' own laws"))
+        name = "population_walkers.png"
+        save_figure(ph.walkers_figure(results, shown, population), out / name)
+        files[name] = str(out / name)
+        sec.figure(
+            name,
+            f"Natural frequency and damping ratio against pacing for "
+            f"{count(len(shown), 'walker')} with the most records used (like seed fig. 11): "
+            "each record's posterior mean with its 95 % bar, the walker's own law fitted to "
+            "all their usable records with its 95 % band, and the population law.",
+        )
+    return files
+
+
 def population_report(
     results: pd.DataFrame,
     fit: PopulationFit,
@@ -359,6 +468,8 @@ def population_report(
     notes: list[str] | None = None,
     reference: PopulationLaws | None = None,
     recovery: list[dict[str, Any]] | None = None,
+    hierarchical: BatchLaws | None = None,
+    walkers: Sequence[WalkerFit] | None = None,
 ) -> dict[str, str]:
     """Write the Table-2-style population report (HTML, Markdown, CSV tables, PNG figures).
 
@@ -380,6 +491,17 @@ def population_report(
         ``recovery.json`` objects of recovery runs (:mod:`workbench.population.recovery`):
         the report then shows what the pipeline recovers, and its conclusions say which of
         its slopes can be read as findings.
+    hierarchical : BatchLaws, optional
+        The hierarchical laws of the same batch
+        (:func:`~workbench.population.batch_hierarchy.hierarchical_laws`). Table 2 then has
+        a row per fit (without it, the hierarchical row says it was not given), and the
+        report gains the hierarchical laws with their intervals and diagnostics, their
+        figure beside the OLS law, and the records left out with their reasons
+        (``left_out.csv``).
+    walkers : sequence of WalkerFit, optional
+        Walker fits (:func:`~workbench.population.walker.fit_walker`): per-walker panels of
+        f_n and zeta against pacing (seed fig. 11 with bands), the walkers with the most
+        records used first, at most six.
 
     Returns
     -------
@@ -397,8 +519,9 @@ def population_report(
     )
     t2 = Table(
         ["reference", "posture", "natural frequency [Hz]", "damping ratio"],
-        table2_rows(s),
-        "The seed's Table 2 with the laws fitted here (f_p: pacing frequency in Hz).",
+        table2_rows(s, hierarchical, both=True),
+        "The seed's Table 2 with the laws fitted here, by the hierarchical model (posterior "
+        "means) and by two-stage OLS (f_p: pacing frequency in Hz).",
     )
     laws_t, logn_t = _laws_table(s), _lognormal_table(s)
     for name, table in (("table2", t2), ("laws", laws_t), ("lognormal", logn_t)):
@@ -409,8 +532,13 @@ def population_report(
     if recovery:
         from workbench.reporting.recovery import recovery_conclusions, recovery_section
 
+        hier_fit = None if hierarchical is None else hierarchical.fit
         sec = report.add(Section("Conclusions"))
-        sec.bullets(recovery_conclusions(recovery, s["laws"]))
+        sec.bullets(
+            recovery_conclusions(
+                recovery, s["laws"], None if hier_fit is None else hier_fit.to_json()["laws"]
+            )
+        )
         report.add(recovery_section(recovery))
     else:
         sec.paragraph(
@@ -418,7 +546,8 @@ def population_report(
             "pipeline tells a pacing-dependent law from a constant one on these records: "
             "run 'workbench recovery' with the same settings and pass it with --recovery."
         )
-    sec = report.add(Section("Mean laws against pacing frequency"))
+    files.update(_hierarchical_sections(report, results, fit, out, hierarchical, walkers))
+    sec = report.add(Section("Mean laws against pacing frequency (two-stage OLS)"))
     sec.table(laws_t)
     one = participant_figure(fit)
     if one is not None:

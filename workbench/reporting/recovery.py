@@ -18,10 +18,12 @@ from typing import Any
 
 from workbench.errors import InputError
 from workbench.population.recovery_text import (
-    FIT_LABELS,
     LAW_NAMES,
     LOAD_FACTOR_NAMES,
     LOGNORMAL_NAMES,
+    NOT_RUN,
+    fit_entries,
+    hierarchical_text,
     interval_text,
     recovery_text,
     settings_text,
@@ -113,28 +115,36 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
         "'biased' otherwise. 'flags ignored' is the fit of every record, as a pipeline "
         "without identifiability checks would make it; 'records' truth' is the law a perfect "
         "identification of the parameters would fit to the same records, against the pacing "
-        "the pipeline identified for each (biased too when the pacing is)."
+        "the pipeline identified for each (biased too when the pacing is). 'hierarchical' is "
+        "the fit of every usable record's stored posterior (docs/science.md 8), judged the "
+        "same way on its 95 % posterior intervals; a recovery written before it was added "
+        "says 'not run'."
     )
     rows = []
     for obj in runs:
         truth, rec = obj["truth"], obj["records"]
-        for which, label in FIT_LABELS.items():
-            fit = obj["recovered"].get(which, {})
+        for which, label, fit, verdicts in fit_entries(obj):
             # The records' truth is not a pipeline fit: its law's own count stands for it.
             law_n = fit.get("laws", {}).get("natural_frequency_hz", {}).get("n", 0)
             used_n = fit.get("records_used", law_n)
+            if which == "hierarchical":
+                left = obj.get("hierarchical", {}).get("records_left_out", 0)
+                used = f"{used_n} / {rec['simulated']} ({left} left out)"
+            else:
+                used = f"{used_n} / {rec['simulated']} ({rec['not_identified']} not identified)"
             cells = [
                 f"{truth['source'].split(' (')[0]}, {truth['floor']}",
                 settings_text(obj),
                 label,
-                f"{used_n} / {rec['simulated']} ({rec['not_identified']} not identified)",
+                "not run" if fit.get("error") == NOT_RUN else used,
             ]
             for law in LAW_NAMES:
                 tl = truth["laws"][law]
                 if "laws" not in fit:
-                    cells.append(f"truth {tl['slope']:.4g}; not fitted")
+                    state = "not run" if fit.get("error") == NOT_RUN else "not fitted"
+                    cells.append(f"truth {tl['slope']:.4g}; {state}")
                     continue
-                v = obj["verdict"].get(which, {}).get(law, {})
+                v = verdicts.get(law, {})
                 slope = interval_text(fit, law, "slope")
                 cells.append(f"truth {tl['slope']:.4g}; {slope} {v.get('slope', '')}")
             rows.append(cells)
@@ -142,7 +152,15 @@ def recovery_section(runs: list[dict[str, Any]]) -> Section:
         Table(
             ["truth, floor", "settings", "fit", "records used", "f_n slope", "zeta slope"],
             rows,
-            "Recovered slopes with 95 % intervals and verdicts (intercepts in recovery.json).",
+            "Recovered slopes with 95 % intervals and verdicts, the two-stage fits and the "
+            "hierarchical one side by side (intercepts in recovery.json).",
+        )
+    )
+    sec.paragraph(
+        " ".join(
+            f"Run '{obj['truth']['source'].split(' (')[0]}', {obj['truth']['floor']}: "
+            f"{hierarchical_text(obj)}."
+            for obj in runs
         )
     )
     load_rows = [row for obj in runs for row in _load_factor_rows(obj)]
@@ -183,14 +201,14 @@ def _load_factor_rows(obj: dict[str, Any]) -> list[list[str]]:
     if any(true is None for _, _, true in judged):
         return []
     rows = []
-    for which, label in FIT_LABELS.items():
-        fit = obj["recovered"].get(which, {})
+    for _, label, fit, verdicts in fit_entries(obj):
         cells = [f"{truth['source'].split(' (')[0]}, {truth['floor']}", settings_text(obj), label]
         for law, par, true in judged:
             if "laws" not in fit:
-                cells.append(f"truth {true:.4g}; not fitted")
+                state = "not run" if fit.get("error") == NOT_RUN else "not fitted"
+                cells.append(f"truth {true:.4g}; {state}")
                 continue
-            v = obj["verdict"].get(which, {}).get(law, {}).get(par, "")
+            v = verdicts.get(law, {}).get(par, "")
             cells.append(f"truth {true:.4g}; {interval_text(fit, law, par)} {v}".rstrip())
         rows.append(cells)
     return rows
@@ -203,7 +221,53 @@ def _change_text(change: dict[str, Any] | None) -> str:
     return f"{change['change']:+.3g} [{lo:.3g}, {hi:.3g}]" + (" moves" if change["moves"] else "")
 
 
-def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]) -> list[str]:
+#: How a verdict is said of a fit's slope ("the hierarchical fit recovers it").
+_VERBS = {
+    "recovered": "recovers",
+    "manufactured": "manufactures",
+    "biased": "biases",
+    "not fitted": "could not fit",
+}
+
+
+def _both_fits_sentence(
+    obj: dict[str, Any], law: str, short: str, where: str, own: str
+) -> str | None:
+    """Say which fit's slope of a law can be read as a finding (None without the part)."""
+    part = obj.get("hierarchical")
+    if part is None:
+        return None
+    fits = {
+        "hierarchical": (part.get("recovered", {}), part.get("verdict", {})),
+        "two-stage": (obj["recovered"].get("pipeline", {}), obj["verdict"].get("pipeline", {})),
+    }
+    clauses, findings = [], []
+    for label, (fit, verdicts) in fits.items():
+        verdict = verdicts.get(law, {}).get("slope", "not fitted") if "laws" in fit else ""
+        verdict = verdict or "not fitted"
+        got = f" ({interval_text(fit, law, 'slope')})" if "laws" in fit else ""
+        clauses.append(f"the {label} fit {_VERBS.get(verdict, verdict)} it{got}")
+        if verdict == "recovered":
+            findings.append(label)
+    if len(findings) == 2:
+        reading = f"either fit's {short} slope can be read as a finding within its interval"
+    elif findings:
+        other = next(label for label in fits if label != findings[0])
+        reading = f"read the {findings[0]} fit's {short} slope as the finding, not the {other} one"
+    else:
+        reading = f"neither fit's {short} slope is a finding here"
+    true_slope = obj["truth"]["laws"][law]["slope"]
+    return (
+        f"Of the two fits {where}, with a true {short} slope of {true_slope:.4g}: "
+        f"{clauses[0]}, {clauses[1]}; {reading}{own}."
+    )
+
+
+def recovery_conclusions(
+    runs: list[dict[str, Any]],
+    fitted_laws: dict[str, Any],
+    hierarchical_laws: dict[str, Any] | None = None,
+) -> list[str]:
     """Sentences that say what the report's laws can be read as, given the recovery runs.
 
     A slope the pipeline manufactures (or biases) on a floor is not presented as a finding:
@@ -215,7 +279,15 @@ def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]
         ``recovery.json`` objects.
     fitted_laws : dict
         The report's own ``laws`` (from the population fit).
+    hierarchical_laws : dict, optional
+        The report's own hierarchical laws (``HierarchicalFit.to_json()["laws"]``), named
+        beside the two-stage slope.
+
+    A run with the hierarchical part (``workbench recovery`` fits both) gets instead, per
+    law, one sentence saying what each fit does with the true slope and which fit's slope
+    can be read as a finding, from the two verdicts.
     """
+    hier = hierarchical_laws or {}
     out = []
     for obj in runs:
         truth = obj["truth"]
@@ -227,7 +299,19 @@ def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]
                 continue
             mine = fitted_laws.get(law)
             own = f" (this report: slope {mine['slope']:.4g})" if mine else ""
+            slope = (hier.get(law) or {}).get("slope")
+            both_own = own
+            if slope:
+                both_own = f" (this report: hierarchical slope {slope['mean']:.4g}" + (
+                    f", two-stage slope {mine['slope']:.4g})" if mine else ")"
+                )
+            both = _both_fits_sentence(obj, law, short, where, both_own)
+            if both is not None:  # a run of both fits: one sentence says which to read
+                out.append(both)
+                continue
             true_slope = truth["laws"][law]["slope"]
+            verdict = obj["verdict"]["pipeline"][law]["slope"] if "laws" in fit else ""
+            got = interval_text(fit, law, "slope") if "laws" in fit else ""
             if "laws" not in fit:
                 rec = obj["records"]
                 out.append(
@@ -236,10 +320,7 @@ def recovery_conclusions(runs: list[dict[str, Any]], fitted_laws: dict[str, Any]
                     f"identified), so a law fitted {where.split(' with ')[0]} rests on the "
                     "records that happened to pass; read it with that in mind" + own + "."
                 )
-                continue
-            verdict = obj["verdict"]["pipeline"][law]["slope"]
-            got = interval_text(fit, law, "slope")
-            if verdict == "manufactured":
+            elif verdict == "manufactured":
                 out.append(
                     f"The pacing dependence of {short} is not a finding {where}: walkers whose "
                     f"{short} does not depend on pacing came back with a slope of {got}"
