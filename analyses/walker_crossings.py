@@ -1,7 +1,12 @@
 """One walker's laws from ten crossings of a lively deck: how well one person is known.
 
 Run: ``python analyses/walker_crossings.py [--walkers 0-9] [--crossings 10] [--out DIR]
-[--workers 2]`` (resumable: each walker's batch continues where it stopped).
+[--workers 2] [--population HIERARCHICAL.json]`` (resumable: each walker's batch continues
+where it stopped). With ``--population`` each walker is fitted as a member of that
+population: its estimate of the spread within a walker is the prior of the walker's crossing
+spread (:func:`workbench.population.walker.crossing_spread_prior`); the demo's footbridge
+cohort (``reports/demo/population/hierarchical.json``), other walkers of the same laws, is
+the population the validation page uses.
 
 For every walker seed (0-9, fixed before any result was seen),
 :func:`workbench.population.recovery_design.walker_plan` draws one walker of the seed's
@@ -37,7 +42,9 @@ def walker_range(text: str) -> list[int]:
     return list(range(int(lo), int(hi or lo) + 1))
 
 
-def one_walker(seed: int, crossings: int, out: Path, workers: int) -> dict[str, float]:
+def one_walker(
+    seed: int, crossings: int, out: Path, workers: int, population: Path | None = None
+) -> dict[str, float]:
     plan = walker_plan(seed=seed, crossings=crossings)
     folder = out / f"walker{seed:04d}"
     manifest = folder / "manifest.csv"
@@ -53,7 +60,7 @@ def one_walker(seed: int, crossings: int, out: Path, workers: int) -> dict[str, 
     run = subprocess.run(args, capture_output=True, text=True, check=False)
     if run.returncode not in (0, 4):
         sys.exit(f"workbench batch failed on walker {seed}: {run.stderr.strip()}")
-    fit = fit_walker(batch, str(plan["subject"].iloc[0]), seed=0)
+    fit = fit_walker(batch, str(plan["subject"].iloc[0]), seed=0, population=population)
     at = fit.at_pacing()
     fp = fit.mean_pacing_hz
     # The walker's true mean law at the mean pacing of the records used (linear in pacing).
@@ -111,10 +118,16 @@ def main() -> None:
     ap.add_argument("--crossings", type=int, default=10)
     ap.add_argument("--out", type=Path, default=Path("walker_crossings"))
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument(
+        "--population",
+        type=Path,
+        help="hierarchical.json of a population of other walkers: its spread within a walker "
+        "is the prior of each walker's crossing spread (default: uniform)",
+    )
     args = ap.parse_args()
     rows = []
     for seed in args.walkers:
-        row = one_walker(seed, args.crossings, args.out, args.workers)
+        row = one_walker(seed, args.crossings, args.out, args.workers, args.population)
         rows.append(row)
         print(
             f"walker {seed}: {row['records']:.0f} records, f_n sd "

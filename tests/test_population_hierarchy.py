@@ -766,3 +766,56 @@ def test_the_sampler_draws_the_posterior_predictive_of_a_hierarchical_fit(pinned
     empty.write_text(json.dumps({"fit": None, "no_fit": "1 usable record"}))
     with pytest.raises(Exception, match="hold no fit"):
         read_laws(empty)
+
+
+def test_a_prior_on_the_residual_sd_gives_the_known_variance_regression(pinned):
+    """A prior that pins f_n's residual sd at sigma_0 leaves the regression with a known
+    variance: (a, b) normal about the least-squares line with covariance sigma_0^2 (X'X)^-1,
+    exactly (the records are sharp), within the Monte Carlo errors of the sampler's ESS."""
+    _, values, pacings = pinned
+    sigma0 = 0.05  # away from the data's own residual sd, so the prior visibly decides
+    fit = fit_collapsed(
+        pinned_records(),
+        seed=3,
+        draws=4000,
+        burn=800,
+        residual_sd_prior={"natural_frequency_hz": (sigma0, 1e-4 * sigma0)},
+    )
+    assert any("normal priors" in n for n in fit.notes)
+    flat = fit.draws.reshape(-1, fit.draws.shape[2])
+    y = values[:, 0]
+    design = np.column_stack([np.ones(y.size), pacings - PACING_REF_HZ])
+    xtx_inv = np.linalg.inv(design.T @ design)
+    coef = xtx_inv @ design.T @ y
+    for k, name in enumerate(("intercept_at_ref", "slope")):
+        i = fit.parameter_names.index(f"natural_frequency_hz.{name}")
+        sd = sigma0 * math.sqrt(xtx_inv[k, k])
+        draws, ess = flat[:, i], fit.ess_bulk[i]
+        # Mean: sd / sqrt(ESS); sd of a normal's draws: sd / sqrt(2 ESS); four of each.
+        assert abs(draws.mean() - coef[k]) < 4 * sd / math.sqrt(ess), name
+        assert abs(draws.std(ddof=1) - sd) < 4 * sd / math.sqrt(2 * ess), name
+    i = fit.parameter_names.index("natural_frequency_hz.residual_sd")
+    assert abs(flat[:, i].mean() - sigma0) < 5e-4 * sigma0  # a few prior sds at most
+    with pytest.raises(UsageError, match="positive mean"):
+        fit_collapsed(pinned_records(), residual_sd_prior={"blf1": (0.0, 1.0)})
+    with pytest.raises(UsageError, match="choose from"):
+        fit_collapsed(pinned_records(), residual_sd_prior={"mass": (1.0, 1.0)})
+
+
+def test_a_walker_prior_needs_a_population_fit_with_walker_effects(pinned, tmp_path):
+    from workbench.population.walker import crossing_spread_prior
+
+    fit, _, _ = pinned
+    with pytest.raises(UsageError, match="without walker effects"):
+        crossing_spread_prior({"fit": fit.to_json()})
+    obj = fit.to_json()
+    obj["walker_effects"] = True
+    prior = crossing_spread_prior(obj)
+    assert prior["natural_frequency_hz"] == (
+        float(fit.params["natural_frequency_hz.residual_sd"]),
+        float(fit.bse["natural_frequency_hz.residual_sd"]),
+    )
+    bad = tmp_path / "bad.json"
+    bad.write_text("{")
+    with pytest.raises(UsageError, match=r"bad\.json: cannot be read"):
+        crossing_spread_prior(bad)

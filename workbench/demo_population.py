@@ -31,10 +31,6 @@ __all__ = ["COHORT_CROSSINGS", "COHORT_WALKERS", "footbridge_population_demo"]
 COHORT_WALKERS = 8
 #: ... and the stream windows they cross the footbridge in.
 COHORT_CROSSINGS = 8
-#: Most walkers given their own panel in the report (those with the most usable records).
-WALKER_PANELS = 6
-#: Fewest usable records of a walker fit (:func:`~workbench.population.walker.fit_walker`).
-WALKER_MIN_RECORDS = 5
 
 
 def _combined_manifest(folder: Path, footbridge: Path, real: Path | None) -> Path:
@@ -54,15 +50,6 @@ def _combined_manifest(folder: Path, footbridge: Path, real: Path | None) -> Pat
     text = pd.concat(frames, ignore_index=True).to_csv(index=False, lineterminator="\n")
     atomic_write_text(path, text)
     return path
-
-
-def _walker_fits(batch: Path, subjects: pd.Series, seed: int) -> list[Any]:
-    """Walker fits of the subjects with the most usable records (at least five)."""
-    from workbench.population.walker import fit_walker
-
-    counts = subjects.value_counts()
-    chosen = counts[counts >= WALKER_MIN_RECORDS].index[:WALKER_PANELS]
-    return [fit_walker(batch, str(s), seed=seed) for s in sorted(chosen)]
 
 
 def _truth_notes(hierarchical: Any, fit: Any) -> list[str]:
@@ -135,7 +122,7 @@ def footbridge_population_demo(
     from workbench.population.batch_hierarchy import hierarchical_laws
     from workbench.population.fit import fit_population
     from workbench.population.footbridge import footbridge_cohort_records
-    from workbench.population.posteriors import read_record_posteriors, record_likelihoods
+    from workbench.population.walker import fit_walkers
     from workbench.reporting.population import population_report
 
     out = Path(out_dir)
@@ -161,8 +148,7 @@ def footbridge_population_demo(
     atomic_write_json(out / "population.json", fit.population_json)
     laws = hierarchical_laws(batch, seed=seed)
     atomic_write_json(out / "hierarchical.json", laws.to_json())
-    used, _ = record_likelihoods(read_record_posteriors(batch))
-    walkers = _walker_fits(batch, pd.Series([r.subject for r in used], dtype=str), seed)
+    walkers = fit_walkers(batch, seed=seed)
     notes = [
         f"Footbridge records: a cohort of {COHORT_WALKERS} walkers drawn from the seed's laws "
         f"crossed the lively span (50 m, 2 Hz, 0.5 % damping) in {COHORT_CROSSINGS} stream "

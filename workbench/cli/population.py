@@ -237,7 +237,7 @@ def _cmd_walker(args: argparse.Namespace) -> int:
     from workbench.fileutil import atomic_write_json
     from workbench.population.walker import fit_walker
 
-    fit = fit_walker(args.results_dir, args.subject, seed=args.seed)
+    fit = fit_walker(args.results_dir, args.subject, seed=args.seed, population=args.population)
     obj = fit.to_json()
     text = fit.summary()
     if args.out:
@@ -372,6 +372,12 @@ def add_population_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
     )
     p.add_argument("results_dir", metavar="RESULTS_DIR", help="the --out folder of a batch")
     p.add_argument("--subject", required=True, metavar="ID", help="the manifest's subject")
+    p.add_argument(
+        "--population",
+        metavar="HIERARCHICAL.json",
+        help="a population fit with walker effects: its spread within a walker becomes the "
+        "prior of this walker's crossing-to-crossing spread (default: a uniform prior)",
+    )
     p.add_argument("--out", metavar="DIR", help="also write DIR/walker.json")
     p.add_argument("--seed", type=seed_int, default=0, help="sampler seed (default 0)")
     p.set_defaults(handler=_cmd_walker)

@@ -930,13 +930,16 @@ def fit_hierarchical(
 COLLAPSED_WALKERS = 32
 
 
-def _collapsed_log_posterior(p: _Packed, theta: FloatArray) -> FloatArray:
+def _collapsed_log_posterior(
+    p: _Packed, theta: FloatArray, sd_prior: FloatArray | None = None
+) -> FloatArray:
     """Log posterior of (W, 13) law parameters with every record's nodes summed out.
 
     ``theta`` per row: for f_n, zeta and BLF1 the intercept at the reference pacing, the
     slope and log sigma; for BLF2 and BLF3 mu and log sigma. Each record's term is the
     log-sum-exp over its nodes of :func:`record_log_marginal`'s summand; the uniform prior
-    on every sigma is ``+ log sigma`` in log sigma.
+    on every sigma is ``+ log sigma`` in log sigma. ``sd_prior`` (laws x (mean, sd), NaN
+    where absent) multiplies a law's uniform prior on sigma by a normal density.
     """
     w = theta.shape[0]
     mean = np.empty((w, _N_LAWS, p.d.size))
@@ -957,7 +960,33 @@ def _collapsed_log_posterior(p: _Packed, theta: FloatArray) -> FloatArray:
     top = np.max(log_node, axis=2, keepdims=True)
     per_record = top[..., 0] + np.log(np.sum(np.exp(log_node - top), axis=2))
     out = per_record.sum(axis=1) + log_sigma.sum(axis=1)
+    if sd_prior is not None:
+        given = np.isfinite(sd_prior[:, 0])
+        z = (np.exp(log_sigma[:, given]) - sd_prior[given, 0]) / sd_prior[given, 1]
+        out = out - 0.5 * np.sum(z**2, axis=1)
     return np.where(np.isfinite(out), out, -np.inf)
+
+
+def _sd_prior(prior: Mapping[str, tuple[float, float]] | None) -> FloatArray | None:
+    """Check ``{law: (mean, sd)}`` priors on residual sds; return them as a (laws, 2) array."""
+    if prior is None:
+        return None
+    out = np.full((_N_LAWS, 2), np.nan)
+    for law, pair in prior.items():
+        if law not in LAWS:
+            raise UsageError(
+                f"residual_sd_prior names the law {law!r}; choose from {', '.join(LAWS)}",
+                parameter="residual_sd_prior",
+            )
+        mean, sd = (float(v) for v in pair)
+        if not (math.isfinite(mean) and mean > 0 and math.isfinite(sd) and sd > 0):
+            raise UsageError(
+                f"residual_sd_prior for {law} must be a positive mean and a positive sd, "
+                f"got {tuple(pair)!r}",
+                parameter="residual_sd_prior",
+            )
+        out[LAWS.index(law)] = mean, sd
+    return out
 
 
 def fit_collapsed(
@@ -967,6 +996,7 @@ def fit_collapsed(
     chains: int = 4,
     draws: int = 1000,
     burn: int = 1000,
+    residual_sd_prior: Mapping[str, tuple[float, float]] | None = None,
 ) -> HierarchicalFit:
     """Fit the laws without walker effects, every record's nodes summed out exactly, by emcee.
 
@@ -992,6 +1022,10 @@ def fit_collapsed(
         Fixes every draw.
     chains, draws, burn : int
         Ensembles (two or more), kept steps per walker (four or more), discarded steps.
+    residual_sd_prior : mapping, optional
+        ``{law: (mean, sd)}``: a normal prior on that law's residual sd (truncated at zero)
+        instead of the uniform one, for example a population's estimate of the spread
+        within a walker (:func:`workbench.population.walker.fit_walker`).
 
     Returns
     -------
@@ -1001,17 +1035,19 @@ def fit_collapsed(
     import emcee
 
     seed, records, p = _checked(records, seed, chains, draws, burn, "fit_collapsed")
+    sd_prior = _sd_prior(residual_sd_prior)
     beta0, se0, sd0 = _ols_start(p)
     centre, spread = [], []
     for law in range(_N_LAWS):
         centre += [beta0[law, 0], beta0[law, 1]] if _HAS_SLOPE[law] else [beta0[law, 0]]
         spread += [se0[law, 0], se0[law, 1]] if _HAS_SLOPE[law] else [se0[law, 0]]
-        centre.append(math.log(sd0[law]))
+        given = sd_prior is not None and math.isfinite(sd_prior[law, 0])
+        centre.append(math.log(sd_prior[law, 0] if sd_prior is not None and given else sd0[law]))
         spread.append(0.3)
     ndim = len(centre)
 
     def target(theta: FloatArray) -> FloatArray:
-        return _collapsed_log_posterior(p, np.atleast_2d(theta))
+        return _collapsed_log_posterior(p, np.atleast_2d(theta), sd_prior)
 
     kept = []
     for c in range(int(chains)):
@@ -1055,6 +1091,12 @@ def fit_collapsed(
         "the records' nodes summed out exactly and the laws sampled by emcee; R-hat "
         "between its ensembles, ESS (bulk and tail alike) from its autocorrelation time"
     ]
+    if residual_sd_prior:
+        named = ", ".join(
+            f"{law} {float(m):.3g} (sd {float(sd):.3g})"
+            for law, (m, sd) in residual_sd_prior.items()
+        )
+        notes.append(f"residual sds with normal priors instead of uniform ones: {named}")
     if n_draws < 50.0 * float(np.max(tau)):
         # emcee's own rule: below 50 autocorrelation times its estimate of them, hence the
         # ESS, is itself uncertain (typically too small a time, too large an ESS).

@@ -13,9 +13,12 @@ narrows more slowly than one over the square root of their number.
 
 from __future__ import annotations
 
+import json
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,7 +32,7 @@ from workbench.population.posteriors import (
     record_likelihoods,
 )
 
-__all__ = ["WalkerFit", "fit_walker", "fit_walkers", "walker_subjects"]
+__all__ = ["WalkerFit", "crossing_spread_prior", "fit_walker", "fit_walkers", "walker_subjects"]
 
 #: Law names in words, for sentences.
 _WORDS = {
@@ -124,12 +127,76 @@ class WalkerFit:
         return "\n".join(lines)
 
 
+def crossing_spread_prior(
+    population: str | os.PathLike[str] | Mapping[str, Any],
+) -> dict[str, tuple[float, float]]:
+    """Read a population fit's spread *within* a walker, as priors on a walker's residual sds.
+
+    Ten crossings of one walker cannot tell a crossing-to-crossing spread below their own
+    widths from none, so a walker fit alone keeps spreads up to the records' widths possible
+    and widens its band. A population fit with walker effects has learnt that spread from
+    every walker's records (its residual sd, beside the walker sd between walkers); taking
+    its posterior mean and sd as a normal prior on the walker's residual sd is the
+    hierarchical model's answer for one member of that population.
+
+    Parameters
+    ----------
+    population : path-like or mapping
+        ``hierarchical.json`` of ``workbench population`` (or its ``fit`` part, or
+        :meth:`HierarchicalFit.to_json`).
+
+    Returns
+    -------
+    dict
+        ``{law: (mean, sd)}`` of every law's residual sd.
+
+    Raises
+    ------
+    UsageError
+        The file cannot be read, or its fit has no walker effects (then its residual sd is
+        the spread between walkers too, not within one).
+    """
+    where = "the population fit"
+    if isinstance(population, Mapping):
+        obj: Any = population
+    else:
+        where = str(population)
+        try:
+            obj = json.loads(Path(population).read_text())
+        except (OSError, ValueError) as err:
+            raise UsageError(
+                f"{where}: cannot be read as a population fit ({err}); give the "
+                "hierarchical.json that 'workbench population' writes",
+                parameter="population",
+            ) from None
+    fit = obj.get("fit", obj) if isinstance(obj, Mapping) else None
+    if not isinstance(fit, Mapping) or not isinstance(fit.get("laws"), Mapping):
+        raise UsageError(
+            f"{where}: holds no hierarchical laws; give the hierarchical.json that 'workbench "
+            "population' writes from a batch whose records keep their posteriors",
+            parameter="population",
+        )
+    if not fit.get("walker_effects"):
+        raise UsageError(
+            f"{where}: was fitted without walker effects, so its residual sd is the spread "
+            "between walkers as well as within one; fit a population with several records "
+            "per walker (five walkers or more)",
+            parameter="population",
+        )
+    out = {}
+    for law in LAWS:
+        entry = fit["laws"][law]["residual_sd"]
+        out[law] = (float(entry["mean"]), float(entry["sd"]))
+    return out
+
+
 def fit_walker(
     batch_dir: str | os.PathLike[str],
     subject: str,
     *,
     seed: int = 0,
     draws: int = 4000,
+    population: str | os.PathLike[str] | Mapping[str, Any] | None = None,
 ) -> WalkerFit:
     """Fit one walker's laws to all their usable records of a batch (module docstring).
 
@@ -144,6 +211,10 @@ def fit_walker(
     draws : int, default 4000
         Kept steps of every emcee walker (over 50 of their autocorrelation times, about 80
         steps, so that the ESS reported is itself reliable).
+    population : path-like or mapping, optional
+        A population fit with walker effects (``hierarchical.json``): its spread within a
+        walker becomes the prior of this walker's residual sds
+        (:func:`crossing_spread_prior`). Without it the prior is uniform.
 
     Returns
     -------
@@ -167,7 +238,8 @@ def fit_walker(
             f"subject {subject!r} has {len(used)} usable record(s) of {len(stored)} (left out: "
             f"{reasons}); a walker's laws need at least five records at two or more pacings"
         )
-    fit = fit_collapsed(used, seed=seed, draws=draws)
+    prior = None if population is None else crossing_spread_prior(population)
+    fit = fit_collapsed(used, seed=seed, draws=draws, residual_sd_prior=prior)
     pacing = np.array([r.pacing_hz for r in used])
     if not math.isfinite(float(pacing.mean())):  # pragma: no cover - record_likelihoods checks
         raise UsageError(f"subject {subject!r}: a record used has no pacing")

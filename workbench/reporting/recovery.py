@@ -255,7 +255,10 @@ def _both_fits_sentence(
         other = next(label for label in fits if label != findings[0])
         reading = f"read the {findings[0]} fit's {short} slope as the finding, not the {other} one"
     else:
-        reading = f"neither fit's {short} slope is a finding here"
+        # Named by floor: the report's own records may come from another floor (a deck).
+        reading = (
+            f"neither fit's {short} slope from records {where.split(' with ')[0]} is a finding"
+        )
     true_slope = obj["truth"]["laws"][law]["slope"]
     return (
         f"Of the two fits {where}, with a true {short} slope of {true_slope:.4g}: "
