@@ -264,6 +264,13 @@ def test_workbench_population_adds_the_hierarchical_laws(walker_batch, tmp_path,
     code = main(["population", str(out / "results.csv"), "--out", str(tmp_path / "q")])
     text = capsys.readouterr().out
     assert code == 0 and "give the batch folder" in text
+    # One walker: no walker effects, so its residual sd is no spread within a walker, and a
+    # walker fit refuses it as a population prior in one sentence.
+    _, subject, _ = walker_batch
+    hier = str(tmp_path / "p" / "hierarchical.json")
+    code = main(["walker", str(out), "--subject", subject, "--population", hier])
+    err = capsys.readouterr().err
+    assert code == 2 and "without walker effects" in err and "Traceback" not in err
 
 
 def test_a_wide_posterior_is_kept_whole_on_a_coarser_grid() -> None:

@@ -295,7 +295,9 @@ def walkers_figure(
             ax.set_ylabel(_AXES[key], fontsize=8)
             ax.grid(alpha=0.3)
         row[0].set_title(
-            f"walker {walker.subject}: {count(int(walker.pacing_hz.size), 'record')} used",
+            # A cohort's subjects already say "walker007"; others get the word.
+            f"{'' if walker.subject.startswith('walker') else 'walker '}{walker.subject}: "
+            f"{count(int(walker.pacing_hz.size), 'record')} used",
             fontsize=9,
             loc="left",
         )
