@@ -2,7 +2,8 @@
 
 Run: ``python analyses/population_calibration.py [--truths seed,constant] [--replicates 0-19]
 [--out DIR] [--workers 2] [--long-chains]`` (resumable: every replicate keeps its own folder,
-and a rerun continues its batch or reads its stored fits).
+and a rerun continues its batch or reads its stored fits). A truth may carry its own
+replicates: ``--truths seed:0-19,constant:0-7``.
 
 Replicates 0-19 of each truth were fixed before any result was seen. Replicate ``r`` of the
 seed's laws is the population of seed ``r``, of the constant truth the population of seed
@@ -311,7 +312,11 @@ def _table(reps: list[dict[str, Any]]) -> tuple[list[str], dict[str, tuple[int, 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--truths", default="seed,constant")
+    ap.add_argument(
+        "--truths",
+        default="seed,constant",
+        help="truths, each optionally with its own replicates: seed:0-19,constant:0-7",
+    )
     ap.add_argument("--replicates", type=seed_range, default=seed_range("0-19"))
     ap.add_argument("--out", type=Path, default=Path("population_calibration"))
     ap.add_argument("--workers", type=int, default=2)
@@ -321,11 +326,15 @@ def main() -> None:
         help="also refit every replicate's hierarchical laws with ten times the sweeps",
     )
     args = ap.parse_args()
-    truths = [t.strip() for t in args.truths.split(",") if t.strip()]
+    # "seed,constant" or, with a truth's own replicates, "seed:0-19,constant:0-7"
+    truths = []
+    for item in (t.strip() for t in args.truths.split(",") if t.strip()):
+        name, _, span = item.partition(":")
+        truths.append((name, seed_range(span) if span else args.replicates))
     everything: list[dict[str, Any]] = []
-    for truth in truths:
+    for truth, replicates in truths:
         reps = []
-        for r in args.replicates:
+        for r in replicates:
             fits = one_replicate(truth, r, args.out, args.workers)
             if args.long_chains:
                 fits |= long_chains(truth, r, args.out)
