@@ -24,6 +24,7 @@ import argparse
 import math
 
 import numpy as np
+from _crossings import seed_range
 
 from workbench.population.fit import fit_population
 from workbench.population.hierarchy import fit_hierarchical
@@ -37,11 +38,6 @@ PARAMETERS = (
     ("damping_ratio", "slope"),
     ("damping_ratio", "intercept"),
 )
-
-
-def seed_range(text: str) -> list[int]:
-    lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
 
 
 def main() -> None:

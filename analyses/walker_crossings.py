@@ -26,40 +26,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
+from _crossings import seed_range, simulate_and_identify
 
-from workbench.population.recovery_design import simulate_recovery_record, walker_plan
+from workbench.population.recovery_design import walker_plan
 from workbench.population.walker import fit_walker
-from workbench.records.io import save_record
-
-
-def walker_range(text: str) -> list[int]:
-    lo, _, hi = text.partition("-")
-    return list(range(int(lo), int(hi or lo) + 1))
 
 
 def one_walker(
     seed: int, crossings: int, out: Path, workers: int, population: Path | None = None
 ) -> dict[str, float]:
     plan = walker_plan(seed=seed, crossings=crossings)
-    folder = out / f"walker{seed:04d}"
-    manifest = folder / "manifest.csv"
-    if not manifest.exists():
-        for row in plan.to_dict(orient="records"):
-            save_record(simulate_recovery_record(row, 200.0), folder / row["path"])
-        manifest.write_text("path\n" + "".join(f"{p}\n" for p in plan["path"]))
-    batch = folder / "batch"
-    args = [sys.executable, "-m", "workbench", "batch", str(manifest), "--out", str(batch)]
-    args += ["--workers", str(workers), "--json"]
-    if (batch / "batch.json").exists():
-        args.append("--resume")
-    run = subprocess.run(args, capture_output=True, text=True, check=False)
-    if run.returncode not in (0, 4):
-        sys.exit(f"workbench batch failed on walker {seed}: {run.stderr.strip()}")
+    batch = simulate_and_identify(plan, out / f"walker{seed:04d}", 200.0, workers)
     fit = fit_walker(batch, str(plan["subject"].iloc[0]), seed=0, population=population)
     at = fit.at_pacing()
     fp = fit.mean_pacing_hz
@@ -114,7 +94,7 @@ def _used(batch: Path) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--walkers", type=walker_range, default=walker_range("0-9"))
+    ap.add_argument("--walkers", type=seed_range, default=seed_range("0-9"))
     ap.add_argument("--crossings", type=int, default=10)
     ap.add_argument("--out", type=Path, default=Path("walker_crossings"))
     ap.add_argument("--workers", type=int, default=2)

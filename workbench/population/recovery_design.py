@@ -21,11 +21,14 @@ from workbench.population.sampler import _masses
 from workbench.population.study import FIXED_PACING_HZ
 
 __all__ = [
+    "CROSSING_SD",
     "DECK_RATIOS",
     "FLOORS",
     "RECORD_RANGES",
     "TRUTH_LAWS",
     "RecoveryDesign",
+    "footbridge_plan",
+    "generating_parameters",
     "recovery_plan",
     "simulate_recovery_record",
     "truth_laws",
@@ -300,6 +303,92 @@ WALKER_PACING_HZ = (1.65, 2.05)
 CROSSING_PACING_SD_HZ = 0.08
 
 
+def _check_crossings(crossings: Any) -> int:
+    if isinstance(crossings, bool) or not isinstance(crossings, int | np.integer) or crossings < 1:
+        raise UsageError(
+            f"'crossings' must be a whole number of at least 1, got {crossings!r}",
+            parameter="crossings",
+        )
+    return int(crossings)
+
+
+def _one_walker(
+    *,
+    seed: int,
+    crossings: int,
+    laws: PopulationLaws,
+    deck_rms_m_s2: tuple[float, float],
+    duration_s: float | tuple[float, float],
+    walker: int | None = None,
+) -> pd.DataFrame:
+    """Draw one walker of ``laws`` and their crossings (:func:`walker_plan`'s draws).
+
+    Without ``walker`` the generator's key is ``[seed, 0x3A1C]`` and the records are named
+    ``w<seed>_c<i>`` (:func:`walker_plan`); with it the key is ``[seed, 0x3A1C, walker]``
+    and the names ``p<seed>_w<walker>_c<i>`` (:func:`footbridge_plan`). A range of
+    ``duration_s`` is drawn per crossing after every other draw, so a fixed duration leaves
+    the other draws as they were.
+    """
+    from workbench.population.sampler import BLF1_BOUNDS, FN_BOUNDS_HZ, ZETA_BOUNDS
+
+    seed = check_seed(seed, "walker_plan")
+    key = [seed, 0x3A1C] if walker is None else [seed, 0x3A1C, int(walker)]
+    rng = np.random.default_rng(key)
+    n = int(crossings)
+    if walker is None:
+        names = [f"w{seed:04d}_c{i:02d}" for i in range(n)]
+        subject = f"walker{seed:04d}"
+    else:
+        subject = f"p{seed}_w{int(walker):03d}"
+        names = [f"{subject}_c{i:02d}" for i in range(n)]
+    mass = float(_masses(rng, 1, laws)[0])
+    mean_pacing = float(rng.uniform(*WALKER_PACING_HZ))
+    pacing = mean_pacing + rng.normal(0.0, CROSSING_PACING_SD_HZ, n)
+    plan = pd.DataFrame(
+        {
+            "record": names,
+            "subject": subject,
+            "mass_kg": mass,
+            "pacing_hz": pacing,
+        }
+    )
+    plan.insert(1, "path", [f"records/{r}.csv" for r in plan["record"]])
+    bounds = {
+        "natural_frequency_hz": (FN_BOUNDS_HZ[0], 10.0),
+        "damping_ratio": ZETA_BOUNDS,
+        "blf1": BLF1_BOUNDS,
+    }
+    for name, (lo, hi) in bounds.items():
+        law: LinearLaw = getattr(laws, name)
+        own = law.mean(pacing) + rng.normal(0.0, law.residual_sd)
+        plan[f"walker_{name}"] = own
+        plan[name] = np.clip(own + rng.normal(0.0, CROSSING_SD[name], n), lo * 1.01, hi * 0.99)
+    for name in ("blf2", "blf3"):
+        lognormal = getattr(laws, name)
+        median = float(np.exp(rng.normal(lognormal.mu, lognormal.sigma)))
+        plan[f"walker_{name}"] = median
+        plan[name] = median * np.exp(rng.normal(0.0, CROSSING_SD[name], n))
+    phases = rng.uniform(0.0, 2.0 * np.pi, (n, 3))
+    for i in range(3):
+        plan[f"phase{i + 1}_rad"] = phases[:, i]
+    drawn = isinstance(duration_s, tuple)
+    plan["duration_s"] = 0.0 if drawn else float(duration_s)  # type: ignore[arg-type]
+    for key_ in ("noise_sd_n", "amplitude_sd", "step_duration_sd", "phase_sd_rad"):
+        plan[key_] = rng.uniform(*RECORD_RANGES[key_], n)
+    which = rng.random(n) < 0.5
+    ratio = np.where(which, rng.uniform(*DECK_RATIOS[0], n), rng.uniform(*DECK_RATIOS[1], n))
+    plan["deck_kind"] = "sine"
+    plan["deck_rms_m_s2"] = rng.uniform(*deck_rms_m_s2, n)
+    plan["deck_frequency_hz"] = pacing * ratio
+    plan["deck_bandwidth_fraction"] = 0.0
+    plan["deck_phase_rad"] = rng.uniform(0.0, 2.0 * np.pi, n)
+    plan["deck_seed"] = rng.integers(0, 2**31 - 1, n)
+    plan["seed"] = rng.integers(0, 2**31 - 1, n)
+    if isinstance(duration_s, tuple):
+        plan["duration_s"] = rng.uniform(float(duration_s[0]), float(duration_s[1]), n)
+    return plan
+
+
 def walker_plan(
     *,
     seed: int,
@@ -337,59 +426,117 @@ def walker_plan(
         plus ``subject`` and ``walker_<law>``: the walker's mean law at the crossing's
         pacing (BLF2 and BLF3: the walker's median), the target of a walker fit.
     """
-    from workbench.population.sampler import BLF1_BOUNDS, FN_BOUNDS_HZ, ZETA_BOUNDS
-
     laws = truth if truth is not None else truth_laws("seed")
-    rng = np.random.default_rng([check_seed(seed, "walker_plan"), 0x3A1C])
-    if isinstance(crossings, bool) or not isinstance(crossings, int | np.integer) or crossings < 1:
-        raise UsageError(
-            f"'crossings' must be a whole number of at least 1, got {crossings!r}",
-            parameter="crossings",
-        )
-    n = int(crossings)
-    mass = float(_masses(rng, 1, laws)[0])
-    mean_pacing = float(rng.uniform(*WALKER_PACING_HZ))
-    pacing = mean_pacing + rng.normal(0.0, CROSSING_PACING_SD_HZ, n)
-    plan = pd.DataFrame(
-        {
-            "record": [f"w{seed:04d}_c{i:02d}" for i in range(n)],
-            "subject": f"walker{seed:04d}",
-            "mass_kg": mass,
-            "pacing_hz": pacing,
-        }
+    n = _check_crossings(crossings)
+    return _one_walker(
+        seed=seed, crossings=n, laws=laws, deck_rms_m_s2=deck_rms_m_s2, duration_s=duration_s
     )
-    plan.insert(1, "path", [f"records/{r}.csv" for r in plan["record"]])
-    bounds = {
-        "natural_frequency_hz": (FN_BOUNDS_HZ[0], 10.0),
-        "damping_ratio": ZETA_BOUNDS,
-        "blf1": BLF1_BOUNDS,
-    }
-    for name, (lo, hi) in bounds.items():
-        law: LinearLaw = getattr(laws, name)
-        own = law.mean(pacing) + rng.normal(0.0, law.residual_sd)
-        plan[f"walker_{name}"] = own
-        plan[name] = np.clip(own + rng.normal(0.0, CROSSING_SD[name], n), lo * 1.01, hi * 0.99)
+
+
+def generating_parameters(truth: PopulationLaws) -> pd.Series:
+    """Return the hierarchical model's parameters a walker population of ``truth`` is drawn from.
+
+    As :func:`walker_plan` and :func:`footbridge_plan` draw walkers: a walker's own law is
+    the population's shifted by one draw of the law's residual sd, which is therefore the
+    model's walker sd; each crossing adds :data:`CROSSING_SD`, the model's residual (record)
+    sd. For BLF2 and BLF3 (log scale): ``mu``, the walker sd ``sigma`` and the crossing sd.
+
+    Returns
+    -------
+    pandas.Series
+        Indexed by the names of :attr:`HierarchicalFit.params
+        <workbench.population.hierarchy.HierarchicalFit.params>`: ``<law>.slope``,
+        ``.intercept`` (the seed's form ``slope * f_p + intercept``), ``.walker_sd`` and
+        ``.residual_sd`` for f_n, zeta and BLF1; ``<law>.mu``, ``.walker_sd`` and
+        ``.residual_sd`` for BLF2 and BLF3.
+    """
+    values: dict[str, float] = {}
+    for name in ("natural_frequency_hz", "damping_ratio", "blf1"):
+        law: LinearLaw = getattr(truth, name)
+        values[f"{name}.slope"] = float(law.slope)
+        values[f"{name}.intercept"] = float(law.intercept)
+        values[f"{name}.walker_sd"] = float(law.residual_sd)
+        values[f"{name}.residual_sd"] = float(CROSSING_SD[name])
     for name in ("blf2", "blf3"):
-        lognormal = getattr(laws, name)
-        median = float(np.exp(rng.normal(lognormal.mu, lognormal.sigma)))
-        plan[f"walker_{name}"] = median
-        plan[name] = median * np.exp(rng.normal(0.0, CROSSING_SD[name], n))
-    phases = rng.uniform(0.0, 2.0 * np.pi, (n, 3))
-    for i in range(3):
-        plan[f"phase{i + 1}_rad"] = phases[:, i]
-    plan["duration_s"] = float(duration_s)
-    for key in ("noise_sd_n", "amplitude_sd", "step_duration_sd", "phase_sd_rad"):
-        plan[key] = rng.uniform(*RECORD_RANGES[key], n)
-    which = rng.random(n) < 0.5
-    ratio = np.where(which, rng.uniform(*DECK_RATIOS[0], n), rng.uniform(*DECK_RATIOS[1], n))
-    plan["deck_kind"] = "sine"
-    plan["deck_rms_m_s2"] = rng.uniform(*deck_rms_m_s2, n)
-    plan["deck_frequency_hz"] = pacing * ratio
-    plan["deck_bandwidth_fraction"] = 0.0
-    plan["deck_phase_rad"] = rng.uniform(0.0, 2.0 * np.pi, n)
-    plan["deck_seed"] = rng.integers(0, 2**31 - 1, n)
-    plan["seed"] = rng.integers(0, 2**31 - 1, n)
-    return plan
+        lognormal = getattr(truth, name)
+        values[f"{name}.mu"] = float(lognormal.mu)
+        values[f"{name}.walker_sd"] = float(lognormal.sigma)
+        values[f"{name}.residual_sd"] = float(CROSSING_SD[name])
+    return pd.Series(values)
+
+
+def footbridge_plan(
+    *,
+    seed: int,
+    walkers: int = 40,
+    crossings: int = 3,
+    truth: PopulationLaws | None = None,
+    deck_rms_m_s2: tuple[float, float] = (0.1, 0.5),
+    duration_s: tuple[float, float] = (20.0, 30.0),
+) -> tuple[pd.DataFrame, pd.Series]:
+    """Draw a footbridge's population: many walkers, each crossing a lively deck a few times.
+
+    Every walker is drawn as :func:`walker_plan` draws one (their own generator, keyed by
+    ``seed`` and the walker's index): a member of the ``truth`` population whose mean law
+    of f_n, zeta and BLF1 is the population's shifted by one residual draw (BLF2, BLF3: one
+    lognormal median each), with their own body mass and mean self-chosen pacing. Each of
+    their ``crossings`` is at its own pacing about that mean and adds its own spread
+    (:data:`CROSSING_SD`) about the walker's law. The deck moves in one mode (a sine) at a
+    ratio to the crossing's pacing from :data:`DECK_RATIOS`, of RMS acceleration uniform
+    over ``deck_rms_m_s2``; the crossing lasts a time uniform over ``duration_s``.
+
+    Parameters
+    ----------
+    seed : int
+        Fixes every draw.
+    walkers : int, default 40
+        Walkers in the population.
+    crossings : int, default 3
+        Crossings (records) per walker.
+    truth : PopulationLaws, optional
+        The population (default the seed's laws).
+    deck_rms_m_s2 : (float, float), default (0.1, 0.5)
+        Range of the deck's RMS acceleration [m/s^2].
+    duration_s : (float, float), default (20, 30)
+        Range of a crossing's length [s].
+
+    Returns
+    -------
+    plan : pandas.DataFrame
+        One row per crossing, columns as :func:`walker_plan`'s; records are named
+        ``p<seed>_w<walker>_c<crossing>`` and the subject is ``p<seed>_w<walker>``.
+    parameters : pandas.Series
+        The generating parameters of the hierarchical model (:func:`generating_parameters`).
+    """
+    laws = truth if truth is not None else truth_laws("seed")
+    seed = check_seed(seed, "footbridge_plan")
+    n = _check_crossings(crossings)
+    if isinstance(walkers, bool) or not isinstance(walkers, int | np.integer) or walkers < 1:
+        raise UsageError(
+            f"'walkers' must be a whole number of at least 1, got {walkers!r}",
+            parameter="walkers",
+        )
+    lo, hi = (float(v) for v in duration_s)
+    if not 0.0 < lo <= hi:
+        raise UsageError(
+            f"'duration_s' must be a range (low, high) of positive seconds, got {duration_s!r}",
+            parameter="duration_s",
+        )
+    plan = pd.concat(
+        [
+            _one_walker(
+                seed=seed,
+                crossings=n,
+                laws=laws,
+                deck_rms_m_s2=deck_rms_m_s2,
+                duration_s=(lo, hi),
+                walker=j,
+            )
+            for j in range(int(walkers))
+        ],
+        ignore_index=True,
+    )
+    return plan, generating_parameters(laws)
 
 
 @dataclass(frozen=True)
