@@ -4,7 +4,7 @@ A population law needs records whose C and K are identified, and a rigid floor c
 them (the demo's recovery shows it); walkers crossing a lively footbridge can, where the
 deck moves away from their gait's harmonics. So the demo's Table 2 comes from a cohort of
 walkers who cross the lively span of the design notes several times each, in a stream that
-keeps the deck moving (:func:`~workbench.population.footbridge.footbridge_cohort_records`),
+keeps the deck moving (:func:`~workbench.hsi.cohort_study.footbridge_cohort_records`),
 together with the steady stretches of the two real rigid-floor records. Every record is
 identified in one batch; the two-stage least-squares laws (:mod:`workbench.population.fit`)
 and the hierarchical laws fitted to every usable record's posterior
@@ -117,11 +117,11 @@ def footbridge_population_demo(
     dict
         Counts, the laws of both fits, the report's files and one line of text.
     """
+    from workbench.hsi.cohort_study import footbridge_cohort_records
     from workbench.inference.pipeline import IdentifySettings
     from workbench.population.batch import run_batch
     from workbench.population.batch_hierarchy import hierarchical_laws
     from workbench.population.fit import fit_population
-    from workbench.population.footbridge import footbridge_cohort_records
     from workbench.population.walker import fit_walkers
     from workbench.reporting.population import population_report
 
