@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
+from workbench import load_record
 from workbench.errors import UsageError
 from workbench.hsi.pedestrians import validate_pedestrians
 from workbench.population.cohort import CohortSampler, draw_cohort, walker_name
@@ -107,3 +108,20 @@ def test_cli_cohort_records_group_by_walker(
         main(["hsi", "--cohort", "0"])
     assert main(["hsi", "--cohort", "3", "--pedestrians", str(out / "truth.csv")]) != 0
     assert "--cohort draws its walkers from the laws" in capsys.readouterr().err
+
+
+def test_the_footbridge_study_keeps_whole_crossings_only(tmp_path: Path) -> None:
+    """Walkers caught at a stream window's edge are skipped with the reason, not written as
+    fragments a batch cannot identify; the rest load with their walker as subject."""
+    from workbench.hsi.cohort_study import footbridge_cohort_records
+
+    written = footbridge_cohort_records(
+        tmp_path / "study", walkers=6, crossings=2, seed=4, duration_s=30.0, min_record_s=12.0
+    )
+    entries = load_manifest(tmp_path / "study" / "manifest.csv")
+    assert len(entries) == len(written.records) >= 3
+    assert written.skipped, "a 30 s window always cuts some walker short"
+    for e in entries:
+        assert load_record(e.path).duration_s >= 12.0
+        assert e.subject in {walker_name(i) for i in range(6)}
+    assert all("shorter than the study's 12 s" in s["reason"] for s in written.skipped)

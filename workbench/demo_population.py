@@ -152,10 +152,10 @@ def footbridge_population_demo(
     notes = [
         f"Footbridge records: a cohort of {COHORT_WALKERS} walkers drawn from the seed's laws "
         f"crossed the lively span (50 m, 2 Hz, 0.5 % damping) in {COHORT_CROSSINGS} stream "
-        f"windows, {len(written.records)} records written ({len(written.skipped)} too short "
-        "to hold steps skipped), each walker coupled to the deck (human-structure "
-        "interaction). The laws fitted to them are a check of the workbench against the laws "
-        "they were drawn from, not a finding about people.",
+        f"windows, {len(written.records)} records written ({len(written.skipped)} shorter "
+        "than 10 s, walkers at a window's edge, skipped), each walker coupled to the deck "
+        "(human-structure interaction). The laws fitted to them are a check of the "
+        "workbench against the laws they were drawn from, not a finding about people.",
         *_truth_notes(laws.fit, fit),
     ]
     if real_manifest is not None:

@@ -38,6 +38,7 @@ def footbridge_cohort_records(
     duration_s: float = 60.0,
     dt_s: float = 0.01,
     laws: PopulationLaws | None = None,
+    min_record_s: float = 10.0,
 ) -> RecordsWritten:
     """Simulate a cohort crossing the lively span and write its walkers' records.
 
@@ -61,6 +62,10 @@ def footbridge_cohort_records(
         Time step of the simulation, and the records' sample interval [s].
     laws : PopulationLaws, optional
         The population the cohort is drawn from (default the seed's laws).
+    min_record_s : float, default 10
+        Records shorter than this -- walkers caught at a window's edge, a few steps on the
+        deck -- are skipped with the reason (identification needs several whole steps, and a
+        study would not keep such a fragment).
 
     Returns
     -------
@@ -68,7 +73,8 @@ def footbridge_cohort_records(
         The records written (and those the loaders would refuse, skipped with the reason).
     """
     from workbench.hsi.montecarlo import CrossingSpec
-    from workbench.hsi.record_files import write_crossing_records
+    from workbench.hsi.record_files import check_records_folder, write_walker_records
+    from workbench.hsi.records import crossing_records, record_name
     from workbench.hsi.structure import simply_supported_beam
     from workbench.population.cohort import CohortSampler
 
@@ -82,4 +88,19 @@ def footbridge_cohort_records(
         duration_s=duration_s,
         dt_s=dt_s,
     )
-    return write_crossing_records(spec, seed, folder, crossings=crossings)
+    check_records_folder(folder)
+    records = [r for i in range(int(crossings)) for r in crossing_records(spec, seed, i)]
+    keep = [r for r in records if r.duration_s >= min_record_s]
+    written = write_walker_records(keep, folder)
+    short = [
+        {
+            "record": record_name(r.metadata["truth"]["crossing"], r.metadata["truth"]["walker"]),
+            "reason": f"the record lasts {r.duration_s:.2f} s, shorter than the study's "
+            f"{min_record_s:g} s (a walker at the window's edge)",
+        }
+        for r in records
+        if r.duration_s < min_record_s
+    ]
+    return RecordsWritten(
+        written.folder, written.manifest, written.records, [*written.skipped, *short]
+    )
