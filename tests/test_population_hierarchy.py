@@ -800,6 +800,9 @@ def test_a_prior_on_the_residual_sd_gives_the_known_variance_regression(pinned):
         fit_collapsed(pinned_records(), residual_sd_prior={"blf1": (0.0, 1.0)})
     with pytest.raises(UsageError, match="choose from"):
         fit_collapsed(pinned_records(), residual_sd_prior={"mass": (1.0, 1.0)})
+    for bad in (0.1, (0.1,), (0.1, 0.2, 0.3)):
+        with pytest.raises(UsageError, match="must be a pair"):
+            fit_collapsed(pinned_records(), residual_sd_prior={"blf1": bad})
 
 
 def test_a_walker_prior_needs_a_population_fit_with_walker_effects(pinned, tmp_path):
@@ -815,6 +818,15 @@ def test_a_walker_prior_needs_a_population_fit_with_walker_effects(pinned, tmp_p
         float(fit.params["natural_frequency_hz.residual_sd"]),
         float(fit.bse["natural_frequency_hz.residual_sd"]),
     )
+    del obj["laws"]["blf3"]["residual_sd"]
+    with pytest.raises(UsageError, match="no residual sd"):
+        crossing_spread_prior(obj)
+    # A cohort needs point laws: a hierarchical fit's sds already hold both spreads.
+    from workbench.cli import main
+
+    path = tmp_path / "hierarchical.json"
+    path.write_text(json.dumps({"fit": fit.to_json(), "no_fit": None}))
+    assert main(["hsi", "--cohort", "4", "--laws", str(path)]) == 2
     bad = tmp_path / "bad.json"
     bad.write_text("{")
     with pytest.raises(UsageError, match=r"bad\.json: cannot be read"):

@@ -184,6 +184,12 @@ def test_a_batch_keeps_every_records_posterior_and_reads_it_back(tmp_path) -> No
     again = {r.path: r for r in read_record_posteriors(out)}
     assert again["deck.csv"].posterior is None
     assert "cannot be read" in likelihood_use(again["deck.csv"])
+    # The same folder resumed with a smaller manifest: the rigid walk's file stays behind,
+    # but it is no longer part of the batch, so the fits do not read it.
+    (tmp_path / "recs" / "manifest.csv").write_text("path\ndeck.csv\n")
+    run_batch(tmp_path / "recs" / "manifest.csv", out, resume=True)
+    assert any("rigid" in p.read_text() for p in (out / "records").glob("*.json"))
+    assert [r.path for r in read_record_posteriors(out)] == ["deck.csv"]
 
 
 @pytest.fixture(scope="module")

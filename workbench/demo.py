@@ -198,10 +198,16 @@ def run_demo(
     pop.paragraph(
         f"{population['records']} records identified in one batch: walkers of a cohort "
         "crossing a lively footbridge several times each, and steady stretches of the two "
-        "real rigid-floor records. The hierarchical laws use "
-        f"{population['hierarchical_records_used']} records' posteriors "
-        f"({population['walkers']} walkers; {population['records_left_out']} left out, with "
-        "their reasons in the population report); the two-stage least squares uses the point "
+        "real rigid-floor records. "
+        + (
+            f"The hierarchical laws use {population['hierarchical_records_used']} records' "
+            f"posteriors ({population['walkers']} walkers; "
+            f"{population['records_left_out']} left out, with their reasons in the population "
+            "report)"
+            if population["hierarchical_records_used"]
+            else "No hierarchical laws could be fitted (the population report says why)"
+        )
+        + "; the two-stage least squares uses the point "
         f"estimates of {population['records_used']} records graded identified. The walkers "
         "were drawn from the seed's laws, so these rows check the workbench, they are not a "
         "finding; the full report with the walkers' own panels, figures like the seed's "

@@ -57,6 +57,15 @@ def _sampler(args: argparse.Namespace) -> tuple[Any, str]:
     if args.cohort is not None:
         from workbench.population.cohort import CohortSampler
 
+        if laws.parameter_draws is not None:
+            # Those laws' residual sds already combine the walker and crossing spreads, and
+            # their posterior draws would be ignored: a cohort needs point laws.
+            raise UsageError(
+                f"--cohort draws walkers from point laws, and {args.laws} is a hierarchical "
+                "fit (its residual sds hold both spreads); give the population.json laws or "
+                "the seed's defaults with --cohort"
+            )
+
         cohort = CohortSampler.from_laws(args.cohort, seed=args.seed, laws=laws)
         return cohort, f"a cohort of {args.cohort} walkers drawn from {laws.source}"
     return partial(sample_pedestrians, laws=laws), f"population sampler ({laws.source})"

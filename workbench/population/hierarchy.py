@@ -978,11 +978,14 @@ def _sd_prior(prior: Mapping[str, tuple[float, float]] | None) -> FloatArray | N
                 f"residual_sd_prior names the law {law!r}; choose from {', '.join(LAWS)}",
                 parameter="residual_sd_prior",
             )
-        mean, sd = (float(v) for v in pair)
+        try:
+            mean, sd = (float(v) for v in pair)
+        except (TypeError, ValueError):
+            mean, sd = math.nan, math.nan  # not a pair of numbers: refused below
         if not (math.isfinite(mean) and mean > 0 and math.isfinite(sd) and sd > 0):
             raise UsageError(
-                f"residual_sd_prior for {law} must be a positive mean and a positive sd, "
-                f"got {tuple(pair)!r}",
+                f"residual_sd_prior for {law} must be a pair: a positive mean and a positive "
+                f"sd, got {pair!r}",
                 parameter="residual_sd_prior",
             )
         out[LAWS.index(law)] = mean, sd

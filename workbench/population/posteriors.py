@@ -110,11 +110,22 @@ def _read(file: Path) -> dict[str, Any] | None:
     return obj if isinstance(obj, dict) else None
 
 
+def _listed_paths(batch_dir: Path) -> set[str] | None:
+    """Return the record paths of the batch's ``results.csv`` (None without a readable one)."""
+    try:
+        return set(pd.read_csv(batch_dir / "results.csv", usecols=["path"])["path"].astype(str))
+    except (OSError, ValueError):
+        return None
+
+
 def read_record_posteriors(batch_dir: str | os.PathLike[str]) -> list[StoredRecord]:
     """Read every done record of a batch folder with its stored posterior, sorted by path.
 
     A record file that cannot be read, or whose posterior is malformed, is kept with its
     ``problem`` set (a fit leaves it out and the report says why), never dropped silently.
+    Where the folder has its ``results.csv``, only the records it lists are read: a batch
+    resumed in the same folder with a smaller manifest leaves the earlier run's record files
+    behind, and they are no longer part of the batch.
 
     Parameters
     ----------
@@ -139,6 +150,7 @@ def read_record_posteriors(batch_dir: str | os.PathLike[str]) -> list[StoredReco
             "there are no record files here",
             "give the --out folder of 'workbench batch'",
         )
+    listed = _listed_paths(Path(batch_dir))
     out = []
     for file in files:
         obj = _read(file)
@@ -146,6 +158,8 @@ def read_record_posteriors(batch_dir: str | os.PathLike[str]) -> list[StoredReco
             continue  # failed records are listed in failures.csv
         row = obj.get("row") or {}
         path = str(obj.get("path", file.stem))
+        if listed is not None and path not in listed:
+            continue  # an earlier manifest's record, not in this batch
         stored = obj.get("posterior")
         posterior, problem, check = None, None, None
         if stored is not None:

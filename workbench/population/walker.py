@@ -137,7 +137,9 @@ def crossing_spread_prior(
     and widens its band. A population fit with walker effects has learnt that spread from
     every walker's records (its residual sd, beside the walker sd between walkers); taking
     its posterior mean and sd as a normal prior on the walker's residual sd is the
-    hierarchical model's answer for one member of that population.
+    hierarchical model's answer for one member of that population. If the population fit
+    included this walker's own records, they count twice (a little too narrow a band): fit
+    the population to the other walkers where that matters.
 
     Parameters
     ----------
@@ -185,8 +187,15 @@ def crossing_spread_prior(
         )
     out = {}
     for law in LAWS:
-        entry = fit["laws"][law]["residual_sd"]
-        out[law] = (float(entry["mean"]), float(entry["sd"]))
+        try:
+            entry = fit["laws"][law]["residual_sd"]
+            out[law] = (float(entry["mean"]), float(entry["sd"]))
+        except (KeyError, TypeError, ValueError):
+            raise UsageError(
+                f"{where}: has no residual sd (mean and sd) for the {_WORDS[law]} law; give the "
+                "hierarchical.json that 'workbench population' writes",
+                parameter="population",
+            ) from None
     return out
 
 
