@@ -321,3 +321,27 @@ def walker_batch(tmp_path_factory):
     from tests.test_record_posteriors import make_walker_batch
 
     return make_walker_batch(tmp_path_factory.mktemp("walker"))
+
+
+def test_walker_panels_draw_no_estimate_graded_not_identified() -> None:
+    """A weak deck record counts in the walker's fit through its likelihood, but its point
+    estimate is not drawn: only records whose C and K are identified get a marker, and a
+    record the walker fit left out gets none."""
+    from types import SimpleNamespace
+
+    from workbench.reporting.population_hierarchy import _walker_records
+
+    results = pd.DataFrame(
+        {
+            "path": ["a.csv", "b.csv", "c.csv", "d.csv"],
+            "subject": ["w1", "w1", "w1", "w2"],
+            "pacing_hz": [1.9, 1.7, 1.8, 1.8],
+            "natural_frequency_hz": [2.0, 2.1, 2.2, 2.3],
+            "identified_stiffness": [True, True, False, True],
+            "identified_damping": [True, True, True, True],
+        }
+    )
+    walker = SimpleNamespace(
+        subject="w1", left_out=pd.DataFrame({"path": ["b.csv"], "reason": ["left out"]})
+    )
+    assert list(_walker_records(results, walker)["path"]) == ["a.csv"]

@@ -242,12 +242,20 @@ def hierarchical_figure(fit: PopulationFit, hierarchical: HierarchicalFit) -> Fi
 
 
 def _walker_records(results: pd.DataFrame, walker: WalkerFit) -> pd.DataFrame:
-    """Return the rows of ``results`` a walker fit used (its subject's, less left out)."""
+    """Return the rows of ``results`` a walker fit used and whose C and K are identified.
+
+    A weak deck record enters the fit through its whole likelihood, but its point estimate
+    is not shown as one: a value graded not identified is never drawn as an estimate.
+    """
     if "subject" not in results.columns:
         return results.iloc[0:0]
     mine = results[results["subject"].astype(str) == walker.subject]
     left = set(walker.left_out["path"].astype(str)) if len(walker.left_out) else set()
-    return mine[~mine["path"].astype(str).isin(left)].sort_values("pacing_hz")
+    mine = mine[~mine["path"].astype(str).isin(left)]
+    for flag in ("identified_stiffness", "identified_damping"):
+        if flag in mine.columns:
+            mine = mine[mine[flag].astype(bool)]
+    return mine.sort_values("pacing_hz")
 
 
 def walkers_figure(
@@ -282,7 +290,8 @@ def walkers_figure(
                     recs.pacing_hz,
                     recs[key],
                     yerr=None if sd is None else 1.96 * sd.fillna(0).to_numpy(float),
-                    fmt="o", ms=4, capsize=2, color="C0", label="record (95 % bar)",
+                    fmt="o", ms=4, capsize=2, color="C0",
+                    label="record graded identified (95 % bar)",
                 )  # fmt: skip
             band = walker.fit.law_band(key, grid)
             ax.fill_between(
