@@ -1,9 +1,10 @@
 """Simulation-based calibration of the hierarchical population laws against the two-stage fit.
 
 Run: ``python analyses/population_calibration.py [--truths seed,constant] [--replicates 0-19]
-[--out DIR] [--workers 2] [--long-chains]`` (resumable: every replicate keeps its own folder,
-and a rerun continues its batch or reads its stored fits). A truth may carry its own
-replicates: ``--truths seed:0-19,constant:0-7``.
+[--out DIR] [--workers 2] [--long-chains] [--sampler auto|gibbs|moves]`` (resumable: every
+replicate keeps its own folder, and a rerun continues its batch or reads its stored fits;
+the fits of a ``--sampler`` other than the default are stored apart, on the same records).
+A truth may carry its own replicates: ``--truths seed:0-19,constant:0-7``.
 
 Replicates 0-19 of each truth were fixed before any result was seen. Replicate ``r`` of the
 seed's laws is the population of seed ``r``, of the constant truth the population of seed
@@ -84,9 +85,9 @@ def _interval(value: float, lo: float, hi: float) -> dict[str, float]:
     return {"value": float(value), "lower": float(lo), "upper": float(hi)}
 
 
-def _fits(batch: Path, seed: int, plan: pd.DataFrame) -> dict[str, Any]:
+def _fits(batch: Path, seed: int, plan: pd.DataFrame, sampler: str) -> dict[str, Any]:
     """Both fits of one replicate's batch, as intervals by parameter name."""
-    laws = hierarchical_laws(batch, seed=seed)
+    laws = hierarchical_laws(batch, seed=seed, sampler=sampler)
     out: dict[str, Any] = {"hierarchical": {}, "two_stage": {}}
     fit = laws.fit
     out["hierarchical_left_out"] = len(laws.left_out)
@@ -106,6 +107,7 @@ def _fits(batch: Path, seed: int, plan: pd.DataFrame) -> dict[str, Any]:
         out["walker_effects"] = bool(fit.walker_effects)
         out["walkers"] = int(fit.walkers)
         out["flagged"] = list(fit.flagged)
+        out["sampler"] = fit.sampler
         out["rhat_max"] = float(np.max(fit.rhat))
         out["ess_min"] = float(min(np.min(fit.ess_bulk), np.min(fit.ess_tail)))
     results = read_results(batch)
@@ -174,10 +176,17 @@ def _clipped(plan: pd.DataFrame) -> int:
     return int(hit.sum())
 
 
-def one_replicate(truth: str, replicate: int, out: Path, workers: int) -> dict[str, Any]:
+def _stored_name(stem: str, sampler: str) -> str:
+    """``fits.json`` for the default sampler, ``fits_gibbs.json`` for another (kept apart)."""
+    return f"{stem}.json" if sampler == "auto" else f"{stem}_{sampler}.json"
+
+
+def one_replicate(
+    truth: str, replicate: int, out: Path, workers: int, sampler: str = "auto"
+) -> dict[str, Any]:
     """Simulate, identify and fit one replicate, or read its stored fits."""
     folder = out / truth / f"replicate{replicate:02d}"
-    stored = folder / "fits.json"
+    stored = folder / _stored_name("fits", sampler)
     if stored.exists():
         return dict(json.loads(stored.read_text()))
     folder.mkdir(parents=True, exist_ok=True)
@@ -185,7 +194,7 @@ def one_replicate(truth: str, replicate: int, out: Path, workers: int) -> dict[s
     started = time.perf_counter()
     batch = simulate_and_identify(plan, folder, SAMPLE_RATE_HZ, workers)
     identified = time.perf_counter()
-    fits = _fits(batch, replicate, plan)
+    fits = _fits(batch, replicate, plan, sampler)
     fits["truth"] = {k: float(v) for k, v in parameters.items()}
     fits["records"] = len(plan)
     fits["clipped"] = _clipped(plan)
@@ -214,7 +223,7 @@ FITS = (
 LONG_SWEEPS = (10000, 5000)
 
 
-def long_chains(truth: str, replicate: int, out: Path) -> dict[str, Any]:
+def long_chains(truth: str, replicate: int, out: Path, sampler: str = "auto") -> dict[str, Any]:
     """Refit a replicate's hierarchical laws with ten times the sweeps (stored, read back).
 
     The same records and seed as the default fit; only the chains are longer, so a change
@@ -223,13 +232,13 @@ def long_chains(truth: str, replicate: int, out: Path) -> dict[str, Any]:
     from workbench.population.hierarchy import fit_hierarchical
     from workbench.population.posteriors import read_record_posteriors, record_likelihoods
 
-    stored = out / truth / f"replicate{replicate:02d}" / "long.json"
+    stored = out / truth / f"replicate{replicate:02d}" / _stored_name("long", sampler)
     if stored.exists():
         return dict(json.loads(stored.read_text()))
     started = time.perf_counter()
     used, _ = record_likelihoods(read_record_posteriors(stored.parent / "batch"))
     draws, burn = LONG_SWEEPS
-    fit = fit_hierarchical(used, seed=replicate, draws=draws, burn=burn)
+    fit = fit_hierarchical(used, seed=replicate, draws=draws, burn=burn, sampler=sampler)
     ci = fit.conf_int(0.05)
     result = {
         "hierarchical_long": {
@@ -325,6 +334,12 @@ def main() -> None:
         action="store_true",
         help="also refit every replicate's hierarchical laws with ten times the sweeps",
     )
+    ap.add_argument(
+        "--sampler",
+        choices=("auto", "gibbs", "moves"),
+        default="auto",
+        help="the hierarchical fit's algorithm (fit_hierarchical's sampler; stored apart)",
+    )
     args = ap.parse_args()
     # "seed,constant" or, with a truth's own replicates, "seed:0-19,constant:0-7"
     truths = []
@@ -335,9 +350,9 @@ def main() -> None:
     for truth, replicates in truths:
         reps = []
         for r in replicates:
-            fits = one_replicate(truth, r, args.out, args.workers)
+            fits = one_replicate(truth, r, args.out, args.workers, args.sampler)
             if args.long_chains:
-                fits |= long_chains(truth, r, args.out)
+                fits |= long_chains(truth, r, args.out, args.sampler)
             fits["record_sd_median"] = _record_sd(args.out / truth / f"replicate{r:02d}")
             reps.append(fits)
             flagged = ", ".join(fits.get("flagged", [])) or "none"

@@ -831,3 +831,176 @@ def test_a_walker_prior_needs_a_population_fit_with_walker_effects(pinned, tmp_p
     bad.write_text("{")
     with pytest.raises(UsageError, match=r"bad\.json: cannot be read"):
         crossing_spread_prior(bad)
+
+
+# -- the node-summed moves ---------------------------------------------------------------------
+
+
+def _law_state(seed: int, n_walkers: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Population parameters near TRUTH: (L, 2) intercept and slope, (L,) sigma^2, (L, J) u."""
+    rng = np.random.default_rng(seed)
+    beta = np.array([[a, b] for a, b, _, _ in TRUTH.values()]) + 0.02 * rng.standard_normal((5, 2))
+    beta[3:, 1] = 0.0
+    sigma2 = (np.array([t[2] for t in TRUTH.values()]) * rng.uniform(0.7, 1.3, 5)) ** 2
+    u = np.array([t[3] for t in TRUTH.values()])[:, None] * rng.standard_normal((5, n_walkers))
+    return beta, sigma2, u
+
+
+def test_the_node_summed_passes_are_the_records_marginal_likelihoods():
+    """The compiled passes against :func:`record_log_marginal`, the nodes summed in numpy.
+
+    Records of three walkers with padded nodes (different node counts) and cell variances;
+    the full pass at two parameter sets, and a mean move and a variance move from the
+    first to the second, give each record's log marginal up to one constant per record
+    (the normal densities' 2 pi), to rounding: 1e-9 on values of order 10.
+    """
+    from workbench.population import hierarchy as h
+    from workbench.population._node_kernel import move_mean, move_variance, node_log_probabilities
+
+    records = _population(4, 3, 2)
+    rng = np.random.default_rng(5)
+    # Different node counts, so that the packed arrays are padded.
+    records = [
+        _with(
+            r,
+            **{
+                f: getattr(r, f)[: 81 - 9 * i]
+                for f in (
+                    "natural_frequency_hz",
+                    "damping_ratio",
+                    "log_weight",
+                    "log_prior",
+                    "blf_mean",
+                    "blf_sd",
+                )
+            },
+        )
+        for i, r in enumerate(records)
+    ]
+    records = [
+        _with(r, natural_frequency_var=rng.uniform(0, 1e-3, r.natural_frequency_hz.size))
+        for r in records
+    ]
+    p = h._pack(records)
+    order = [records.index(r) for r in sorted(records, key=lambda r: r.subject)]
+    walker_of = {s: j for j, s in enumerate(sorted({r.subject for r in records}))}
+
+    def state_marginals(beta, sigma2, u):
+        mean = beta[:, :1] + beta[:, 1:] * p.d + u[:, p.walker]
+        logp = np.empty(p.base.shape)
+        return node_log_probabilities(p.obs, p.var, p.base, mean, sigma2, logp), logp, mean
+
+    def exact(beta, sigma2, u):
+        out = []
+        for i in order:
+            rec = records[i]
+            params = {}
+            for law_index, law in enumerate(LAWS):
+                shift = u[law_index, walker_of[rec.subject]]
+                if law in ("blf2", "blf3"):
+                    params[f"{law}.mu"] = beta[law_index, 0] + shift
+                else:
+                    params[f"{law}.intercept_at_ref"] = beta[law_index, 0] + shift
+                    params[f"{law}.slope"] = beta[law_index, 1]
+                params[f"{law}.residual_sd"] = math.sqrt(sigma2[law_index])
+            out.append(record_log_marginal(rec, params))
+        return np.array(out)
+
+    first, second = _law_state(1, 3), _law_state(2, 3)
+    lm1, logp1, mean1 = state_marginals(*first)
+    lm2, _, mean2 = state_marginals(*second)
+    constant = exact(*first) - lm1
+    np.testing.assert_allclose(exact(*second) - lm2, constant, rtol=0, atol=1e-9)
+    # One law at a time from the first state to the second: a mean move, then a variance
+    # move, on the running log-probabilities.
+    logp, sigma2 = logp1.copy(), first[1].copy()
+    proposed = np.empty_like(logp)
+    for law in range(5):
+        lm = move_mean(logp, p.obs[law], p.var[law], sigma2[law], mean1[law], mean2[law], proposed)
+        logp, proposed = proposed, logp
+        lm = move_variance(
+            logp, p.obs[law], p.var[law], mean2[law], sigma2[law], second[1][law], proposed
+        )
+        logp, proposed = proposed, logp
+        sigma2[law] = second[1][law]
+    np.testing.assert_allclose(lm, lm2, rtol=0, atol=1e-9)
+    assert np.all(np.isneginf(logp[~np.isfinite(p.base)]))
+
+
+def test_the_node_summed_moves_give_the_posterior_of_bayesian_linear_regression(pinned):
+    """The same exact posterior as the data-augmentation sweep's test, drawn by the moves."""
+    _, values, pacings = pinned
+    fit = fit_hierarchical(
+        pinned_records(), seed=3, chains=4, draws=1000, burn=200, sampler="moves"
+    )
+    assert fit.sampler == "moves" and fit.to_json()["sampler"] == "moves"
+    _check_regression_posterior(fit, values, pacings)
+
+
+def _wide_population(seed: int, walkers: int, per_walker: int) -> list[RecordLikelihood]:
+    """Walkers whose f_n and zeta records are three times wider than the crossing spread.
+
+    Each record's grid is fine against the crossing spread (spacing 0.8 of it) and its
+    nodes stand for cells (the cell variance given), as a deck record's stored posterior.
+    """
+    rng = np.random.default_rng([seed, 0x51DE])
+    sd = np.array([0.45, 0.15, 0.01, 0.05, 0.05])
+    taus = np.array([t[3] for t in TRUTH.values()])
+    sigmas = np.array([t[2] for t in TRUTH.values()])
+    nodes = 31
+    step = 8.0 * sd[:2] / (nodes - 1)
+    records = []
+    for w in range(walkers):
+        effect = taus * rng.standard_normal(5)
+        for k in range(per_walker):
+            pacing = rng.uniform(1.5, 2.3)
+            latent = _law_means(pacing) + effect + sigmas * rng.standard_normal(5)
+            rec = _grid_record(f"w{w}_r{k}.csv", f"w{w}", pacing, latent, sd, rng, nodes=nodes)
+            records.append(
+                _with(
+                    rec,
+                    natural_frequency_var=np.full(rec.damping_ratio.size, step[0] ** 2 / 12),
+                    damping_ratio_var=np.full(rec.damping_ratio.size, step[1] ** 2 / 12),
+                )
+            )
+    return records
+
+
+def test_the_two_samplers_target_the_same_posterior():
+    """A population with walker effects, fitted by the sweep and by the moves: every
+    parameter's posterior mean agrees within 4.5 Monte Carlo standard errors of the
+    difference (sd / sqrt(bulk ESS) of each fit; 21 comparisons at a two-sided 7e-6)."""
+    records = _population(6, 16, 4)
+    fits = [
+        fit_hierarchical(records, seed=2, chains=4, draws=600, burn=200, sampler=s)
+        for s in ("gibbs", "moves")
+    ]
+    assert [f.sampler for f in fits] == ["gibbs", "moves"]
+    se = [f.bse / np.sqrt(f.ess_bulk) for f in fits]
+    gap = (fits[0].params - fits[1].params).abs()
+    assert (gap < 4.5 * np.sqrt(se[0] ** 2 + se[1] ** 2)).all(), (gap / np.hypot(*se)).round(1)
+
+
+@pytest.mark.slow
+def test_the_moves_mix_where_the_records_are_wide():
+    """f_n and zeta records three times wider than the crossing spread: 'auto' sums the
+    nodes for those two laws (the load factors' records are narrow: the sweep), and its
+    chains agree (R-hat below 1.05 on every parameter), where the data-augmentation sweep
+    alone does not mix: its residual sds' bulk ESS is over ten times below (same seed and
+    sweeps)."""
+    records = _wide_population(0, 20, 3)
+    fit = fit_hierarchical(records, seed=0, draws=500, burn=250)
+    assert fit.sampler == "mixed"
+    assert fit.summed_laws == ("natural_frequency_hz", "damping_ratio")
+    assert np.all(fit.rhat < 1.05), dict(zip(fit.parameter_names, fit.rhat.round(3), strict=True))
+    gibbs = fit_hierarchical(records, seed=0, draws=500, burn=250, sampler="gibbs")
+    for law in ("natural_frequency_hz", "damping_ratio"):
+        i = fit.parameter_names.index(f"{law}.residual_sd")
+        assert fit.ess_bulk[i] > 10 * gibbs.ess_bulk[i], (law, fit.ess_bulk[i], gibbs.ess_bulk[i])
+
+
+def test_auto_takes_the_sweep_where_the_records_pin_their_values():
+    fit = fit_hierarchical(_population(1, 6, 3), seed=0, chains=2, draws=20, burn=0)
+    assert fit.sampler == "gibbs"
+    with pytest.raises(UsageError, match="'sampler' must be one of auto, gibbs, moves"):
+        fit_hierarchical(_population(1, 6, 3), sampler="slice")

@@ -93,7 +93,9 @@ class BatchLaws:
         return "\n".join(lines)
 
 
-def hierarchical_laws(batch_dir: str | os.PathLike[str], *, seed: int = 0) -> BatchLaws:
+def hierarchical_laws(
+    batch_dir: str | os.PathLike[str], *, seed: int = 0, sampler: str = "auto"
+) -> BatchLaws:
     """Fit the hierarchical laws to every usable record of a batch folder.
 
     Parameters
@@ -102,6 +104,8 @@ def hierarchical_laws(batch_dir: str | os.PathLike[str], *, seed: int = 0) -> Ba
         The ``--out`` folder of ``workbench batch``.
     seed : int, default 0
         Fixes the sampler's draws.
+    sampler : {"auto", "gibbs", "moves"}, default "auto"
+        The algorithm (:func:`~workbench.population.hierarchy.fit_laws`).
 
     Returns
     -------
@@ -110,7 +114,7 @@ def hierarchical_laws(batch_dir: str | os.PathLike[str], *, seed: int = 0) -> Ba
     stored = read_record_posteriors(Path(batch_dir))
     used, left_out = record_likelihoods(stored)
     try:
-        fit = fit_laws(used, seed=seed)
+        fit = fit_laws(used, seed=seed, sampler=sampler)
     except UsageError as err:
         return BatchLaws(None, left_out, str(err).split(": ", 1)[-1])
     return BatchLaws(fit, left_out)

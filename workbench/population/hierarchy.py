@@ -76,6 +76,53 @@ conditions on it again, so the sweep keeps the posterior. The integrals are clos
 walker ``w``'s residuals are ``N(0, sigma^2 I + tau^2 11')``, whose inverse is ``(I - c_w
 11') / sigma^2`` with ``c_w = tau^2 / (sigma^2 + n_w tau^2)``.
 
+Where the records are wide the sweep crawls. Its speed is set by the fraction of missing
+information (Liu, Wong and Kong 1994): given a record's node its f_n and zeta are fixed,
+so when a record's likelihood is wide against the residual sd the node pins the latent
+value, the law's sigma and walker effects given the nodes barely move, and the nodes given
+them barely move either. Footbridge crossings are like that (each pins f_n to a few per
+cent where one walker's crossings differ by about one): the sweep's chains then disagree
+however long they run (docs/validation/population.md). For such laws the nodes are summed
+out instead. Each record's marginal likelihood is then the log-sum-exp over its nodes of
+their log-probabilities, and the law's parameters move by Metropolis-Hastings steps whose
+ratio is those marginals' change. The sampler keeps every node's log-probability and changes one
+law at a time, so a step costs one compiled pass over the (records, nodes) array
+(:mod:`workbench.population._node_kernel`). Per law and sweep:
+
+a. every walker's effect at once, each accepted on its own records: proposed from a
+   Student t around the normal approximation in which each record's likelihood of the
+   law's value is replaced by the normal of its moments;
+b. the slope against the effects: the slope moves by delta and walker ``w``'s effect by
+   ``-delta * dbar_w`` (``dbar_w`` the walker's mean pacing offset), the line along which
+   walkers at different pacings let the two trade off; proposed from the same
+   approximation on that line;
+c. two exact Gibbs steps that leave every record's mean as it is: the intercept and every
+   effect shifted against each other, and tau^2 given the effects;
+d. the effects and tau scaled together by one factor (a random walk on its log; the
+   funnel where the effects sit at the scale of tau);
+e. sigma, on even sweeps from its conditional under the normal approximations (tabulated
+   on a grid of log sigma), on odd sweeps by a random walk on log sigma.
+
+Without walker effects a. to d. are replaced by one move of (a, b), on even sweeps from a
+Student t around the weighted least-squares fit of the records' moments, on odd sweeps a
+random walk shaped by its covariance. The random walks' steps are tuned towards an
+acceptance of 0.4 during burn-in only, so the kept sweeps are a fixed Markov kernel.
+Independence proposals that cannot return to the current state are refused, as the
+Metropolis-Hastings ratio requires.
+
+Which laws take which: ``sampler="auto"`` estimates each law's missing share before
+sampling (:func:`_missing_information`: the median over records of ``v / (v + s^2)``, the
+record's variance of the law's value against the residual variance) and sums the nodes
+out for the laws above :data:`MISSING_INFORMATION_MAX`, where the sweep's
+autocorrelation time ``(1 + f) / (1 - f)`` would pass 7. The others keep the sweep, which
+is cheaper and, where the records pin their values, mixes as well. In one sweep of a
+mixed fit the nodes and latent values are drawn afresh and only the sweep's laws are
+updated given them (a data-augmentation step keeps the parameters' posterior once the
+nodes are dropped again), then the moves run for the others on freshly computed node
+log-probabilities. ``"gibbs"`` and ``"moves"`` force one algorithm for every law; the tests
+check both against the exact posterior of Bayesian linear regression and against each
+other.
+
 Several chains (default 4) start from dispersed values around the ordinary least-squares
 fit of the records' posterior means; each chain's generator is
 ``np.random.default_rng([seed, chain])``, so one seed fixes every result. Convergence is
@@ -96,7 +143,13 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from workbench.errors import UsageError, check_seed
-from workbench.population._node_kernel import draw_nodes
+from workbench.population._node_kernel import (
+    draw_nodes,
+    keep_rows,
+    move_mean,
+    move_variance,
+    node_log_probabilities,
+)
 from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, MIN_RECORDS, PACING_SPREAD_HZ
 
 if TYPE_CHECKING:
@@ -123,6 +176,12 @@ FloatArray = NDArray[np.float64]
 PACING_REF_HZ = 1.8
 #: The laws, in the order of the sampler's arrays: three linear in pacing, two lognormal.
 LAWS: tuple[str, ...] = (*LAW_COLUMNS, *LOGNORMAL_COLUMNS)
+#: The data-augmentation sweep is used while no law's median missing share of information
+#: (:func:`_missing_information`) exceeds this; above it the node-summed moves (module
+#: docstring, "The algorithm, and why").
+MISSING_INFORMATION_MAX = 0.75
+#: The samplers :func:`fit_hierarchical` offers (module docstring).
+SAMPLERS = ("auto", "gibbs", "moves")
 #: Fewest walkers a fit with walker effects needs (module docstring: with fewer, the
 #: posterior of tau under its uniform prior has no mean or no variance).
 MIN_WALKERS = 5
@@ -143,6 +202,27 @@ _SLICE_STEPS = 200
 #: Smallest variance a sigma^2 draw is floored at: identical latent values give SS = 0, and
 #: a zero variance would turn the node probabilities into NaN.
 _TINY = float(np.finfo(np.float64).tiny)
+#: Degrees of freedom of the Student t the independence proposals draw from (heavier tails
+#: than the normal approximation they are centred on, so that the ratio of target to proposal
+#: stays bounded where the approximation is too narrow).
+_PROPOSAL_DOF = 5.0
+#: Factor on the normal approximation's sd in those proposals (a slightly wider proposal
+#: loses little acceptance and keeps the ratio bounded).
+_PROPOSAL_INFLATION = 1.2
+#: Acceptance rate the random-walk steps are tuned towards during burn-in (near the
+#: optimum of a one- or two-dimensional random walk, Gelman, Roberts and Gilks 1996).
+_TARGET_ACCEPTANCE = 0.4
+#: Sweeps between recomputations of every node's log-probability from scratch (moves update
+#: it by differences, whose rounding would otherwise accumulate).
+_REFRESH_SWEEPS = 25
+#: Cells of the grid in log sigma the residual sd's independence proposal is drawn on.
+_SD_GRID = 200
+#: Residual and walker sds are kept above this fraction of the law's spread over the
+#: records: a numerical floor (below it a point node's term overflows), far below any sd a
+#: population's records can tell from zero.
+_FLOOR_RELATIVE = 1e-6
+#: Absolute floor of that floor, for records that all hold one exact value.
+_TINY_SD = 1e-150
 _LOG_2PI = math.log(2.0 * math.pi)
 _HAS_SLOPE = np.array([law in LAW_COLUMNS for law in LAWS])
 _N_LAWS = len(LAWS)
@@ -202,13 +282,15 @@ class _Nodes:
     ``obs[l]`` is what law ``l`` sees at each node (f_n, zeta, m1, log m2, log m3) and
     ``var[l]`` its variance given the node (0, 0, s1^2, (s2/m2)^2, (s3/m3)^2); ``base`` is
     the node's log likelihood ``log_weight - log_prior`` with the log-scale Jacobians
-    ``-log m2 - log m3``.
+    ``-log m2 - log m3``. ``moments`` are the mean and variance of each law's value under
+    the record's likelihood (the nodes' normals weighted by ``base``): the normal
+    approximation the sampler's proposals are centred on, and the dispersed starts' centre.
     """
 
     obs: FloatArray  # (L, B)
     var: FloatArray  # (L, B)
     base: FloatArray  # (B,)
-    point: FloatArray  # (L,) likelihood-weighted mean of obs: the dispersed starts' centre
+    moments: FloatArray  # (2, L): mean and variance of each law's value under the likelihood
 
 
 def _record_nodes(rec: RecordLikelihood) -> _Nodes:
@@ -306,9 +388,11 @@ def _record_nodes(rec: RecordLikelihood) -> _Nodes:
     rel = (s[:, 1:] / m[:, 1:]) ** 2  # delta method: sd of log BLF = sd / mean
     var = np.stack([fn_var, zeta_var, s[:, 0] ** 2, rel[:, 0], rel[:, 1]])
     base = lw - lp - log_m.sum(axis=1)
-    w = np.exp(lw - lp - np.max(lw - lp))
-    point = obs @ (w / w.sum())
-    return _Nodes(obs=obs, var=var, base=base, point=point)
+    w = np.exp(base - np.max(base))
+    w /= w.sum()
+    mean = obs @ w
+    spread = np.maximum((var + (obs - mean[:, None]) ** 2) @ w, 0.0)
+    return _Nodes(obs=obs, var=var, base=base, moments=np.stack([mean, spread]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -318,7 +402,9 @@ class _Packed:
     obs: FloatArray  # (L, R, B_max), padding 0
     var: FloatArray  # (L, R, B_max), padding 1
     base: FloatArray  # (R, B_max), padding -inf
-    point: FloatArray  # (L, R)
+    approx_mean: FloatArray  # (L, R): each record's likelihood moments (_Nodes.moments)
+    approx_var: FloatArray  # (L, R)
+    floor2: FloatArray  # (L,): square of the sds' numerical floor (_FLOOR_RELATIVE)
     d: FloatArray  # (R,) pacing - PACING_REF_HZ [Hz]
     walker: NDArray[np.intp]  # (R,) walker index of every record
     starts: NDArray[np.intp]  # (J,) first record of every walker
@@ -342,11 +428,17 @@ def _pack(records: Sequence[RecordLikelihood]) -> _Packed:
         b = nodes[i].base.size
         obs[:, row, :b], var[:, row, :b], base[row, :b] = nodes[i].obs, nodes[i].var, nodes[i].base
     starts = np.flatnonzero(np.r_[True, walker[1:] != walker[:-1]])
+    approx_mean = np.stack([nodes[i].moments[0] for i in order], axis=1)
+    approx_var = np.stack([nodes[i].moments[1] for i in order], axis=1)
+    spread = np.maximum(np.std(approx_mean, axis=1), np.sqrt(np.median(approx_var, axis=1)))
+    floor2 = np.maximum(_FLOOR_RELATIVE * spread, _TINY_SD) ** 2
     return _Packed(
         obs=obs,
         var=var,
         base=base,
-        point=np.stack([nodes[i].point for i in order], axis=1),
+        approx_mean=approx_mean,
+        approx_var=approx_var,
+        floor2=floor2,
         d=np.array([float(records[i].pacing_hz) for i in order]) - PACING_REF_HZ,
         walker=np.searchsorted(starts, np.arange(n_r), side="right") - 1,
         starts=starts,
@@ -354,25 +446,10 @@ def _pack(records: Sequence[RecordLikelihood]) -> _Packed:
     )
 
 
-# -- the Gibbs sweep ---------------------------------------------------------------------
+# -- the data-augmentation Gibbs sweep ----------------------------------------------------
 
 
-@dataclass
-class _State:
-    """One chain's population parameters, per law (L = 5)."""
-
-    beta: FloatArray  # (L, 2): intercept at PACING_REF_HZ, slope (0 for the lognormal laws)
-    sigma2: FloatArray  # (L,)
-    tau2: FloatArray  # (L,), 0 without walker effects
-    u: FloatArray  # (L, J)
-
-
-def _sum_by_walker(x: FloatArray, starts: NDArray[np.intp]) -> FloatArray:
-    """Sum ``x`` (..., R) over each walker's contiguous records, giving (..., J)."""
-    return np.add.reduceat(x, starts, axis=-1)
-
-
-def _draw_latents(p: _Packed, st: _State, rng: np.random.Generator) -> FloatArray:
+def _draw_latents(p: _Packed, st: _Chain, rng: np.random.Generator) -> FloatArray:
     """Draw every record's node and latent values (L, R): steps 1 and 2."""
     mean = st.beta[:, :1] + st.beta[:, 1:] * p.d + st.u[:, p.walker]  # (L, R)
     # Step 1, compiled (:mod:`workbench.population._node_kernel`): each node's log-probability
@@ -446,7 +523,7 @@ def _slice_log_tau(
 
 
 def _update_laws(
-    p: _Packed, st: _State, x: FloatArray, effects: bool, rng: np.random.Generator
+    p: _Packed, st: _Chain, x: FloatArray, effects: bool, rng: np.random.Generator
 ) -> None:
     """Step 3, every law at once: tau, (a, b), the walker effects, sigma^2."""
     n = float(p.d.size)
@@ -497,6 +574,308 @@ def _update_laws(
     st.sigma2 = np.maximum(ss / rng.chisquare(n - 1.0, size=_N_LAWS), _TINY)
 
 
+# -- the node-summed moves --------------------------------------------------------------
+
+
+def _sum_by_walker(x: FloatArray, starts: NDArray[np.intp]) -> FloatArray:
+    """Sum ``x`` (..., R) over each walker's contiguous records, giving (..., J)."""
+    return np.add.reduceat(x, starts, axis=-1)
+
+
+def _log_t(z: FloatArray) -> FloatArray:
+    """Log density of Student's t (:data:`_PROPOSAL_DOF` degrees of freedom) up to a constant."""
+    return -0.5 * (_PROPOSAL_DOF + 1.0) * np.log1p(z * z / _PROPOSAL_DOF)
+
+
+@dataclass
+class _Chain:
+    """One chain's state: the population parameters per law (L = 5).
+
+    With them, every record's node log-probabilities under them and each record's log
+    marginal likelihood, which the node-summed moves update.
+    """
+
+    beta: FloatArray  # (L, 2): intercept at PACING_REF_HZ, slope (0 for the lognormal laws)
+    sigma2: FloatArray  # (L,)
+    tau2: FloatArray  # (L,), 0 without walker effects
+    u: FloatArray  # (L, J), 0 without walker effects
+    logp: FloatArray  # (R, B)
+    log_marginal: FloatArray  # (R,)
+    proposed: FloatArray  # (R, B), scratch for a move's log-probabilities
+    # Random-walk step sizes per law, tuned during burn-in only: log sigma, log of the
+    # walker-effect scale, and the factor on the intercept and slope's proposal covariance.
+    sigma_step: FloatArray
+    scale_step: FloatArray
+    beta_step: FloatArray
+
+    def law_mean(self, p: _Packed, law: int, beta: FloatArray, u: FloatArray) -> FloatArray:
+        return beta[0] + beta[1] * p.d + u[p.walker]
+
+    def refresh(self, p: _Packed) -> None:
+        """Recompute every node's log-probability from scratch (rounding does not build up)."""
+        mean = self.beta[:, :1] + self.beta[:, 1:] * p.d + self.u[:, p.walker]
+        self.log_marginal = node_log_probabilities(
+            p.obs, p.var, p.base, mean, self.sigma2, self.logp
+        )
+
+    def accept_all(self, new_marginal: FloatArray) -> None:
+        self.logp, self.proposed = self.proposed, self.logp
+        self.log_marginal = new_marginal
+
+
+def _tune(step: FloatArray, accepted: FloatArray, target: float, sweep: int) -> FloatArray:
+    """Robbins-Monro adaptation of a log step towards an acceptance rate (burn-in only)."""
+    return step * np.exp((accepted - target) / (1.0 + sweep) ** 0.6)
+
+
+def _move_walker_effects(p: _Packed, ch: _Chain, law: int, rng: np.random.Generator) -> None:
+    """Every walker's effect on one law at once, each accepted on its own records.
+
+    Proposed independently from a Student t around the effect's normal approximation: each
+    record's likelihood of the law's value replaced by the normal of its moments
+    (``p.approx_mean``, ``p.approx_var``), convolved with the residual sd.
+    """
+    fixed = ch.beta[law, 0] + ch.beta[law, 1] * p.d
+    w = 1.0 / (p.approx_var[law] + ch.sigma2[law])
+    precision = _sum_by_walker(w, p.starts) + 1.0 / ch.tau2[law]
+    centre = _sum_by_walker(w * (p.approx_mean[law] - fixed), p.starts) / precision
+    scale = _PROPOSAL_INFLATION / np.sqrt(precision)
+    z_new = rng.standard_t(_PROPOSAL_DOF, size=centre.shape)
+    u_new = centre + scale * z_new
+    z_old = (ch.u[law] - centre) / scale
+    new_marginal = move_mean(
+        ch.logp,
+        p.obs[law],
+        p.var[law],
+        float(ch.sigma2[law]),
+        fixed + ch.u[law, p.walker],
+        fixed + u_new[p.walker],
+        ch.proposed,
+    )
+    log_ratio = (
+        _sum_by_walker(new_marginal - ch.log_marginal, p.starts)
+        - 0.5 * (u_new**2 - ch.u[law] ** 2) / ch.tau2[law]
+        - _log_t(z_new)
+        + _log_t(z_old)
+    )
+    accept = np.log(rng.random(centre.shape)) < log_ratio
+    rows = accept[p.walker]
+    keep_rows(ch.logp, ch.proposed, rows)
+    ch.log_marginal = np.where(rows, new_marginal, ch.log_marginal)
+    ch.u[law] = np.where(accept, u_new, ch.u[law])
+
+
+def _shift_and_draw_walker_sd(p: _Packed, ch: _Chain, law: int, rng: np.random.Generator) -> None:
+    """Two exact Gibbs steps that leave every record's mean as it is.
+
+    The intercept moves by delta and every walker effect by -delta, delta drawn from its
+    conditional N(mean of the effects, tau^2 / J) (the intercept's prior is flat); then
+    tau^2 given the effects, a scaled inverse chi-square with J - 1 degrees of freedom under
+    the uniform prior on tau.
+    """
+    j = float(p.starts.size)
+    delta = ch.u[law].mean() + math.sqrt(ch.tau2[law] / j) * rng.standard_normal()
+    ch.beta[law, 0] += delta
+    ch.u[law] -= delta
+    ch.tau2[law] = max(float(np.sum(ch.u[law] ** 2)) / rng.chisquare(j - 1.0), p.floor2[law])
+
+
+def _move_slope_against_effects(p: _Packed, ch: _Chain, law: int, rng: np.random.Generator) -> None:
+    """Move the slope by delta and walker ``w``'s effect by ``-delta * dbar_w``.
+
+    ``dbar_w`` is the walker's mean pacing offset, so each walker's mean law keeps its
+    value at that walker's mean pacing: walkers at different pacings make the slope and the
+    effects trade off along this line, which moves of one given the other cross slowly.
+    delta is proposed from a Student t around its conditional on the line under the
+    records' normal approximations (the effects' prior times the walkers' own pacing
+    spreads, which alone see delta) and accepted on the exact likelihood.
+    """
+    if not _HAS_SLOPE[law]:
+        return
+    dbar = _sum_by_walker(p.d, p.starts) / p.n_w
+    within = p.d - dbar[p.walker]
+    old_mean = ch.beta[law, 0] + ch.beta[law, 1] * p.d + ch.u[law, p.walker]
+    w = 1.0 / (p.approx_var[law] + ch.sigma2[law])
+    prior_precision = float(dbar @ dbar) / ch.tau2[law]
+    precision = prior_precision + float(np.sum(w * within**2))
+    if not precision > 0.0:
+        return
+    centre = (
+        float(ch.u[law] @ dbar) / ch.tau2[law]
+        + float(np.sum(w * within * (p.approx_mean[law] - old_mean)))
+    ) / precision
+    scale = _PROPOSAL_INFLATION / math.sqrt(precision)
+    z_new = float(rng.standard_t(_PROPOSAL_DOF))
+    delta = centre + scale * z_new
+    z_old = -centre / scale
+    u_new = ch.u[law] - delta * dbar
+    new_mean = old_mean + delta * within
+    new_marginal = move_mean(
+        ch.logp, p.obs[law], p.var[law], float(ch.sigma2[law]), old_mean, new_mean, ch.proposed
+    )
+    log_prior = -0.5 * (float(u_new @ u_new) - float(ch.u[law] @ ch.u[law])) / ch.tau2[law]
+    log_q = float(_log_t(np.array([z_new]))[0] - _log_t(np.array([z_old]))[0])
+    log_ratio = float(np.sum(new_marginal - ch.log_marginal)) + log_prior - log_q
+    if math.log(rng.random()) < log_ratio:
+        ch.accept_all(new_marginal)
+        ch.beta[law, 1] += delta
+        ch.u[law] = u_new
+
+
+def _move_effect_scale(p: _Packed, ch: _Chain, law: int, rng: np.random.Generator) -> bool:
+    """Walker effects and tau scaled together by one factor c (random walk on log c).
+
+    Where the walkers' records are wide against tau, the effects and tau pin each other (a
+    funnel) and neither Gibbs step moves far; this move slides along it. The map (u, tau) ->
+    (c u, c tau) has Jacobian c^(J+1), the effects' prior loses c^-J, so the acceptance ratio
+    is the records' likelihood ratio times c.
+    """
+    log_c = ch.scale_step[law] * rng.standard_normal()
+    c = math.exp(log_c)
+    if ch.tau2[law] * c * c < p.floor2[law]:
+        return False
+    fixed = ch.beta[law, 0] + ch.beta[law, 1] * p.d
+    new_marginal = move_mean(
+        ch.logp,
+        p.obs[law],
+        p.var[law],
+        float(ch.sigma2[law]),
+        fixed + ch.u[law, p.walker],
+        fixed + c * ch.u[law, p.walker],
+        ch.proposed,
+    )
+    if math.log(rng.random()) < float(np.sum(new_marginal - ch.log_marginal)) + log_c:
+        ch.accept_all(new_marginal)
+        ch.u[law] *= c
+        ch.tau2[law] *= c * c
+        return True
+    return False
+
+
+def _move_intercept_and_slope(
+    p: _Packed, ch: _Chain, law: int, independent: bool, rng: np.random.Generator
+) -> bool:
+    """Move the law's intercept and slope together (the intercept alone for a lognormal law).
+
+    The proposal's shape is the weighted least-squares covariance of the records' moments
+    given the walker effects. ``independent``: drawn from a Student t around that fit (big
+    steps where the approximation is good); otherwise a random walk scaled by the law's
+    tuned step (small steps where it is not). Sweeps alternate between the two.
+    """
+    k = 2 if _HAS_SLOPE[law] else 1
+    design = np.stack([np.ones_like(p.d), p.d])[:k]
+    w = 1.0 / (p.approx_var[law] + ch.sigma2[law])
+    information = (design * w) @ design.T
+    chol = np.linalg.cholesky(np.linalg.inv(information))
+    old = ch.beta[law, :k].copy()
+    z = rng.standard_t(_PROPOSAL_DOF, size=k) if independent else rng.standard_normal(k)
+    if independent:
+        centre = np.linalg.solve(
+            information, (design * w) @ (p.approx_mean[law] - ch.u[law, p.walker])
+        )
+        new = centre + _PROPOSAL_INFLATION * chol @ z
+        z_old = np.linalg.solve(_PROPOSAL_INFLATION * chol, old - centre)
+        # The multivariate t's log density up to a constant.
+        q_ratio = (
+            -0.5
+            * (_PROPOSAL_DOF + k)
+            * (
+                math.log1p(float(z @ z) / _PROPOSAL_DOF)
+                - math.log1p(float(z_old @ z_old) / _PROPOSAL_DOF)
+            )
+        )
+    else:
+        new = old + ch.beta_step[law] * 2.38 / math.sqrt(k) * (chol @ z)
+        q_ratio = 0.0
+    beta_new = ch.beta[law].copy()
+    beta_new[:k] = new
+    effects = ch.u[law, p.walker]
+    new_marginal = move_mean(
+        ch.logp,
+        p.obs[law],
+        p.var[law],
+        float(ch.sigma2[law]),
+        ch.beta[law, 0] + ch.beta[law, 1] * p.d + effects,
+        beta_new[0] + beta_new[1] * p.d + effects,
+        ch.proposed,
+    )
+    if math.log(rng.random()) < float(np.sum(new_marginal - ch.log_marginal)) - q_ratio:
+        ch.accept_all(new_marginal)
+        ch.beta[law] = beta_new
+        return True
+    return False
+
+
+def _residual_sd_proposal(
+    p: _Packed, ch: _Chain, law: int, mean: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Tabulate the residual sd's conditional under the records' normal approximations.
+
+    Returns the grid of log sigma (cell edges) and each cell's log probability. The grid
+    depends on the other parameters only (never on sigma itself), as an independence
+    proposal's must: it spans the spread of the records' approximate residuals from a
+    millionth to ten times it.
+    """
+    resid2 = (p.approx_mean[law] - mean) ** 2
+    spread = math.sqrt(float(np.mean(resid2 + p.approx_var[law])))
+    edges = np.linspace(
+        math.log(max(_FLOOR_RELATIVE * spread, math.sqrt(p.floor2[law]))),
+        math.log(10.0 * spread),
+        _SD_GRID + 1,
+    )
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    total = p.approx_var[law][None, :] + np.exp(2.0 * mid)[:, None]
+    # The approximate likelihood times the uniform prior's Jacobian sigma (per log sigma).
+    log_density = mid - 0.5 * np.sum(resid2 / total + np.log(total), axis=1)
+    return edges, log_density - _log_sum_exp(log_density)
+
+
+def _log_sum_exp(x: FloatArray) -> float:
+    top = float(np.max(x))
+    return top + math.log(float(np.sum(np.exp(x - top))))
+
+
+def _move_residual_sd(
+    p: _Packed, ch: _Chain, law: int, independent: bool, rng: np.random.Generator
+) -> bool:
+    """Move the law's residual sd (on log sigma; the uniform prior's Jacobian in the ratio).
+
+    ``independent``: drawn from its conditional under the records' normal approximations
+    (:func:`_residual_sd_proposal`), accepted on how far the exact likelihood departs from
+    them; otherwise a random walk on log sigma with the law's tuned step. Sds below the
+    law's numerical floor are refused.
+    """
+    mean = ch.beta[law, 0] + ch.beta[law, 1] * p.d + ch.u[law, p.walker]
+    eta_old = 0.5 * math.log(ch.sigma2[law])
+    if independent:
+        edges, log_cell = _residual_sd_proposal(p, ch, law, mean)
+        cell = int(
+            np.searchsorted(np.cumsum(np.exp(log_cell)), rng.random() * np.exp(log_cell).sum())
+        )
+        cell = min(cell, _SD_GRID - 1)
+        width = edges[1] - edges[0]
+        eta_new = edges[cell] + width * rng.random()
+        old_cell = int(np.floor((eta_old - edges[0]) / width))
+        if not 0 <= old_cell < _SD_GRID:
+            return False  # the proposal cannot return to sigma: the move must not leave it
+        log_q = log_cell[cell] - log_cell[old_cell]
+    else:
+        eta_new = eta_old + ch.sigma_step[law] * rng.standard_normal()
+        log_q = 0.0
+    sigma2_new = math.exp(2.0 * eta_new)
+    if sigma2_new < p.floor2[law]:
+        return False
+    new_marginal = move_variance(
+        ch.logp, p.obs[law], p.var[law], mean, float(ch.sigma2[law]), sigma2_new, ch.proposed
+    )
+    log_ratio = float(np.sum(new_marginal - ch.log_marginal)) + (eta_new - eta_old) - log_q
+    if math.log(rng.random()) < log_ratio:
+        ch.accept_all(new_marginal)
+        ch.sigma2[law] = sigma2_new
+        return True
+    return False
+
+
 def _ols_start(p: _Packed) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per law: least-squares (a, b), their standard errors and the residual sd.
 
@@ -508,7 +887,7 @@ def _ols_start(p: _Packed) -> tuple[FloatArray, FloatArray, FloatArray]:
     se = np.zeros((_N_LAWS, 2))
     sd = np.zeros(_N_LAWS)
     for law in range(_N_LAWS):
-        y = p.point[law]
+        y = p.approx_mean[law]
         design = np.column_stack([np.ones(n), p.d]) if _HAS_SLOPE[law] else np.ones((n, 1))
         coef, *_ = np.linalg.lstsq(design, y, rcond=None)
         resid = y - design @ coef
@@ -526,6 +905,7 @@ def _ols_start(p: _Packed) -> tuple[FloatArray, FloatArray, FloatArray]:
 def _run_chain(
     p: _Packed,
     effects: bool,
+    summed: NDArray[np.bool_],
     rng: np.random.Generator,
     burn: int,
     draws: int,
@@ -533,27 +913,99 @@ def _run_chain(
 ) -> FloatArray:
     """One chain: dispersed start, ``burn`` sweeps discarded, then (draws, L, 4) kept.
 
-    The kept values per law are intercept at the reference, slope, sigma, tau.
+    ``summed`` (L,) marks the laws updated by the node-summed moves; the others by the
+    data-augmentation sweep. The kept values per law are intercept at the reference,
+    slope, sigma, tau.
     """
     beta0, se0, sd0 = start
     # Dispersed: three standard errors around the least-squares fit, a factor of about
     # e^(+-1) on sigma, tau between a tenth and one and a half of sigma.
-    st = _State(
+    n_r, n_b = p.base.shape
+    ch = _Chain(
         beta=beta0 + 3.0 * se0 * rng.standard_normal(beta0.shape),
         sigma2=(sd0 * np.exp(0.5 * rng.standard_normal(_N_LAWS))) ** 2,
         tau2=(sd0 * rng.uniform(0.1, 1.5, _N_LAWS)) ** 2 if effects else np.zeros(_N_LAWS),
         u=np.zeros((_N_LAWS, p.starts.size)),
+        logp=np.empty((n_r, n_b)),
+        log_marginal=np.empty(n_r),
+        proposed=np.empty((n_r, n_b)),
+        sigma_step=np.full(_N_LAWS, 0.3),
+        scale_step=np.full(_N_LAWS, 0.3),
+        beta_step=np.ones(_N_LAWS),
     )
+    ch.beta[~_HAS_SLOPE, 1] = 0.0
+    ch.sigma2 = np.maximum(ch.sigma2, p.floor2)
+    augmented = ~summed
     kept = np.empty((draws, _N_LAWS, 4))
-    for it in range(burn + draws):
-        x = _draw_latents(p, st, rng)
-        _update_laws(p, st, x, effects, rng)
-        if it >= burn:
-            k = kept[it - burn]
-            k[:, :2] = st.beta
-            k[:, 2] = np.sqrt(st.sigma2)
-            k[:, 3] = np.sqrt(st.tau2)
+    for sweep in range(burn + draws):
+        if augmented.any():
+            # The data-augmentation sweep, kept for the laws it updates: each record's node
+            # and latent values drawn afresh, those laws' parameters given them.
+            x = _draw_latents(p, ch, rng)
+            before = (ch.beta.copy(), ch.sigma2.copy(), ch.tau2.copy(), ch.u.copy())
+            _update_laws(p, ch, x, effects, rng)
+            ch.beta[summed], ch.sigma2[summed] = before[0][summed], before[1][summed]
+            ch.tau2[summed], ch.u[summed] = before[2][summed], before[3][summed]
+        if summed.any() and (augmented.any() or sweep % _REFRESH_SWEEPS == 0):
+            ch.refresh(p)
+        moved = np.zeros((3, _N_LAWS))
+        even = sweep % 2 == 0
+        for law in (int(i) for i in np.flatnonzero(summed)):
+            if effects:
+                _move_walker_effects(p, ch, law, rng)
+                _move_slope_against_effects(p, ch, law, rng)
+                _shift_and_draw_walker_sd(p, ch, law, rng)
+                moved[0, law] = _move_effect_scale(p, ch, law, rng)
+            else:
+                moved[1, law] = _move_intercept_and_slope(p, ch, law, even, rng)
+            moved[2, law] = _move_residual_sd(p, ch, law, even, rng)
+        if sweep < burn:
+            ch.scale_step = _tune(ch.scale_step, moved[0], _TARGET_ACCEPTANCE, sweep)
+            if not even:
+                ch.beta_step = _tune(ch.beta_step, moved[1], _TARGET_ACCEPTANCE, sweep)
+                ch.sigma_step = _tune(ch.sigma_step, moved[2], _TARGET_ACCEPTANCE, sweep)
+        else:
+            k = kept[sweep - burn]
+            k[:, :2] = ch.beta
+            k[:, 2] = np.sqrt(ch.sigma2)
+            k[:, 3] = np.sqrt(ch.tau2)
     return kept
+
+
+def _missing_information(p: _Packed, effects: bool) -> FloatArray:
+    """Per law, the median share of a record's variance that its own likelihood leaves open.
+
+    ``v / (v + s^2)``: ``v`` the variance of the law's value under the record's likelihood,
+    ``s^2`` the residual variance of the population around its walker's law, estimated
+    before sampling from the records' likelihood means (their scatter within walkers, or
+    around the least-squares law without walker effects, less the records' mean ``v``).
+    """
+    out = np.empty(_N_LAWS)
+    n = p.d.size
+    for law in range(_N_LAWS):
+        y, v = p.approx_mean[law], p.approx_var[law]
+        design = np.column_stack([np.ones(n), p.d]) if _HAS_SLOPE[law] else np.ones((n, 1))
+        coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+        e = y - design @ coef
+        dof = n - design.shape[1]
+        if effects:
+            e = e - (_sum_by_walker(e, p.starts) / p.n_w)[p.walker]
+            dof = n - p.starts.size
+        s2 = max(float(e @ e) / max(dof, 1) - float(np.mean(v)), 0.0)
+        share = v / (v + s2) if s2 > 0.0 else np.ones_like(v)
+        out[law] = float(np.median(share))
+    return out
+
+
+def _summed_laws(p: _Packed, effects: bool, asked: str) -> NDArray[np.bool_]:
+    """Return which laws the node-summed moves update (the others: the sweep).
+
+    ``"moves"`` every law, ``"gibbs"`` none, ``"auto"`` those whose missing share exceeds
+    :data:`MISSING_INFORMATION_MAX`.
+    """
+    if asked == "auto":
+        return _missing_information(p, effects) > MISSING_INFORMATION_MAX
+    return np.full(_N_LAWS, asked == "moves")
 
 
 # -- the result ----------------------------------------------------------------------------
@@ -613,6 +1065,12 @@ class HierarchicalFit:
         Whether walker effects were fitted.
     seed, burn : int
         The seed and the discarded sweeps per chain.
+    sampler : str
+        The algorithm that drew them: ``"gibbs"`` (the data-augmentation sweep), ``"moves"``
+        (the node-summed moves), ``"mixed"`` (the moves for the laws in ``summed_laws``,
+        the sweep for the others) or ``"emcee"`` (:func:`fit_collapsed`).
+    summed_laws : tuple of str
+        The laws the node-summed moves updated.
     notes : tuple of str
         Sentences about the fit, such as why walker effects were left out.
     """
@@ -628,6 +1086,8 @@ class HierarchicalFit:
     seed: int = 0
     burn: int = 0
     notes: tuple[str, ...] = ()
+    sampler: str = "gibbs"
+    summed_laws: tuple[str, ...] = ()
 
     def _flat(self) -> FloatArray:
         return self.draws.reshape(-1, self.draws.shape[2])
@@ -780,6 +1240,8 @@ class HierarchicalFit:
             # For fit_collapsed a chain is one emcee ensemble, its draws every walker's steps.
             "draws_per_chain": int(self.draws.shape[1]),
             "burn": self.burn,
+            "sampler": self.sampler,
+            "node_summed_laws": list(self.summed_laws),
             "seed": self.seed,
             "diagnostics": {
                 "parameters": list(self.parameter_names),
@@ -869,6 +1331,7 @@ def fit_hierarchical(
     draws: int = 1000,
     burn: int = 500,
     walker_effects: bool | None = None,
+    sampler: str = "auto",
 ) -> HierarchicalFit:
     """Fit the population laws as a hierarchical model to every record's likelihood.
 
@@ -884,6 +1347,11 @@ def fit_hierarchical(
     walker_effects : bool or None, default None
         None: fit walker effects when some walker has two or more records and there are
         at least :data:`MIN_WALKERS` walkers. False: never. True: require them.
+    sampler : {"auto", "gibbs", "moves"}, default "auto"
+        ``"gibbs"``: the data-augmentation sweep; ``"moves"``: the node-summed moves;
+        ``"auto"``: the sweep unless some law's records leave more than
+        :data:`MISSING_INFORMATION_MAX` of its information open (module docstring). Both
+        target the same posterior; they differ in how fast they mix and cost.
 
     Returns
     -------
@@ -897,11 +1365,20 @@ def fit_hierarchical(
         fitted, or sampler settings out of range.
     """
     seed, records, p = _checked(records, seed, chains, draws, burn, "fit_hierarchical")
+    if sampler not in SAMPLERS:
+        raise UsageError(
+            f"fit_hierarchical: 'sampler' must be one of {', '.join(SAMPLERS)}, got "
+            f"{sampler!r}; pass 'auto' unless comparing the two",
+            parameter="sampler",
+        )
     effects, notes = _walker_effects(p, walker_effects)
+    summed = _summed_laws(p, effects, sampler)
     start = _ols_start(p)
     kept = np.stack(
         [
-            _run_chain(p, effects, np.random.default_rng([seed, c]), int(burn), int(draws), start)
+            _run_chain(
+                p, effects, summed, np.random.default_rng([seed, c]), int(burn), int(draws), start
+            )
             for c in range(int(chains))
         ]
     )
@@ -922,6 +1399,8 @@ def fit_hierarchical(
         seed=seed,
         burn=int(burn),
         notes=notes,
+        sampler="moves" if summed.all() else "gibbs" if not summed.any() else "mixed",
+        summed_laws=tuple(law for law, on in zip(LAWS, summed, strict=True) if on),
     )
 
 
@@ -1119,6 +1598,7 @@ def fit_collapsed(
         seed=seed,
         burn=int(burn),
         notes=tuple(notes),
+        sampler="emcee",
     )
 
 
@@ -1193,27 +1673,32 @@ def record_log_marginal(
 COLLAPSED_MAX_RECORDS = 50
 
 
-def fit_laws(records: Sequence[RecordLikelihood], *, seed: int = 0) -> HierarchicalFit:
+def fit_laws(
+    records: Sequence[RecordLikelihood], *, seed: int = 0, sampler: str = "auto"
+) -> HierarchicalFit:
     """Fit the laws with the sampler that suits the records: the fit a population report runs.
 
-    With walker effects (records sharing subjects, five walkers or more) the Gibbs sampler
-    of :func:`fit_hierarchical`; without them, up to :data:`COLLAPSED_MAX_RECORDS` records,
-    :func:`fit_collapsed` (emcee with the nodes summed out, which mixes where a law's spread
-    is small against the records' widths), and beyond that the Gibbs sampler again (whose
-    cost does not grow with emcee's walkers).
+    With walker effects (records sharing subjects, five walkers or more)
+    :func:`fit_hierarchical`, whose ``sampler="auto"`` picks per law between its two
+    algorithms; without them, up to :data:`COLLAPSED_MAX_RECORDS` records,
+    :func:`fit_collapsed` (emcee with the nodes summed out), and beyond that
+    :func:`fit_hierarchical` again (whose cost does not grow with emcee's walkers).
 
     Parameters
     ----------
     records : sequence of RecordLikelihood
     seed : int, default 0
+    sampler : {"auto", "gibbs", "moves"}, default "auto"
+        Passed to :func:`fit_hierarchical`; other than ``"auto"`` it is used even where
+        emcee would be (to compare the algorithms on the same records).
 
     Returns
     -------
     HierarchicalFit
     """
     records = list(records)
-    if len(records) >= MIN_RECORDS:
+    if sampler == "auto" and len(records) >= MIN_RECORDS:
         effects, _ = _walker_effects(_pack(records), None)
         if not effects and len(records) <= COLLAPSED_MAX_RECORDS:
             return fit_collapsed(records, seed=seed, draws=4000)
-    return fit_hierarchical(records, seed=seed)
+    return fit_hierarchical(records, seed=seed, sampler=sampler)
