@@ -102,17 +102,25 @@ def _population(
     """Records of a simulated population with walker effects (TRUTH), narrow grids."""
     rng = np.random.default_rng([seed, 99])
     base_sd = np.array([0.03, 0.01, 0.01, 0.05, 0.05])
+    records = []
+    for w, k, pacing, latent in _crossings(rng, walkers, per_walker, walker_sd_scale):
+        sd = base_sd * rng.uniform(0.5, 1.5)  # records differ in how well they pin
+        records.append(_grid_record(f"w{w}_r{k}.csv", f"w{w}", pacing, latent, sd, rng))
+    return records
+
+
+def _crossings(rng: np.random.Generator, walkers: int, per_walker: int, walker_sd_scale=1.0):
+    """Yield (walker, crossing, pacing, the five true values) of a population of TRUTH.
+
+    Lazily, so that a caller's own draws between crossings keep their place in ``rng``.
+    """
     taus = np.array([t[3] for t in TRUTH.values()]) * walker_sd_scale
     sigmas = np.array([t[2] for t in TRUTH.values()])
-    records = []
     for w in range(walkers):
         effect = taus * rng.standard_normal(5)
         for k in range(per_walker):
             pacing = rng.uniform(1.5, 2.3)
-            latent = _law_means(pacing) + effect + sigmas * rng.standard_normal(5)
-            sd = base_sd * rng.uniform(0.5, 1.5)  # records differ in how well they pin
-            records.append(_grid_record(f"w{w}_r{k}.csv", f"w{w}", pacing, latent, sd, rng))
-    return records
+            yield w, k, pacing, _law_means(pacing) + effect + sigmas * rng.standard_normal(5)
 
 
 # -- 1. the likelihood integration ---------------------------------------------------------
@@ -945,24 +953,18 @@ def _wide_population(seed: int, walkers: int, per_walker: int) -> list[RecordLik
     """
     rng = np.random.default_rng([seed, 0x51DE])
     sd = np.array([0.45, 0.15, 0.01, 0.05, 0.05])
-    taus = np.array([t[3] for t in TRUTH.values()])
-    sigmas = np.array([t[2] for t in TRUTH.values()])
     nodes = 31
     step = 8.0 * sd[:2] / (nodes - 1)
     records = []
-    for w in range(walkers):
-        effect = taus * rng.standard_normal(5)
-        for k in range(per_walker):
-            pacing = rng.uniform(1.5, 2.3)
-            latent = _law_means(pacing) + effect + sigmas * rng.standard_normal(5)
-            rec = _grid_record(f"w{w}_r{k}.csv", f"w{w}", pacing, latent, sd, rng, nodes=nodes)
-            records.append(
-                _with(
-                    rec,
-                    natural_frequency_var=np.full(rec.damping_ratio.size, step[0] ** 2 / 12),
-                    damping_ratio_var=np.full(rec.damping_ratio.size, step[1] ** 2 / 12),
-                )
+    for w, k, pacing, latent in _crossings(rng, walkers, per_walker):
+        rec = _grid_record(f"w{w}_r{k}.csv", f"w{w}", pacing, latent, sd, rng, nodes=nodes)
+        records.append(
+            _with(
+                rec,
+                natural_frequency_var=np.full(rec.damping_ratio.size, step[0] ** 2 / 12),
+                damping_ratio_var=np.full(rec.damping_ratio.size, step[1] ** 2 / 12),
             )
+        )
     return records
 
 

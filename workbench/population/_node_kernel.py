@@ -24,6 +24,26 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy", boundscheck=False
 
 
 @_jit
+def _node_value(
+    obs: NDArray[np.float64],
+    var: NDArray[np.float64],
+    base: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    sigma2: NDArray[np.float64],
+    r: int,
+    b: int,
+) -> float:  # pragma: no cover - compiled
+    """Node ``b`` of record ``r``: its log-probability under the laws (-inf for padding)."""
+    value = base[r, b]
+    if value > -np.inf:
+        for law in range(obs.shape[0]):
+            total = var[law, r, b] + sigma2[law]
+            diff = obs[law, r, b] - mean[law, r]
+            value -= 0.5 * (diff * diff / total + math.log(total))
+    return value
+
+
+@_jit
 def node_log_probabilities(
     obs: NDArray[np.float64],
     var: NDArray[np.float64],
@@ -36,17 +56,12 @@ def node_log_probabilities(
 
     From ``obs, var`` (L, R, B), ``base`` (R, B), ``mean`` (L, R) and ``sigma2`` (L,).
     """
-    n_laws, n_records, n_nodes = obs.shape
+    _, n_records, n_nodes = obs.shape
     out = np.empty(n_records)
     for r in range(n_records):
         top = -np.inf
         for b in range(n_nodes):
-            value = base[r, b]
-            if value > -np.inf:
-                for law in range(n_laws):
-                    total = var[law, r, b] + sigma2[law]
-                    diff = obs[law, r, b] - mean[law, r]
-                    value -= 0.5 * (diff * diff / total + math.log(total))
+            value = _node_value(obs, var, base, mean, sigma2, r, b)
             logp[r, b] = value
             if value > top:
                 top = value
@@ -156,18 +171,13 @@ def draw_nodes(
     From ``obs, var`` (L, R, B), ``base`` (R, B), ``mean`` (L, R), ``sigma2`` (L,) and one
     uniform in [0, 1) per record.
     """
-    n_laws, n_records, n_nodes = obs.shape
+    _, n_records, n_nodes = obs.shape
     out = np.empty(n_records, dtype=np.int64)
     logp = np.empty(n_nodes)
     for r in range(n_records):
         top = -np.inf
         for b in range(n_nodes):
-            value = base[r, b]
-            if value > -np.inf:
-                for law in range(n_laws):
-                    total = var[law, r, b] + sigma2[law]
-                    diff = obs[law, r, b] - mean[law, r]
-                    value -= 0.5 * (diff * diff / total + math.log(total))
+            value = _node_value(obs, var, base, mean, sigma2, r, b)
             logp[b] = value
             if value > top:
                 top = value

@@ -628,6 +628,13 @@ def _tune(step: FloatArray, accepted: FloatArray, target: float, sweep: int) -> 
     return step * np.exp((accepted - target) / (1.0 + sweep) ** 0.6)
 
 
+def _propose_means(
+    p: _Packed, ch: _Chain, law: int, old: FloatArray, new: FloatArray
+) -> FloatArray:
+    """Every record's log marginal with one law's means moved from ``old`` to ``new``."""
+    return move_mean(ch.logp, p.obs[law], p.var[law], float(ch.sigma2[law]), old, new, ch.proposed)
+
+
 def _move_walker_effects(p: _Packed, ch: _Chain, law: int, rng: np.random.Generator) -> None:
     """Every walker's effect on one law at once, each accepted on its own records.
 
@@ -643,15 +650,7 @@ def _move_walker_effects(p: _Packed, ch: _Chain, law: int, rng: np.random.Genera
     z_new = rng.standard_t(_PROPOSAL_DOF, size=centre.shape)
     u_new = centre + scale * z_new
     z_old = (ch.u[law] - centre) / scale
-    new_marginal = move_mean(
-        ch.logp,
-        p.obs[law],
-        p.var[law],
-        float(ch.sigma2[law]),
-        fixed + ch.u[law, p.walker],
-        fixed + u_new[p.walker],
-        ch.proposed,
-    )
+    new_marginal = _propose_means(p, ch, law, fixed + ch.u[law, p.walker], fixed + u_new[p.walker])
     log_ratio = (
         _sum_by_walker(new_marginal - ch.log_marginal, p.starts)
         - 0.5 * (u_new**2 - ch.u[law] ** 2) / ch.tau2[law]
@@ -710,9 +709,7 @@ def _move_slope_against_effects(p: _Packed, ch: _Chain, law: int, rng: np.random
     z_old = -centre / scale
     u_new = ch.u[law] - delta * dbar
     new_mean = old_mean + delta * within
-    new_marginal = move_mean(
-        ch.logp, p.obs[law], p.var[law], float(ch.sigma2[law]), old_mean, new_mean, ch.proposed
-    )
+    new_marginal = _propose_means(p, ch, law, old_mean, new_mean)
     log_prior = -0.5 * (float(u_new @ u_new) - float(ch.u[law] @ ch.u[law])) / ch.tau2[law]
     log_q = float(_log_t(np.array([z_new]))[0] - _log_t(np.array([z_old]))[0])
     log_ratio = float(np.sum(new_marginal - ch.log_marginal)) + log_prior - log_q
@@ -735,14 +732,8 @@ def _move_effect_scale(p: _Packed, ch: _Chain, law: int, rng: np.random.Generato
     if ch.tau2[law] * c * c < p.floor2[law]:
         return False
     fixed = ch.beta[law, 0] + ch.beta[law, 1] * p.d
-    new_marginal = move_mean(
-        ch.logp,
-        p.obs[law],
-        p.var[law],
-        float(ch.sigma2[law]),
-        fixed + ch.u[law, p.walker],
-        fixed + c * ch.u[law, p.walker],
-        ch.proposed,
+    new_marginal = _propose_means(
+        p, ch, law, fixed + ch.u[law, p.walker], fixed + c * ch.u[law, p.walker]
     )
     if math.log(rng.random()) < float(np.sum(new_marginal - ch.log_marginal)) + log_c:
         ch.accept_all(new_marginal)
@@ -790,14 +781,12 @@ def _move_intercept_and_slope(
     beta_new = ch.beta[law].copy()
     beta_new[:k] = new
     effects = ch.u[law, p.walker]
-    new_marginal = move_mean(
-        ch.logp,
-        p.obs[law],
-        p.var[law],
-        float(ch.sigma2[law]),
+    new_marginal = _propose_means(
+        p,
+        ch,
+        law,
         ch.beta[law, 0] + ch.beta[law, 1] * p.d + effects,
         beta_new[0] + beta_new[1] * p.d + effects,
-        ch.proposed,
     )
     if math.log(rng.random()) < float(np.sum(new_marginal - ch.log_marginal)) - q_ratio:
         ch.accept_all(new_marginal)
