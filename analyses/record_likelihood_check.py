@@ -96,7 +96,9 @@ def _check(records, params: dict[str, dict[str, float]], law: str, kind: str):
     )
     h = STEP * half
     curvature = (loglik(best.x + h) - 2.0 * loglik(best.x) + loglik(best.x - h)) / h**2
-    se = 1.0 / math.sqrt(-curvature) if curvature < 0 else math.nan
+    # A maximum on the bracket's edge, or no curvature, gives no error to judge: NaN, counted.
+    on_edge = abs(best.x) > (1.0 - 10.0 * STEP) * half
+    se = 1.0 / math.sqrt(-curvature) if curvature < 0 and not on_edge else math.nan
     return float(best.x), se
 
 
@@ -149,12 +151,16 @@ def main() -> None:
             print(f"{truth} replicate {rep}: {len(records)} records", flush=True)
     table = pd.DataFrame(rows)
     print()
-    print("| truth | law | quantity | mean error | median se | z mean | z sd | replicates |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(
+        "| truth | law | quantity | mean error | median se | z mean | z sd | replicates | "
+        "no maximum inside |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     for (truth, law, kind), g in table.groupby(["truth", "law", "kind"], sort=False):
+        ok = g[np.isfinite(g.se)]
         print(
-            f"| {truth} | {law} | {kind} | {g.error.mean():+.4f} | {g.se.median():.4f} | "
-            f"{g.z.mean():+.2f} | {g.z.std(ddof=1):.2f} | {len(g)} |"
+            f"| {truth} | {law} | {kind} | {ok.error.mean():+.4f} | {ok.se.median():.4f} | "
+            f"{ok.z.mean():+.2f} | {ok.z.std(ddof=1):.2f} | {len(ok)} | {len(g) - len(ok)} |"
         )
     z = pd.concat(zs, ignore_index=True)
     print()

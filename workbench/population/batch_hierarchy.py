@@ -18,7 +18,7 @@ import pandas as pd
 
 from workbench.errors import UsageError
 from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS
-from workbench.population.hierarchy import HierarchicalFit, fit_laws
+from workbench.population.hierarchy import SAMPLERS, HierarchicalFit, fit_laws
 from workbench.population.posteriors import read_record_posteriors, record_likelihoods
 
 __all__ = ["BatchLaws", "hierarchical_laws"]
@@ -111,6 +111,12 @@ def hierarchical_laws(
     -------
     BatchLaws
     """
+    if sampler not in SAMPLERS:
+        raise UsageError(
+            f"hierarchical_laws: 'sampler' must be one of {', '.join(SAMPLERS)}, got "
+            f"{sampler!r}; pass 'auto' unless comparing the algorithms",
+            parameter="sampler",
+        )
     stored = read_record_posteriors(Path(batch_dir))
     used, left_out = record_likelihoods(stored)
     try:

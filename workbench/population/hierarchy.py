@@ -120,8 +120,9 @@ mixed fit the nodes and latent values are drawn afresh and only the sweep's laws
 updated given them (a data-augmentation step keeps the parameters' posterior once the
 nodes are dropped again), then the moves run for the others on freshly computed node
 log-probabilities. ``"gibbs"`` and ``"moves"`` force one algorithm for every law; the tests
-check both against the exact posterior of Bayesian linear regression and against each
-other.
+check both against the exact posterior of Bayesian linear regression, the moves also
+against the exact one-way random-effects posterior of records with walkers, and the two
+against each other.
 
 Several chains (default 4) start from dispersed values around the ordinary least-squares
 fit of the records' posterior means; each chain's generator is
@@ -676,7 +677,15 @@ def _shift_and_draw_walker_sd(p: _Packed, ch: _Chain, law: int, rng: np.random.G
     delta = ch.u[law].mean() + math.sqrt(ch.tau2[law] / j) * rng.standard_normal()
     ch.beta[law, 0] += delta
     ch.u[law] -= delta
-    ch.tau2[law] = max(float(np.sum(ch.u[law] ** 2)) / rng.chisquare(j - 1.0), p.floor2[law])
+    # The sds' floor truncates the prior (the other moves refuse to go below it), so tau^2 is
+    # drawn from its truncated conditional: by rejection, which a draw at the floor's scale
+    # (a millionth of the spread) practically never needs; a chain stuck there keeps tau.
+    ss = float(np.sum(ch.u[law] ** 2))
+    for _ in range(_SLICE_STEPS):
+        tau2 = ss / rng.chisquare(j - 1.0)
+        if tau2 >= p.floor2[law]:
+            ch.tau2[law] = tau2
+            break
 
 
 def _move_slope_against_effects(p: _Packed, ch: _Chain, law: int, rng: np.random.Generator) -> None:
@@ -806,7 +815,7 @@ def _residual_sd_proposal(
     millionth to ten times it.
     """
     resid2 = (p.approx_mean[law] - mean) ** 2
-    spread = math.sqrt(float(np.mean(resid2 + p.approx_var[law])))
+    spread = max(math.sqrt(float(np.mean(resid2 + p.approx_var[law]))), math.sqrt(p.floor2[law]))
     edges = np.linspace(
         math.log(max(_FLOOR_RELATIVE * spread, math.sqrt(p.floor2[law]))),
         math.log(10.0 * spread),
