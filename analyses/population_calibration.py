@@ -35,7 +35,8 @@ Printed: per parameter, each fit's coverage (intervals holding the truth, of all
 replicates) and median interval width; each fit's mean error, the sd of its estimates over
 the replicates, and the median width over 3.92 times that sd (about 1 where a 95 % interval
 is as wide as the estimates scatter, below 1 where it is too narrow); the pooled coverage
-over every parameter x replicate case of each fit; the hierarchical fits' R-hat/ESS flags;
+over every parameter x replicate case of each fit; which laws the hierarchical fits summed
+the nodes out for; the hierarchical fits' R-hat/ESS flags;
 the records each fit used and left out; and, to read a shortfall, the identified records'
 errors in units of their own posterior sd (f_n, zeta, BLF1-3: the share within 1.96 sd, and
 the sd of those ratios) with the records' median posterior sd. Beside the two-stage fit, the
@@ -52,6 +53,7 @@ import argparse
 import json
 import math
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +110,7 @@ def _fits(batch: Path, seed: int, plan: pd.DataFrame, sampler: str) -> dict[str,
         out["walkers"] = int(fit.walkers)
         out["flagged"] = list(fit.flagged)
         out["sampler"] = fit.sampler
+        out["node_summed_laws"] = list(fit.summed_laws)
         out["rhat_max"] = float(np.max(fit.rhat))
         out["ess_min"] = float(min(np.min(fit.ess_bulk), np.min(fit.ess_tail)))
     results = read_results(batch)
@@ -379,6 +382,11 @@ def _report(title: str, reps: list[dict[str, Any]]) -> None:
             continue
         held, n = pooled[key]
         print(f"pooled coverage, {title}: {held} of {n} ({100 * held / n:.1f} %)")
+    summed = Counter(
+        ", ".join(r["node_summed_laws"]) or "none" for r in reps if "node_summed_laws" in r
+    )
+    for laws, count in summed.most_common():
+        print(f"laws with their nodes summed out: {laws} in {count} of {len(reps)} fits")
     flags = [len(r.get("flagged", [])) for r in reps]
     print(
         f"R-hat/ESS flags: {sum(flags)} parameter(s) on {sum(f > 0 for f in flags)} of "

@@ -609,9 +609,6 @@ class _Chain:
     scale_step: FloatArray
     beta_step: FloatArray
 
-    def law_mean(self, p: _Packed, law: int, beta: FloatArray, u: FloatArray) -> FloatArray:
-        return beta[0] + beta[1] * p.d + u[p.walker]
-
     def refresh(self, p: _Packed) -> None:
         """Recompute every node's log-probability from scratch (rounding does not build up)."""
         mean = self.beta[:, :1] + self.beta[:, 1:] * p.d + self.u[:, p.walker]
