@@ -258,21 +258,28 @@ def _pinned():
         latent = _law_means(pacing) + np.array([t[2] for t in TRUTH.values()]) * (
             rng.standard_normal(5)
         )
-        # Exact-enough nodes: a 3 x 3 grid 1e-6 wide and load factors with sd 1e-7.
-        sd = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-7])
-        rec = _grid_record(f"p{r}.csv", None, pacing, latent, sd, rng, nodes=3, span=1.0)
+        rec, value = _pinned_record(f"p{r}.csv", None, pacing, latent, rng)
         records.append(rec)
-        values.append(
-            [
-                np.mean(rec.natural_frequency_hz),
-                np.mean(rec.damping_ratio),
-                rec.blf_mean[0, 0],
-                math.log(rec.blf_mean[0, 1]),
-                math.log(rec.blf_mean[0, 2]),
-            ]
-        )
+        values.append(value)
         pacings.append(pacing)
     return records, np.array(values), np.array(pacings)
+
+
+def _pinned_record(path, subject, pacing, latent, rng):
+    """A record pinned to its values, and the five values it holds (log BLF2, log BLF3).
+
+    Exact-enough nodes: a 3 x 3 grid 1e-6 wide and load factors with sd 1e-7.
+    """
+    sd = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-7])
+    rec = _grid_record(path, subject, pacing, latent, sd, rng, nodes=3, span=1.0)
+    value = [
+        np.mean(rec.natural_frequency_hz),
+        np.mean(rec.damping_ratio),
+        rec.blf_mean[0, 0],
+        math.log(rec.blf_mean[0, 1]),
+        math.log(rec.blf_mean[0, 2]),
+    ]
+    return rec, value
 
 
 def _regression_posterior(y: np.ndarray, design: np.ndarray):
@@ -1060,27 +1067,12 @@ def test_the_node_summed_moves_give_the_exact_posterior_with_walker_effects():
     the chains agree (R-hat below 1.01)."""
     rng = np.random.default_rng(17)
     records, values, pacings, walkers = [], [], [], []
-    taus = np.array([t[3] for t in TRUTH.values()])
-    sigmas = np.array([t[2] for t in TRUTH.values()])
-    for w in range(12):
-        effect = taus * rng.standard_normal(5)
-        for k in range(5):
-            pacing = rng.uniform(1.5, 2.3)
-            latent = _law_means(pacing) + effect + sigmas * rng.standard_normal(5)
-            sd = np.array([1e-6, 1e-6, 1e-7, 1e-7, 1e-7])
-            rec = _grid_record(f"w{w}_{k}.csv", f"w{w}", pacing, latent, sd, rng, nodes=3, span=1)
-            records.append(rec)
-            values.append(
-                [
-                    np.mean(rec.natural_frequency_hz),
-                    np.mean(rec.damping_ratio),
-                    rec.blf_mean[0, 0],
-                    math.log(rec.blf_mean[0, 1]),
-                    math.log(rec.blf_mean[0, 2]),
-                ]
-            )
-            pacings.append(pacing)
-            walkers.append(w)
+    for w, k, pacing, latent in _crossings(rng, 12, 5):
+        rec, value = _pinned_record(f"w{w}_{k}.csv", f"w{w}", pacing, latent, rng)
+        records.append(rec)
+        values.append(value)
+        pacings.append(pacing)
+        walkers.append(w)
     fit = fit_hierarchical(records, seed=4, chains=4, draws=1500, burn=300, sampler="moves")
     assert fit.walker_effects and fit.sampler == "moves"
     assert np.all(fit.rhat < 1.01), dict(zip(fit.parameter_names, fit.rhat.round(3), strict=True))
