@@ -345,3 +345,18 @@ def test_walker_panels_draw_no_estimate_graded_not_identified() -> None:
         subject="w1", left_out=pd.DataFrame({"path": ["b.csv"], "reason": ["left out"]})
     )
     assert list(_walker_records(results, walker)["path"]) == ["a.csv"]
+    # Flags read back as text, or missing, are read as the fit reads them: "False" and a
+    # missing flag are not identified.
+    as_text = results.assign(
+        identified_stiffness=["True", "True", "False", "True"],
+        identified_damping=["True", "True", "True", None],
+    )
+    assert list(_walker_records(as_text, walker)["path"]) == ["a.csv"]
+    assert (
+        list(
+            _walker_records(as_text, SimpleNamespace(subject="w2", left_out=walker.left_out[:0]))[
+                "path"
+            ]
+        )
+        == []
+    )

@@ -36,7 +36,7 @@ from scipy import stats
 from workbench.errors import UsageError
 from workbench.records.validation import PACING_RANGE_HZ
 
-__all__ = ["LAW_COLUMNS", "LOGNORMAL_COLUMNS", "PopulationFit", "fit_population"]
+__all__ = ["LAW_COLUMNS", "LOGNORMAL_COLUMNS", "PopulationFit", "fit_population", "identified_mask"]
 
 LAW_COLUMNS = ("natural_frequency_hz", "damping_ratio", "blf1")
 LOGNORMAL_COLUMNS = ("blf2", "blf3")
@@ -120,6 +120,19 @@ def _flag(value: Any) -> bool:
     if isinstance(value, str):
         return value.strip().lower() in ("true", "1", "yes")
     return bool(value) if not (isinstance(value, float) and math.isnan(value)) else False
+
+
+def identified_mask(results: pd.DataFrame) -> pd.Series:
+    """Mark the rows of a results table whose C and K are both identified.
+
+    The flags are read as the fit reads them (text such as ``"False"`` is false, a missing
+    value is false); a table without the columns (an earlier version's) counts as identified.
+    """
+    mask = pd.Series(True, index=results.index)
+    for column in ("identified_damping", "identified_stiffness"):
+        if column in results.columns:
+            mask &= results[column].map(_flag).astype(bool)
+    return mask
 
 
 def _through_surface(used: pd.DataFrame) -> int:

@@ -844,9 +844,8 @@ def _move_residual_sd(
     eta_old = 0.5 * math.log(ch.sigma2[law])
     if independent:
         edges, log_cell = _residual_sd_proposal(p, ch, law, mean)
-        cell = int(
-            np.searchsorted(np.cumsum(np.exp(log_cell)), rng.random() * np.exp(log_cell).sum())
-        )
+        cumulative = np.cumsum(np.exp(log_cell))
+        cell = int(np.searchsorted(cumulative, rng.random() * cumulative[-1]))
         cell = min(cell, _SD_GRID - 1)
         width = edges[1] - edges[0]
         eta_new = edges[cell] + width * rng.random()

@@ -325,16 +325,17 @@ def _sample_law(plan: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:
     }
 
 
-def _identified(results: pd.DataFrame) -> pd.Series:
-    """Mark the records whose C and K are both identified (flags read as the fit reads them)."""
-    from workbench.population.fit import _flag
-
-    return results["identified_damping"].map(_flag) & results["identified_stiffness"].map(_flag)
-
-
 #: Relative error of a record's identified pacing beyond which it is counted as mistaken (the
 #: metronome rates are 0.05-0.15 Hz apart, about 3-8 %).
 PACING_ERROR_SHARE = 0.05
+
+
+def _identified(results: pd.DataFrame) -> pd.Series:
+    """Mark the records whose C and K are both identified (the fit's reading of the flags)."""
+    # Imported here: the fit module's scipy.stats takes most of a second to import.
+    from workbench.population.fit import identified_mask
+
+    return identified_mask(results)
 
 
 def _record_errors(plan: pd.DataFrame, results: pd.DataFrame) -> dict[str, Any]:

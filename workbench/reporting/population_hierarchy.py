@@ -19,7 +19,12 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from workbench.population.fit import LAW_COLUMNS, LOGNORMAL_COLUMNS, RANGE_PACING_HZ
+from workbench.population.fit import (
+    LAW_COLUMNS,
+    LOGNORMAL_COLUMNS,
+    RANGE_PACING_HZ,
+    identified_mask,
+)
 from workbench.reporting.document import Table
 from workbench.wording import count
 
@@ -252,10 +257,7 @@ def _walker_records(results: pd.DataFrame, walker: WalkerFit) -> pd.DataFrame:
     mine = results[results["subject"].astype(str) == walker.subject]
     left = set(walker.left_out["path"].astype(str)) if len(walker.left_out) else set()
     mine = mine[~mine["path"].astype(str).isin(left)]
-    for flag in ("identified_stiffness", "identified_damping"):
-        if flag in mine.columns:
-            mine = mine[mine[flag].astype(bool)]
-    return mine.sort_values("pacing_hz")
+    return mine[identified_mask(mine)].sort_values("pacing_hz")
 
 
 def walkers_figure(
