@@ -22,6 +22,9 @@ record's posterior mean and sd), the error over the posterior sd of f_n, zeta an
 (the share within 1.96 and the sd), split by where the deck's frequency sits against the
 pacing: the plan puts it between the gait's harmonics, at 1.15-1.35 or 1.65-1.85 times the
 pacing, and the upper end of the second band reaches within 8 % of the second harmonic.
+Beside them, the load factors given the true f_n and zeta
+(:meth:`~workbench.inference.core.node_posterior.NodePosterior.load_factors_given`): what the
+hierarchical fit reads from a record once the laws of f_n and zeta pin its node.
 Figures quoted in docs/validation/population.md.
 """
 
@@ -102,11 +105,29 @@ def _check(records, params: dict[str, dict[str, float]], law: str, kind: str):
     return float(best.x), se
 
 
+def _given_truth_z(stored, plan: pd.DataFrame) -> pd.DataFrame:
+    """Each record's load factors given its true f_n and zeta: error over sd, BLF1-3."""
+    generating = plan.set_index("path")
+    rows = []
+    for rec in stored:
+        if rec.posterior is None:
+            continue
+        row = generating.loc[rec.path]
+        mean, sd = rec.posterior.load_factors_given(
+            float(row["natural_frequency_hz"]), float(row["damping_ratio"])
+        )
+        names = ("blf1", *LOGNORMAL_COLUMNS)
+        z = (mean[:3] - row[list(names)].to_numpy(float)) / sd[:3]
+        rows.append({"path": rec.path, **dict(zip(names, z, strict=True))})
+    return pd.DataFrame(rows).set_index("path")
+
+
 def _record_z(results: pd.DataFrame, plan: pd.DataFrame, truth: str) -> pd.DataFrame:
     """Each record's error over its posterior sd, with where its deck sits against the gait."""
     generating = plan.set_index("path")
     paths = results["path"].astype(str)
     out = pd.DataFrame(index=range(len(results)))
+    out["path"] = paths.to_numpy()
     out["truth"] = truth
     rows = generating.loc[paths]
     ratio = rows["deck_frequency_hz"].to_numpy(float) / rows["pacing_hz"].to_numpy(float)
@@ -131,9 +152,14 @@ def main() -> None:
         for rep in seed_range(reps or "0-9"):
             folder = args.run / truth / f"replicate{rep:02d}"
             plan, _ = footbridge_plan(seed=rep + SEED_OFFSET[truth], truth=laws)
-            records, _ = record_likelihoods(read_record_posteriors(folder / "batch"))
+            stored = read_record_posteriors(folder / "batch")
+            records, _ = record_likelihoods(stored)
             params = _record_parameters(plan, laws, gp)
-            zs.append(_record_z(read_results(folder / "batch"), plan, truth))
+            z = _record_z(read_results(folder / "batch"), plan, truth)
+            given = _given_truth_z(stored, plan)
+            for col in ("blf1", *LOGNORMAL_COLUMNS):
+                z[f"{col} given truth"] = given[col].reindex(z["path"]).to_numpy()
+            zs.append(z)
             for law in LAW_COLUMNS:
                 for kind in ("slope", "level"):
                     error, se = _check(records, params, law, kind)
@@ -168,7 +194,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     for (truth, near), g in z.groupby(["truth", "near_second_harmonic"], sort=False):
         band = f"above {NEAR_SECOND}" if near else f"up to {NEAR_SECOND}"
-        for col in (*LAW_COLUMNS, *LOGNORMAL_COLUMNS):
+        given = [f"{c} given truth" for c in ("blf1", *LOGNORMAL_COLUMNS)]
+        for col in (*LAW_COLUMNS, *LOGNORMAL_COLUMNS, *given):
             v = g[col].dropna()
             print(
                 f"| {truth} | {band} | {col} | {len(v)} | {100 * np.mean(np.abs(v) < 1.96):.1f} % "

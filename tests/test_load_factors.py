@@ -144,3 +144,23 @@ def test_blf_bands_hold_the_realised_load_factors_on_deck_walks():
     # the bound scales with the walks identified (at least 2 misses allowed).
     allowed = max(2, int(np.ceil(0.25 * identified)))
     assert np.all(misses <= allowed), f"BLF1-3 bands missed {misses} of {identified} walks"
+
+
+def test_the_long_run_variance_of_the_mean_is_statsmodels_newey_west():
+    """``long_run_variance_of_mean`` is the Newey-West estimate (statsmodels' lag rule and
+    Bartlett weights) of the series' long-run variance over P^2, point by point and harmonic
+    by harmonic: against ``S_hac_simple`` on each demeaned column, to rounding. A single
+    piece has none (NaN)."""
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+    from workbench.inference.core.load_factors import long_run_variance_of_mean
+
+    rng = np.random.default_rng(11)
+    for n_pieces in (2, 7, 57, 400):
+        x = rng.normal(0.4, 0.02, (3, n_pieces, 4)).cumsum(axis=1) * 0.1  # coloured series
+        got = long_run_variance_of_mean(x)
+        for b in range(3):
+            d = x[b] - x[b].mean(axis=0)
+            want = np.diag(S_hac_simple(d)) / n_pieces**2
+            np.testing.assert_allclose(got[b], want, rtol=1e-10)
+    assert np.all(np.isnan(long_run_variance_of_mean(np.ones((2, 1, 3)))))

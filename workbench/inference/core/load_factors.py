@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from statsmodels.stats.sandwich_covariance import weights_bartlett
 
 from workbench.errors import UsageError
 from workbench.inference.core.problem import IdentificationProblem
@@ -35,6 +36,7 @@ from workbench.records.record import G_M_S2
 __all__ = [
     "LoadFactorPosterior",
     "coefficient_load_factors",
+    "long_run_variance_of_mean",
     "mix_load_factors",
     "point_load_factors",
     "realised_load_factors",
@@ -119,6 +121,44 @@ def point_load_factors(
     var_bp = ((a / amp) ** 2 * var[..., ia] + (b / amp) ** 2 * var[..., ib]) / weight_n**2
     n_pieces = mu.shape[1]
     return blf_bp.mean(axis=1), var_bp.sum(axis=1) / n_pieces**2, blf_bp
+
+
+def long_run_variance_of_mean(piece: FloatArray) -> FloatArray:
+    """Variance of the walk's mean load factors as an estimate of the walker's long-run mean.
+
+    The walk's realised mean is the mean over its P steps; the walker's mean at that crossing
+    (what a population law describes) is what it would tend to over many steps. The two
+    differ by the steps' own sampling, which the Kalman variance given (C, K) does not hold
+    (it is the estimation error of the realised steps alone), and successive steps are not
+    independent (a gait drifts within and across steps, and neighbouring pieces share the
+    measured state). The Newey-West estimate of the long-run variance of the per-step series,
+    Bartlett kernel with ``floor(4 (P / 100)^(2/9))`` lags, over ``P^2`` covers both: the
+    series is the estimated per-step load factors, so it carries their estimation error too.
+
+    Parameters
+    ----------
+    piece : ndarray, shape (B, P, n)
+        Every piece's load factors at each of B points of (C, K).
+
+    Returns
+    -------
+    ndarray, shape (B, n)
+        The variance of the mean over the pieces (NaN for a single piece).
+    """
+    x = np.asarray(piece, dtype=np.float64)
+    b, n_pieces, n = x.shape
+    if n_pieces < 2:
+        return np.full((b, n), np.nan)
+    d = x - x.mean(axis=1, keepdims=True)
+    # statsmodels' lag rule and Bartlett weights (as its S_hac_simple), on the diagonal only:
+    # its full inner matrix over every point and harmonic would be mostly thrown away.
+    lags = min(int(np.floor(4.0 * (n_pieces / 100.0) ** (2.0 / 9.0))), n_pieces - 1)
+    weights = weights_bartlett(lags)
+    inner = np.einsum("bpn,bpn->bn", d, d)
+    for lag in range(1, lags + 1):
+        inner += 2.0 * weights[lag] * np.einsum("bpn,bpn->bn", d[:, lag:], d[:, :-lag])
+    # Bartlett weights keep the estimate non-negative; the clip guards rounding only.
+    return np.asarray(np.maximum(inner, 0.0) / n_pieces**2, dtype=np.float64)
 
 
 def mix_load_factors(

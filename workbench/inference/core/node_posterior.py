@@ -17,7 +17,14 @@ identification keeps them:
   box the likelihood is proportional to the mass (the cells are alike), and the cells'
   edges, since a node stands for its cell (:meth:`NodePosterior.modal_cell_variance`);
 - each node's walk load factors BLF1-3 (those the population laws use) given its (C, K),
-  mean and sd (:func:`~workbench.inference.core.load_factors.point_load_factors`).
+  mean and sd, computed at the node's own (C, K) (a load factor changes fast with C and K
+  where the deck moves near the gait, so a node cannot borrow another point's). The sd is
+  that of the walker's long-run mean at this crossing, the quantity a population law
+  describes, not of the few steps recorded
+  (:func:`~workbench.inference.core.load_factors.long_run_variance_of_mean`), with the load
+  factors' spread over the node's cell added: the cell's variance of a function linear over
+  it, its slopes along the cell's edges taken from the neighbouring nodes
+  (:func:`cell_variance_from_neighbours`).
 
 In the walker's own terms: a density uniform in (C, K) is, in (f_n, zeta), proportional to
 ``1 / |J|`` with ``J = d(f_n, zeta) / d(C, K)``; ``f_n = sqrt(K / M) / (2 pi)`` depends on K
@@ -30,16 +37,24 @@ later fit multiplies in.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import logsumexp
 
 from workbench.errors import UsageError
 from workbench.inference.core.problem import StiffnessDampingPrior
 
-__all__ = ["NODE_LOAD_FACTORS", "NodePosterior", "node_posterior_from_grid"]
+__all__ = [
+    "NODE_LOAD_FACTORS",
+    "NODE_POSTERIOR_VERSION",
+    "NodePosterior",
+    "cell_variance_from_neighbours",
+    "node_posterior_from_grid",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -49,6 +64,10 @@ NODE_LOAD_FACTORS = 3
 MAX_NODES = 160
 #: ... holding all but this much of the posterior's mass.
 MASS_TAIL = 1e-3
+#: The stored form's version. 2: every node's load factors at its own (C, K), their sd the
+#: long-run mean's with the cell's spread (version 1, unnumbered, took the nearest force
+#: node's and the realised steps' sd, too narrow for a population fit).
+NODE_POSTERIOR_VERSION = 2
 #: Significant digits the JSON keeps (as ``results.csv`` does).
 _DIGITS = 10
 
@@ -70,8 +89,9 @@ class NodePosterior:
     mass_held : float
         Share of the whole posterior's mass the nodes hold before renormalising.
     blf_mean, blf_sd : ndarray, shape (B, 3)
-        The walk's mean load factors BLF1-3 given each node's (C, K), and their sd (fewer
-        columns where the model has fewer harmonics).
+        The walk's mean load factors BLF1-3 given each node's (C, K), and the sd of the
+        walker's long-run mean over the node's cell (module docstring; fewer columns where
+        the model has fewer harmonics).
     prior : StiffnessDampingPrior
         The uniform prior box over (C, K) the posterior was computed under.
     mass_kg : float
@@ -133,9 +153,41 @@ class NodePosterior:
         var_zeta = dz_dc**2 * cov[0, 0] + 2.0 * dz_dc * dz_dk * cov[0, 1] + dz_dk**2 * cov[1, 1]
         return np.asarray(var_fn, dtype=np.float64), np.asarray(var_zeta, dtype=np.float64)
 
+    def load_factors_given(
+        self, natural_frequency_hz: float, damping_ratio: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """Mean and sd of the load factors BLF1-3 given the walker's f_n and zeta.
+
+        Every node is weighted by its likelihood (its mass with the prior divided out) times
+        the density of the given (f_n, zeta) over its cell (a normal with the cell's spread,
+        :meth:`modal_cell_variance`), and the nodes' load factors are mixed with those
+        weights (law of total variance). What a population fit reads from the record once
+        the laws of f_n and zeta pin its node; with the true values, a check of the stored
+        load factors against a simulation's.
+
+        Returns
+        -------
+        mean, sd : ndarray, shape (n,)
+        """
+        var_fn, var_zeta = self.modal_cell_variance()
+        with np.errstate(divide="ignore"):
+            log_w = (
+                np.log(self.weight)
+                - self.log_prior_modal()
+                - 0.5 * (self.natural_frequency_hz - natural_frequency_hz) ** 2 / var_fn
+                - 0.5 * np.log(var_fn)
+                - 0.5 * (self.damping_ratio - damping_ratio) ** 2 / var_zeta
+                - 0.5 * np.log(var_zeta)
+            )
+        w = np.exp(log_w - logsumexp(log_w))
+        mean = w @ self.blf_mean
+        var = w @ self.blf_sd**2 + w @ (self.blf_mean - mean) ** 2
+        return np.asarray(mean, dtype=np.float64), np.sqrt(np.maximum(var, 0.0))
+
     def to_json(self) -> dict[str, Any]:
         """Return a JSON-able dict (numbers to ten significant digits)."""
         return {
+            "version": NODE_POSTERIOR_VERSION,
             "kind": self.kind,
             "prior": {
                 "kind": "uniform",
@@ -166,6 +218,11 @@ class NodePosterior:
             What the dict came from (a file and key), for the error's sentence.
         """
         fix = "identify the record again with this version (its batch into a new folder)"
+        if isinstance(obj, dict) and obj.get("version") != NODE_POSTERIOR_VERSION:
+            raise UsageError(
+                f"{where}: the stored posterior was written by an earlier version, whose "
+                f"load-factor sds are too narrow for a population fit; {fix}"
+            )
         try:
             nodes = obj["nodes"]
             prior = obj["prior"]
@@ -207,13 +264,58 @@ class NodePosterior:
         return cls(c, k, w / w.sum(), held, blf_mean, blf_sd, box, mass_kg, edges, kind)
 
 
+def cell_variance_from_neighbours(
+    keys: NDArray[np.int64], points: FloatArray, edges: FloatArray, values: FloatArray
+) -> FloatArray:
+    """Variance over each node's cell of quantities linear over it, from the neighbouring nodes.
+
+    A cell is the parallelogram spanned by ``edges``, and a point in it is ``x + E u`` with
+    ``u`` uniform on (-1/2, 1/2)^2; a quantity linear over the cell, ``f(x) + h . u``, has
+    variance ``(h_1^2 + h_2^2) / 12`` there. ``h`` (the change along each edge) is fitted by
+    least squares to the differences to the node's kept lattice neighbours (one step along
+    either edge), their offsets in edge units, since a merged node sits at its mass's
+    centroid rather than its cell's centre. Exact for a linear quantity where the neighbours
+    span both edges; with neighbours along one edge only, the change along the other is
+    taken as zero (the least-squares minimum norm); a node with no kept neighbour (a
+    posterior one cell wide holds nearly all its mass there) gets none.
+
+    Parameters
+    ----------
+    keys : ndarray of int, shape (B, 2)
+        Every node's cell on the lattice (unit steps along the edges).
+    points : ndarray, shape (B, 2)
+        The nodes' (C [N s/m], K [N/m]).
+    edges : ndarray, shape (2, 2)
+        The cells' edge vectors as columns, in (C, K).
+    values : ndarray, shape (B, n)
+        The quantities at the nodes.
+
+    Returns
+    -------
+    ndarray, shape (B, n)
+    """
+    keys = np.asarray(keys, dtype=np.int64)
+    v = np.asarray(values, dtype=np.float64)
+    u = np.asarray(points, dtype=np.float64) @ np.linalg.inv(np.asarray(edges, dtype=np.float64)).T
+    where = {(int(a), int(b)): i for i, (a, b) in enumerate(keys)}
+    steps = ((1, 0), (-1, 0), (0, 1), (0, -1))
+    out = np.zeros_like(v)
+    for i, (a, b) in enumerate(keys):
+        near = [where[key] for key in ((a + da, b + db) for da, db in steps) if key in where]
+        if not near:
+            continue
+        # A direction the neighbours span by under a tenth of a cell is not fitted: the
+        # centroids' jitter alone would give it a spurious slope.
+        change, *_ = np.linalg.lstsq(u[near] - u[i], v[near] - v[i], rcond=0.1)
+        out[i] = np.sum(change * change, axis=0) / 12.0
+    return out
+
+
 def node_posterior_from_grid(
     nodes: FloatArray,
     weights: FloatArray,
     cell_edges: FloatArray,
-    blf_nodes: FloatArray,
-    blf_mean: FloatArray,
-    blf_sd: FloatArray,
+    load_factors: Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]],
     prior: StiffnessDampingPrior,
     mass_kg: float,
 ) -> NodePosterior:
@@ -225,10 +327,11 @@ def node_posterior_from_grid(
         The grid's (C, K) nodes and posterior masses.
     cell_edges : ndarray, shape (2, 2)
         The grid's cell edges as columns.
-    blf_nodes, blf_mean, blf_sd : ndarray, shapes (B, 2), (B, n), (B, n)
-        Points of (C, K) where the load factors given (C, K) are known (the force mixture's
-        nodes), and their mean and sd there; every kept node takes those of the nearest such
-        point (in cells), the load factors changing little over a few cells.
+    load_factors : callable
+        ``load_factors(damping_ns_per_m, stiffness_n_per_m)`` -> ``(mean, variance)``, each of
+        shape (B, n): the walk's load factors given (C, K) at the kept nodes, and the
+        variance of the walker's long-run mean there (module docstring). The spread over
+        each node's cell is added here.
     prior : StiffnessDampingPrior
     mass_kg : float
 
@@ -262,17 +365,19 @@ def node_posterior_from_grid(
         )[kept]
         / mass[kept, None]
     )
-    # The load factors of the nearest point where they are known, distance in cells.
-    offset = (centroid[:, None, :] - np.asarray(blf_nodes)[None, :, :]) @ inverse.T
-    nearest = np.argmin(np.sum(offset * offset, axis=2), axis=1)
+    blf_mean, blf_var = load_factors(centroid[:, 0].copy(), centroid[:, 1].copy())
+    blf_mean = np.asarray(blf_mean, dtype=np.float64)
+    blf_var = np.asarray(blf_var, dtype=np.float64) + cell_variance_from_neighbours(
+        keys[kept], centroid, edges * k, blf_mean
+    )
     held = float(mass[kept].sum())
     return NodePosterior(
         damping_ns_per_m=centroid[:, 0].copy(),
         stiffness_n_per_m=centroid[:, 1].copy(),
         weight=mass[kept] / held,
         mass_held=held,
-        blf_mean=np.asarray(blf_mean)[nearest],
-        blf_sd=np.asarray(blf_sd)[nearest],
+        blf_mean=blf_mean,
+        blf_sd=np.sqrt(np.maximum(blf_var, 0.0)),
         prior=prior,
         mass_kg=float(mass_kg),
         cell_edges=edges * k,

@@ -54,10 +54,10 @@ from workbench.inference.core import (
 from workbench.inference.core.load_factors import (
     LoadFactorPosterior,
     mix_load_factors,
-    point_load_factors,
 )
-from workbench.inference.core.node_posterior import NODE_LOAD_FACTORS, node_posterior_from_grid
+from workbench.inference.core.node_posterior import node_posterior_from_grid
 from workbench.inference.kalman import record_loglik
+from workbench.inference.methods.exact_force import node_load_factors
 from workbench.inference.methods.pf import PF_PARTICLES
 from workbench.inference.methods.rbpf import RBPF_PARTICLES, REJUVENATE
 
@@ -607,16 +607,11 @@ def exact_result(
     if force is None:  # pragma: no cover - only with an injected likelihood and no force
         raise RuntimeError("the exact posterior returned no force coefficients")
     report = post.identifiability
-    blf_mean, blf_var, _ = point_load_factors(
-        force.node_theta_mean, force.node_theta_var, problem.mass_kg, problem.harmonics
-    )
     nodes = node_posterior_from_grid(
         post.nodes,
         post.weights,
         post.cell_edges,
-        np.column_stack([force.node_damping, force.node_stiffness]),
-        blf_mean[:, :NODE_LOAD_FACTORS],
-        np.sqrt(np.maximum(blf_var[:, :NODE_LOAD_FACTORS], 0.0)),
+        lambda c, k: node_load_factors(problem, force, c, k),
         post.prior,
         problem.mass_kg,
     )

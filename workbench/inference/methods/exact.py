@@ -89,6 +89,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -176,23 +177,33 @@ def kalman_loglik(discretisation: str = "foh") -> LogLikelihood:
     return loglik
 
 
+@dataclass(frozen=True)
+class _KalmanForceMoments:
+    """The Kalman filter's force moments given (C, K).
+
+    An object rather than a closure, so that it pickles with the force posterior that
+    keeps it.
+    """
+
+    discretisation: str
+
+    def __call__(
+        self, problem: IdentificationProblem, damping: FloatArray, stiffness: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        from workbench.inference.kalman import record_loglik
+
+        result = record_loglik(
+            problem, damping, stiffness, discretisation=self.discretisation, return_pieces=True
+        )
+        return np.asarray(result.theta_mean), np.asarray(result.theta_cov)
+
+
 def kalman_force_moments(discretisation: str) -> ForceMoments:
     """Give the force coefficients' posterior moments given (C, K), by the Kalman filter.
 
     The exact method and the surface route mix these over their grid of (C, K).
     """
-
-    def moments(
-        problem: IdentificationProblem, damping: FloatArray, stiffness: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
-        from workbench.inference.kalman import record_loglik
-
-        result = record_loglik(
-            problem, damping, stiffness, discretisation=discretisation, return_pieces=True
-        )
-        return np.asarray(result.theta_mean), np.asarray(result.theta_cov)
-
-    return moments
+    return _KalmanForceMoments(discretisation)
 
 
 class _Evaluator:

@@ -28,9 +28,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from workbench.inference.core import IdentificationProblem
-from workbench.inference.core.load_factors import LoadFactorPosterior, mix_load_factors
+from workbench.inference.core.load_factors import (
+    LoadFactorPosterior,
+    long_run_variance_of_mean,
+    mix_load_factors,
+    point_load_factors,
+)
+from workbench.inference.core.node_posterior import NODE_LOAD_FACTORS
 
-__all__ = ["ForceMoments", "ForcePosterior"]
+__all__ = ["ForceMoments", "ForcePosterior", "node_load_factors"]
 
 FloatArray = NDArray[np.float64]
 
@@ -73,6 +79,9 @@ class ForcePosterior:
         from the sub-lattice when the filter ran on one.
     filtered_points : int
         How many (C, K) points the filter ran at, besides the MAP.
+    moments : callable or None
+        The function that gave the moments, so that other points are computed the same way
+        (:func:`node_load_factors`).
     """
 
     coefficient_names: tuple[str, ...]
@@ -88,6 +97,7 @@ class ForcePosterior:
     node_theta_mean: FloatArray
     node_theta_var: FloatArray
     filtered_points: int = 0
+    moments: ForceMoments | None = None
 
 
 def _sublattice(
@@ -194,6 +204,7 @@ def _force_posterior(
         node_theta_mean=node_mean,
         node_theta_var=node_var,
         filtered_points=int(points.shape[0]),
+        moments=moments,
     )
 
 
@@ -233,3 +244,76 @@ def _moments_at(
         variances.append(np.diagonal(cov, axis1=-2, axis2=-1).copy())
     assert sum_cov is not None
     return map_mu, map_cov, np.concatenate(means), np.concatenate(variances), sum_cov
+
+
+def _walk_load_factors(
+    problem: IdentificationProblem, theta_mean: FloatArray, theta_var: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Mean load factors given (C, K) and the variance of the walker's long-run mean."""
+    mean, kalman_var, piece = point_load_factors(
+        theta_mean, theta_var, problem.mass_kg, problem.harmonics
+    )
+    long_run = long_run_variance_of_mean(piece)
+    var = np.where(np.isfinite(long_run), np.maximum(long_run, kalman_var), kalman_var)
+    return mean[:, :NODE_LOAD_FACTORS], var[:, :NODE_LOAD_FACTORS]
+
+
+def node_load_factors(
+    problem: IdentificationProblem,
+    force: ForcePosterior,
+    damping: FloatArray,
+    stiffness: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Return the walk's load factors BLF1-3 given (C, K) at each point, and their variance.
+
+    Points that are nodes of the force mixture take its moments there; the filter runs at
+    the others (the merged nodes of a wide posterior), in chunks as for the mixture. The
+    variance is that of the walker's long-run mean at the crossing: the Newey-West variance
+    of the per-step load factors' mean, never below the variance of the realised steps' mean
+    given (C, K) (the estimation error alone, which the Newey-West estimate also holds but
+    can undershoot over few steps); see :mod:`workbench.inference.core.node_posterior`.
+
+    Parameters
+    ----------
+    problem : IdentificationProblem
+    force : ForcePosterior
+        The record's force mixture (its nodes' moments and the function that gave them).
+    damping, stiffness : ndarray, shape (B,)
+        The points' C [N s/m] and K [N/m].
+
+    Returns
+    -------
+    mean, variance : ndarray, shape (B, n), n at most :data:`NODE_LOAD_FACTORS`
+    """
+    c = np.asarray(damping, dtype=np.float64)
+    k = np.asarray(stiffness, dtype=np.float64)
+    # A merged node's centroid is a mass-weighted mean; one of a single cell is that cell's
+    # node up to rounding, so points match force nodes to a relative 1e-9.
+    force_points = np.column_stack([force.node_damping, force.node_stiffness])
+    scale = np.maximum(np.abs(force_points).max(axis=0), 1e-300)
+    offset = (np.column_stack([c, k])[:, None, :] - force_points[None, :, :]) / scale
+    distance = np.max(np.abs(offset), axis=2)
+    nearest = np.argmin(distance, axis=1)
+    at = np.where(distance[np.arange(c.size), nearest] < 1e-9, nearest, -1)
+    n = min(problem.harmonics, NODE_LOAD_FACTORS)
+    mean = np.empty((c.size, n))
+    var = np.empty((c.size, n))
+    hit = at >= 0
+    if np.any(hit):
+        mean[hit], var[hit] = _walk_load_factors(
+            problem, force.node_theta_mean[at[hit]], force.node_theta_var[at[hit]]
+        )
+    missing = np.flatnonzero(~hit)
+    moments = force.moments
+    if missing.size and moments is None:
+        from workbench.inference.methods.exact import kalman_force_moments
+
+        moments = kalman_force_moments("foh")
+    chunk = max(8, int(_FORCE_CHUNK_DOUBLES // (problem.n_pieces * problem.n_coefficients**2)))
+    for a in range(0, missing.size, chunk):
+        rows = missing[a : a + chunk]
+        assert moments is not None
+        mu, cov = moments(problem, c[rows].copy(), k[rows].copy())
+        v = np.diagonal(np.asarray(cov, dtype=np.float64), axis1=-2, axis2=-1)
+        mean[rows], var[rows] = _walk_load_factors(problem, np.asarray(mu, dtype=np.float64), v)
+    return mean, var
