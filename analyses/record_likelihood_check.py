@@ -105,13 +105,13 @@ def _check(records, params: dict[str, dict[str, float]], law: str, kind: str):
     return float(best.x), se
 
 
-def _given_truth_z(stored, plan: pd.DataFrame) -> pd.DataFrame:
-    """Each record's load factors given its true f_n and zeta: error over sd, BLF1-3."""
+def _given_truth_z(stored, used: set[str], plan: pd.DataFrame) -> pd.DataFrame:
+    """Each used record's load factors given its true f_n and zeta: error over sd, BLF1-3."""
     generating = plan.set_index("path")
     rows = []
     for rec in stored:
-        if rec.posterior is None:
-            continue
+        if rec.path not in used or rec.posterior is None:
+            continue  # the fit reads only the records record_likelihoods lets it use
         row = generating.loc[rec.path]
         mean, sd = rec.posterior.load_factors_given(
             float(row["natural_frequency_hz"]), float(row["damping_ratio"])
@@ -156,7 +156,7 @@ def main() -> None:
             records, _ = record_likelihoods(stored)
             params = _record_parameters(plan, laws, gp)
             z = _record_z(read_results(folder / "batch"), plan, truth)
-            given = _given_truth_z(stored, plan)
+            given = _given_truth_z(stored, {r.path for r in records}, plan)
             for col in ("blf1", *LOGNORMAL_COLUMNS):
                 z[f"{col} given truth"] = given[col].reindex(z["path"]).to_numpy()
             zs.append(z)

@@ -346,11 +346,12 @@ def test_the_cell_spread_of_a_linear_quantity_is_exact_from_its_neighbours() -> 
     full = np.sum(h * h, axis=0) / 12.0
     np.testing.assert_allclose(got[:20], np.tile(full, (20, 1)), rtol=1e-9)
     np.testing.assert_array_equal(got[20], 0.0)  # (1, 8): no kept neighbour
-    # (10, 0) and (11, 0): one neighbour each, along the first edge, jittered off it by
-    # under a fifth of a cell; the fit keeps the change along that offset only, so it lies
-    # between the first edge's share and the whole.
-    assert np.all(got[21:] <= full * (1 + 1e-9))
-    assert np.all(got[21:] >= 0.5 * h[0] ** 2 / 12.0)
+    # (10, 0) and (11, 0): one neighbour each, so one offset d (in edge units); the
+    # least-squares minimum norm keeps the change along d alone, (h . d)^2 / |d|^2.
+    u = points @ np.linalg.inv(edges).T
+    for i, j in ((21, 22), (22, 21)):
+        d = u[j] - u[i]
+        np.testing.assert_allclose(got[i], (d @ h) ** 2 / (d @ d) / 12.0, rtol=1e-9)
 
 
 def test_a_posterior_stored_by_an_earlier_version_is_refused(deck_result) -> None:
@@ -360,7 +361,9 @@ def test_a_posterior_stored_by_an_earlier_version_is_refused(deck_result) -> Non
     _, result = deck_result
     old = result.node_posterior.to_json()
     del old["version"]
-    with pytest.raises(UsageError, match=r"rec\.json.*earlier version.*identify the record again"):
+    with pytest.raises(
+        UsageError, match=r"rec\.json.*form 1 .*reads form 2.*identify the record again"
+    ):
         NodePosterior.from_json(old, "rec.json, key 'posterior'")
 
 
@@ -380,10 +383,13 @@ def test_the_stored_load_factors_at_the_true_stiffness_and_damping_hold_the_cros
     force node's, and a posterior wider than the force nodes borrowed its rim's), these 48
     held BLF1-3 in 42, 26 and 22 (sd of z 1.31, 2.24, 3.14); now in 48, 48 and 47 (0.54,
     0.61, 0.95): this test's own computation run on both versions. The floors: BLF1 within
-    1.96 in at least 44 of 48 (an exact 95 % interval fails that 3 % of the time) and the
-    sd of z at most 1.3 (a calibrated z's sample sd over 48 passes 1.3 with probability
-    under 0.1 %); BLF2 and BLF3, whose errors lean to one side by about half an sd at these
-    lengths (docs/validation/population.md), at least 41 of 48.
+    1.96 in at least 43 of 48 (an exact 95 % interval fails that 3.2 % of the time) and the
+    sd of z at most 1.35 (a calibrated z's sample sd over 48 passes it with probability
+    0.05 %); BLF2 and BLF3 at least 41 of 48 (an exact interval fails that 0.2 % of the
+    time). The check shows the stored load factors are not too narrow, the failure measured
+    before; it cannot show they are not too wide: like the population fit, it spreads each
+    node over its cell and mixes the neighbouring nodes, and each node's sd already holds
+    its cell's spread (docs/science.md 8), so z sd under 1 is expected here.
     """
     from workbench.population.recovery_design import footbridge_plan, simulate_recovery_record
 
@@ -395,6 +401,6 @@ def test_the_stored_load_factors_at_the_true_stiffness_and_damping_hold_the_cros
         z.append((mean - [row["blf1"], row["blf2"], row["blf3"]]) / sd)
     z = np.asarray(z)
     held = np.sum(np.abs(z) < 1.96, axis=0)
-    assert held[0] >= 44, held
-    assert np.std(z[:, 0], ddof=1) <= 1.3
+    assert held[0] >= 43, held
+    assert np.std(z[:, 0], ddof=1) <= 1.35
     assert np.all(held[1:] >= 41), held

@@ -134,6 +134,9 @@ def long_run_variance_of_mean(piece: FloatArray) -> FloatArray:
     measured state). The Newey-West estimate of the long-run variance of the per-step series,
     Bartlett kernel with ``floor(4 (P / 100)^(2/9))`` lags, over ``P^2`` covers both: the
     series is the estimated per-step load factors, so it carries their estimation error too.
+    Over the 20-60 steps of a record that is 2-3 lags, without a small-sample correction, so
+    a gait that drifts slowly is understated; the caller keeps the filter's variance as a
+    floor.
 
     Parameters
     ----------

@@ -163,7 +163,10 @@ class NodePosterior:
         :meth:`modal_cell_variance`), and the nodes' load factors are mixed with those
         weights (law of total variance). What a population fit reads from the record once
         the laws of f_n and zeta pin its node; with the true values, a check of the stored
-        load factors against a simulation's.
+        load factors against a simulation's. Like the fit, it mixes the neighbouring nodes
+        whose cells the given values fall near, and each node's sd already holds its own
+        cell's spread, so the sd is wider than the load factor's at that exact point: a
+        check that it is not too narrow, not that it is not too wide.
 
         Returns
         -------
@@ -220,8 +223,9 @@ class NodePosterior:
         fix = "identify the record again with this version (its batch into a new folder)"
         if isinstance(obj, dict) and obj.get("version") != NODE_POSTERIOR_VERSION:
             raise UsageError(
-                f"{where}: the stored posterior was written by an earlier version, whose "
-                f"load-factor sds are too narrow for a population fit; {fix}"
+                f"{where}: the stored posterior is of form {obj.get('version', 1)} and this "
+                f"version reads form {NODE_POSTERIOR_VERSION} (form 1's load-factor sds are "
+                f"too narrow for a population fit); {fix}"
             )
         try:
             nodes = obj["nodes"]
@@ -277,7 +281,10 @@ def cell_variance_from_neighbours(
     centroid rather than its cell's centre. Exact for a linear quantity where the neighbours
     span both edges; with neighbours along one edge only, the change along the other is
     taken as zero (the least-squares minimum norm); a node with no kept neighbour (a
-    posterior one cell wide holds nearly all its mass there) gets none.
+    posterior one cell wide holds nearly all its mass there) gets none. A curved quantity
+    breaks the linear reading: at an extremum between two neighbours the central change
+    is near zero, and where neighbours sit off a straight line (merged centroids do, by up
+    to half a cell) curvature can be read as a steep change along the other edge.
 
     Parameters
     ----------

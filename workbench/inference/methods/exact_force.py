@@ -277,7 +277,8 @@ def node_load_factors(
     ----------
     problem : IdentificationProblem
     force : ForcePosterior
-        The record's force mixture (its nodes' moments and the function that gave them).
+        The record's force mixture (its nodes' moments, bilinear interpolations from the
+        sub-lattice where the filter ran on one, and the function that gave them).
     damping, stiffness : ndarray, shape (B,)
         The points' C [N s/m] and K [N/m].
 
@@ -305,10 +306,10 @@ def node_load_factors(
         )
     missing = np.flatnonzero(~hit)
     moments = force.moments
-    if missing.size and moments is None:
-        from workbench.inference.methods.exact import kalman_force_moments
-
-        moments = kalman_force_moments("foh")
+    if missing.size and moments is None:  # pragma: no cover - every mixture keeps its function
+        # Another function (another discretisation) would give the merged nodes load
+        # factors inconsistent with the mixture's.
+        raise RuntimeError("the force posterior keeps no moments function to evaluate more points")
     chunk = max(8, int(_FORCE_CHUNK_DOUBLES // (problem.n_pieces * problem.n_coefficients**2)))
     for a in range(0, missing.size, chunk):
         rows = missing[a : a + chunk]
