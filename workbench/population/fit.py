@@ -144,12 +144,10 @@ def _through_surface(used: pd.DataFrame) -> int:
 
 def _select(results: pd.DataFrame, keep_not_identified: bool) -> tuple[pd.DataFrame, pd.DataFrame]:
     reasons: list[str | None] = []
-    for _, row in results.iterrows():
+    identified = identified_mask(results).to_numpy()
+    for ok, (_, row) in zip(identified, results.iterrows(), strict=True):
         why = None
-        if not keep_not_identified and not (
-            _flag(row.get("identified_damping", True))
-            and _flag(row.get("identified_stiffness", True))
-        ):
+        if not keep_not_identified and not ok:
             why = f"C or K not identified ({row.get('identifiability', 'no report')})"
         else:
             bad = [
