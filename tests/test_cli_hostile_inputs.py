@@ -13,26 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from workbench.cli import main
-
-
-def run_cli(argv, capsys):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def refused(argv, capsys) -> str:
-    """Run a command that must be refused: exit 2, one sentence, no traceback."""
-    code, _, err = run_cli(argv, capsys)
-    assert code == 2, err
-    assert "Traceback" not in err and "internal error" not in err
-    assert len(err.strip().splitlines()) == 1, err
-    return err
-
-
-def never(*_, **__):
-    raise AssertionError("the computation started")
+from tests.cli_helpers import never, refused, run_cli
 
 
 # -- a settings file: a value of the wrong kind names the file and the key --------------------

@@ -10,16 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.cli_helpers import run_cli
 from workbench.cli import budgets as cli_budgets
-from workbench.cli import main
 from workbench.errors import UsageError, check_seed
 from workbench.inference.pipeline.settings import IdentifySettings
-
-
-def run_cli(argv, capsys):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def refused(argv, capsys) -> str:

@@ -32,6 +32,7 @@ from workbench.records.record import G_M_S2, Record
 if TYPE_CHECKING:
     from workbench import datasets
     from workbench.diagnostics.criticism import compare, diagnose
+    from workbench.diagnostics.walker import compare_walker, diagnose_walker
     from workbench.inference.core import IdentificationResult
     from workbench.inference.crosscheck import crosscheck
     from workbench.inference.methods import PF, RBPF, Exact
@@ -57,9 +58,11 @@ __all__ = [
     "UsageError",
     "WorkbenchError",
     "compare",
+    "compare_walker",
     "crosscheck",
     "datasets",
     "diagnose",
+    "diagnose_walker",
     "effects",
     "identify",
     "load_record",
@@ -84,6 +87,8 @@ _LAZY: dict[str, tuple[str, str | None]] = {
     "crosscheck": ("workbench.inference.crosscheck.check", "crosscheck"),
     "diagnose": ("workbench.diagnostics.criticism", "diagnose"),
     "compare": ("workbench.diagnostics.criticism", "compare"),
+    "diagnose_walker": ("workbench.diagnostics.walker", "diagnose_walker"),
+    "compare_walker": ("workbench.diagnostics.walker", "compare_walker"),
     "simulate_walking": ("workbench.synth.simulate", "simulate_walking"),
 }
 

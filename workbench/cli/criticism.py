@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import argparse
+import os
 from typing import Any
 
 from workbench.cli.common import (
+    IDENTIFY_BASE_BYTES,
+    IDENTIFY_BYTES_PER_SAMPLE,
+    add_allow_outside_paths,
     add_no_limits,
     add_rigid_floor_flag,
+    check_budget,
     check_record_size,
     emit,
     load,
@@ -24,6 +29,8 @@ __all__ = ["add_criticism_parser", "parse_effect_names"]
 ONE_STEP_PARTICLES = 64
 #: Replicate records of the posterior-predictive check in diagnose.
 ONE_STEP_REPLICATES = 99
+#: What diagnose's JSON says of the one-step-ahead check over several walks (it is per record).
+ONE_STEP_POOLED = "not run over several walks"
 
 
 def parse_effect_names(text: str | None) -> list[str]:
@@ -58,6 +65,97 @@ def _check_harmonics(args: argparse.Namespace) -> None:
         )
 
 
+def _pooled(args: argparse.Namespace) -> bool:
+    """Whether the command criticises several walks of one walker (files or a manifest).
+
+    One record given directly keeps the one-record form; ``args.record`` is then set for
+    :func:`~workbench.cli.common.load`.
+    """
+    if args.manifest is not None and args.records:
+        raise UsageError(
+            f"{args.command}: give the walks either as record files or as --manifest "
+            f"{args.manifest}, not both"
+        )
+    if args.manifest is None and not args.records:
+        raise UsageError(
+            f"{args.command}: give a record file (or several walks of one walker), or "
+            "--manifest FILE with --subject NAME"
+        )
+    if args.manifest is None and len(args.records) == 1:
+        args.record = args.records[0]
+        return False
+    return True
+
+
+def _walker_rows(args: argparse.Namespace) -> list[Any]:
+    """Return the manifest's rows of the walker: all (one subject) or those of ``--subject``."""
+    from workbench.records.manifest import load_manifest
+
+    entries = load_manifest(args.manifest, allow_outside_paths=args.allow_outside_paths)
+    named = sorted({e.subject for e in entries if e.subject is not None})
+    found = ", ".join(named) if named else "none"
+    if any(e.subject is None for e in entries) and named:
+        found += ", and rows without a subject"
+    if args.subject is None:
+        if len({e.subject for e in entries}) > 1:
+            raise UsageError(
+                f"--manifest {args.manifest} holds the walks of several subjects ({found}); "
+                "choose the walker with --subject NAME"
+            )
+        return entries
+    rows = [e for e in entries if e.subject == args.subject]
+    if not rows:
+        raise UsageError(
+            f"--manifest {args.manifest} has no rows of subject {args.subject!r} (subjects "
+            f"found: {found}); give one of them with --subject NAME"
+        )
+    return rows
+
+
+def _walk_arguments(args: argparse.Namespace) -> list[argparse.Namespace]:
+    """Return one set of record options per walk, as :func:`~workbench.cli.common.load` reads."""
+    if args.manifest is not None:
+        # As a batch: a row's own mass and pacing win over the command's.
+        return [
+            argparse.Namespace(
+                **{
+                    **vars(args),
+                    "record": str(e.path),
+                    "mass": args.mass if e.mass_kg is None else e.mass_kg,
+                    "pacing": args.pacing if e.pacing_hz is None else e.pacing_hz,
+                    "subject": e.subject,
+                }
+            )
+            for e in _walker_rows(args)
+        ]
+    seen: dict[str, str] = {}
+    for record in args.records:
+        key = os.path.realpath(record) if os.path.exists(record) else record
+        if key in seen:
+            raise UsageError(
+                f"{record} is the walk {seen[key]} given again; give each walk once, "
+                "or it counts twice"
+            )
+        seen[key] = record
+    return [argparse.Namespace(**{**vars(args), "record": r}) for r in args.records]
+
+
+def _walks(args: argparse.Namespace) -> Any:
+    """Load and prepare the walker's walks, checking their size together before any work."""
+    from workbench.diagnostics.walker import prepare_walks
+
+    records = [load(a) for a in _walk_arguments(args)]
+    samples = sum(r.n_samples for r in records)
+    check_budget(
+        args,
+        f"{args.command} over {len(records)} walks ({samples} samples)",
+        f"{args.command} fewer walks at once, or resample them to a lower rate",
+        memory_gb=(IDENTIFY_BASE_BYTES + IDENTIFY_BYTES_PER_SAMPLE * samples) / 1e9,
+    )
+    # Each walk's stated pacing is its record's (the row's, else --pacing).
+    return prepare_walks(records, highpass_hz=args.highpass_hz)
+
+
 def _prepared(args: argparse.Namespace) -> Any:
     from workbench.diagnostics.criticism import prepare
     from workbench.records.preprocess import DEFAULT_HIGHPASS_HZ
@@ -72,6 +170,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from workbench.diagnostics.criticism import diagnose
 
     _check_harmonics(args)
+    if _pooled(args):
+        return _diagnose_walker(args)
     data = _prepared(args)
     names = parse_effect_names(args.effects)
     result = diagnose(
@@ -120,6 +220,31 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def _diagnose_walker(args: argparse.Namespace) -> int:
+    """``diagnose`` over several walks of one walker: one pooled diagnosis."""
+    from workbench.diagnostics.walker import diagnose_walker
+
+    if args.out:
+        raise UsageError(
+            f"--out {args.out}: the report is written for one record; run diagnose on one "
+            "walk with --out"
+        )
+    names = parse_effect_names(args.effects)
+    result = diagnose_walker(
+        _walks(args),
+        effects=names,
+        harmonics=args.harmonics,
+        step_variation=not args.raw_error,
+        surface=surface_choice(args),
+        start_stop=not args.keep_start_stop,
+    )
+    obj = result.to_json()
+    # The one-step-ahead residuals and the posterior-predictive check are per record.
+    obj["baseline"] = {**obj["baseline"], "one_step": ONE_STEP_POOLED}
+    emit(args, obj, result.summary())
+    return 0
+
+
 def _one_step(args: argparse.Namespace, diag: Any, names: list[str]) -> tuple[Any, dict[str, Any]]:
     """Identify the record (rbpf), attach one-step-ahead residuals, run the replicate check.
 
@@ -154,6 +279,19 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     if not names:
         raise UsageError("compare: --effects needs at least one effect name, e.g. gait_asymmetry")
     _check_harmonics(args)
+    if _pooled(args):
+        from workbench.diagnostics.walker import compare_walker
+
+        table = compare_walker(
+            _walks(args),
+            names,
+            harmonics=args.harmonics,
+            step_variation=not args.raw_error,
+            surface=surface_choice(args),
+            start_stop=not args.keep_start_stop,
+        )
+        emit(args, table.to_json(), table.summary())
+        return 0
     data = _prepared(args)
     rows = compare(
         data,
@@ -170,6 +308,26 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     )
     emit(args, obj, text)
     return 0
+
+
+def _add_walks(p: argparse.ArgumentParser) -> None:
+    """Add the records (one, or several walks of one walker) and ``--manifest``."""
+    p.add_argument(
+        "records",
+        nargs="*",
+        metavar="RECORD",
+        help="the record file, or an embedded record by name, e.g. seed_individual; several "
+        "records are walks of one walker, criticised together",
+    )
+    walker = p.add_argument_group("several walks of one walker")
+    walker.add_argument(
+        "--manifest",
+        metavar="FILE",
+        help="a batch manifest CSV (path, mass_kg, pacing_hz, subject) instead of RECORDs: "
+        "its rows of --subject NAME are the walker's walks (every row when it names one "
+        "subject); a row's mass_kg and pacing_hz win over --mass and --pacing",
+    )
+    add_allow_outside_paths(walker)
 
 
 def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
@@ -192,12 +350,19 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "and timing of the shared force shape",
     )
     level.add_argument(
+        "--keep-start-stop",
+        action="store_true",
+        help="over several walks, keep each walk's first and last three steps (left out by "
+        "default: a walk's start and stop are its own, and shared by every pass they look "
+        "like a drift)",
+    )
+    level.add_argument(
         "--seed",
         type=seed_int,
         default=0,
         help="random seed (default 0) of diagnose's identification (rbpf) and "
-        "posterior-predictive replicates; compare's cross-validation draws nothing random, "
-        "so its result does not depend on it",
+        "posterior-predictive replicates (one record only); compare's cross-validation, and "
+        "diagnose over several walks, draw nothing random, so their results do not depend on it",
     )
     add_rigid_floor_flag(level)
     add_no_limits(level)
@@ -209,18 +374,21 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         "steps (each step with its own size and timing of it) plus K u + C u' (and the "
         "current effects), and rank the catalogued effects by "
         "the held-out error each removes, with a significance decision that respects "
-        "autocorrelation (step-blocked cross-validation).",
+        "autocorrelation (step-blocked cross-validation). Given several walks of one walker "
+        "(record files, or --manifest FILE with --subject NAME), each walk keeps its own "
+        "baseline and the effects are tested once over all their steps.",
     )
-    p.add_argument(
-        "record", help="the record file, or an embedded record by name, e.g. seed_individual"
-    )
+    _add_walks(p)
     p.add_argument("--effects", metavar="NAME,...", help="effects already in the model")
-    p.add_argument("--out", metavar="DIR", help="also write an HTML/Markdown report")
+    p.add_argument(
+        "--out", metavar="DIR", help="also write an HTML/Markdown report (one record only)"
+    )
     p.add_argument(
         "--no-one-step",
         action="store_true",
         help="skip the identification (rbpf) behind the one-step-ahead predictive residuals "
-        "and the posterior-predictive check",
+        "and the posterior-predictive check; they are per record, so diagnose over several "
+        "walks never runs them",
     )
     p.set_defaults(handler=_cmd_diagnose)
 
@@ -229,10 +397,10 @@ def add_criticism_parser(sub: Any, out_opts: argparse.ArgumentParser) -> None:
         parents=[out_opts, rec_opts, level],
         help="scoreboard: held-out error of the baseline and with each effect added",
         description="Held-out RMSE, fit %, Ljung-Box p and predictive score of the baseline "
-        "and of the baseline with the given effects added one after another.",
+        "and of the baseline with the given effects added one after another. Given several "
+        "walks of one walker (record files, or --manifest FILE with --subject NAME), the "
+        "scoreboard pools them, adds the error on whole walks held out and each effect's size.",
     )
-    p.add_argument(
-        "record", help="the record file, or an embedded record by name, e.g. seed_individual"
-    )
+    _add_walks(p)
     p.add_argument("--effects", required=True, metavar="NAME,...", help="effects to add in turn")
     p.set_defaults(handler=_cmd_compare)

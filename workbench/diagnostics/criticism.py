@@ -111,7 +111,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -406,8 +406,6 @@ def diagnose(
                 data, [e.name for e in cand_effects], "diagnose"
             )
         cand_effects = [e for e in cand_effects if e.name != "base_motion"]
-    by_name = {e.name: e for e in (*current_effects, *cand_effects)}
-    cands = [e.name for e in cand_effects]
     cv, untestable = _build_cv(
         data,
         [*current_effects, *cand_effects],
@@ -421,6 +419,73 @@ def diagnose(
     resid = cv.y - cv.heldout_prediction(current)
     base_pred = data.target_n - resid
 
+    results, verdict = _rank(
+        cv,
+        current,
+        cand_effects,
+        untestable,
+        lambda effect: effect.statistic(data, resid),
+        f"over {data.n_steps} steps",
+        base_row,
+    )
+    baseline = {
+        "model": "baseline" + "".join(f" + {e}" for e in current),
+        "effects": current,
+        "heldout_rmse_n": base_row.heldout_rmse_n,
+        "fit_percent": base_row.fit_percent,
+        "ljung_box_p": base_row.ljung_box_p,
+        "score": base_row.score,
+        "harmonics": int(min(harmonics, math.floor(_max_order(data)))),
+        "folds": cv.n_folds,
+        "steps": data.n_steps,
+        "pacing_hz": data.pacing_hz,
+        "split": data.split,
+        "grf_rms_n": float(np.std(data.target_n)),
+        "step_variation": bool(step_variation),
+        "response_modulation": bool(response_modulation),
+        "follow_pace": bool(follow_pace),
+        "surface": _surface_name(data),
+    }
+    candidates_out = tuple(c.freeze() for c in results)
+    return Diagnosis(baseline, candidates_out, verdict, data, resid, base_pred, tuple(current))
+
+
+def _rank(
+    cv: _CV,
+    current: Sequence[str],
+    cand_effects: Sequence[Effect],
+    untestable: Sequence[str],
+    statistic: Callable[[Effect], tuple[float, str] | None],
+    where: str,
+    base_row: ScoreRow,
+) -> tuple[list[_Draft], str]:
+    """Test the candidates, select them stepwise and give the verdict (module docstring).
+
+    Parameters
+    ----------
+    cv : _CV
+        The engine on the baseline, the current effects and the candidates.
+    current : sequence of str
+        Effects already in the model.
+    cand_effects : sequence of Effect
+        The candidates, in the catalogue's order.
+    untestable : sequence of str
+        Candidates the record (or walks) cannot test.
+    statistic : callable
+        An effect's revealing statistic on the baseline's held-out error, as
+        :meth:`Effect.statistic`.
+    where : str
+        What the evidence is counted over, e.g. "over 25 steps".
+    base_row : ScoreRow
+        The baseline's scores.
+
+    Returns
+    -------
+    (list of _Draft, str)
+        The candidates in their reading order and the verdict.
+    """
+    by_name = {e.name: e for e in cand_effects}
+    cands = [e.name for e in cand_effects]
     results: list[_Draft] = []
     gains: dict[str, tuple[float, float, float]] = {}
     for name in cands:
@@ -429,7 +494,7 @@ def diagnose(
     called = _holm(gains, cv.dof)
     for name in cands:
         effect = by_name[name]
-        stat = effect.statistic(data, resid)
+        stat = statistic(effect)
         stat_value, stat_text = (0.0, "") if stat is None else stat
         if name in untestable:
             results.append(
@@ -464,7 +529,7 @@ def diagnose(
         evidence = (
             f"{head}{stat_part}; adding it removes {100 * pooled:.1f} % "
             f"(+- {100 * se:.1f} %) of the held-out squared error (one-sided p "
-            f"{p_text(p_value, 2)} over {data.n_steps} steps)"
+            f"{p_text(p_value, 2)} {where})"
         )
         results.append(
             _Draft(
@@ -496,27 +561,7 @@ def diagnose(
                 "% or more"
             )
 
-    verdict = _verdict(results, base_row, reasons)
-    baseline = {
-        "model": "baseline" + "".join(f" + {e}" for e in current),
-        "effects": current,
-        "heldout_rmse_n": base_row.heldout_rmse_n,
-        "fit_percent": base_row.fit_percent,
-        "ljung_box_p": base_row.ljung_box_p,
-        "score": base_row.score,
-        "harmonics": int(min(harmonics, math.floor(_max_order(data)))),
-        "folds": cv.n_folds,
-        "steps": data.n_steps,
-        "pacing_hz": data.pacing_hz,
-        "split": data.split,
-        "grf_rms_n": float(np.std(data.target_n)),
-        "step_variation": bool(step_variation),
-        "response_modulation": bool(response_modulation),
-        "follow_pace": bool(follow_pace),
-        "surface": _surface_name(data),
-    }
-    candidates_out = tuple(c.freeze() for c in results)
-    return Diagnosis(baseline, candidates_out, verdict, data, resid, base_pred, tuple(current))
+    return results, _verdict(results, base_row, reasons)
 
 
 def _p_value(t: float, dof: int) -> float:
@@ -716,6 +761,32 @@ def _verdict(results: Sequence[_Draft], base: ScoreRow, reasons: Mapping[str, st
     )
 
 
+def compared_effects(
+    effects: EffectsLike | SMDModel, model: SMDModel | None, harmonics: int | None
+) -> tuple[SMDModel | None, tuple[Effect, ...], int]:
+    """Return the model, the effects :func:`compare` adds in turn and the harmonics.
+
+    ``effects`` may be the model itself; a model's effects come first, then ``effects``.
+    """
+    if isinstance(effects, SMDModel):
+        if model is not None:
+            raise UsageError(
+                "compare: two models are given (as effects and as model); pass one model"
+            )
+        model, effects = effects, None
+    if model is not None:
+        first, harmonics = _resolve(model, None, harmonics, "compare")
+    else:
+        first, harmonics = (), DEFAULT_HARMONICS if harmonics is None else harmonics
+    added = candidate_effects([*first, *candidate_effects(effects or ())])
+    if not added:
+        raise UsageError(
+            "compare: give at least one effect in 'effects', e.g. gait_asymmetry",
+            parameter="effects",
+        )
+    return model, added, harmonics
+
+
 def compare(
     data: CriticismData | Record,
     effects: EffectsLike | SMDModel = None,
@@ -757,25 +828,10 @@ def compare(
     """
     if isinstance(data, Record):
         data = prepare(data)
-    if isinstance(effects, SMDModel):
-        if model is not None:
-            raise UsageError(
-                "compare: two models are given (as effects and as model); pass one model"
-            )
-        model, effects = effects, None
-    if model is not None:
-        first, harmonics = _resolve(model, None, harmonics, "compare")
-    else:
-        first, harmonics = (), DEFAULT_HARMONICS if harmonics is None else harmonics
+    model, added, harmonics = compared_effects(effects, model, harmonics)
     data = _surface_frame(data, model, surface, "compare")
-    added = candidate_effects([*first, *candidate_effects(effects or ())])
     names = [e.name for e in added]
     _refuse_base_motion_on_a_coupled_surface(data, names, "compare")
-    if not names:
-        raise UsageError(
-            "compare: give at least one effect in 'effects', e.g. gait_asymmetry",
-            parameter="effects",
-        )
     cv, untestable = _build_cv(
         data, added, harmonics, folds, step_variation, response_modulation, follow_pace
     )

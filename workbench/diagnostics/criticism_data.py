@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -163,6 +164,34 @@ class CriticismData:
     def force_timed_phase(self) -> FloatArray:
         """Step phase re-timed step by step to each step's force (see :func:`force_timed_phase`)."""
         return force_timed_phase(self)
+
+    def step_range(self, first: int, stop: int) -> CriticismData:
+        """Return the record's steps ``first`` to ``stop - 1`` alone, renumbered from 0.
+
+        The samples, the phase (0 at the new first footfall) and the boundaries are cut;
+        the pacing is the record's. Used to leave a walk's start and stop out of a pooled
+        criticism (:mod:`workbench.diagnostics.walker`).
+        """
+        if not 0 <= first < stop <= self.n_steps:
+            raise ValueError(f"steps {first}..{stop} outside 0..{self.n_steps}")
+        keep = (self.step >= first) & (self.step < stop)
+        ground = None if self.ground is None else (
+            self.ground[0][keep], self.ground[1][keep], self.ground[2][keep]
+        )  # fmt: skip
+        local = None if self.pacing_local_hz is None else self.pacing_local_hz[keep]
+        return dataclasses.replace(
+            self,
+            time_s=self.time_s[keep],
+            grf_n=self.grf_n[keep],
+            target_n=self.target_n[keep],
+            disp_m=self.disp_m[keep],
+            vel_m_s=self.vel_m_s[keep],
+            phase_rad=np.asarray(self.phase_rad[keep] - 2.0 * np.pi * first, dtype=np.float64),
+            step=self.step[keep] - first,
+            footfall_times_s=self.footfall_times_s[first : stop + 1],
+            ground=ground,
+            pacing_local_hz=local,
+        )
 
 
 def prepare(
@@ -445,6 +474,11 @@ def _step_force_shifts(data: CriticismData) -> FloatArray:
     return np.asarray(shifts, dtype=np.float64)
 
 
+#: Re-timed phases already computed, by record (the search over shifts is the costliest
+#: part of a diagnosis, and the heel impact's columns and statistic both need it).
+_TIMED_PHASES: weakref.WeakKeyDictionary[CriticismData, FloatArray] = weakref.WeakKeyDictionary()
+
+
 def force_timed_phase(data: CriticismData) -> FloatArray:
     """Step phase with each step re-timed to its own force [rad].
 
@@ -461,8 +495,14 @@ StepVariation`), but a transient of a few milliseconds locked to the heel strike
 
     What is gained is measured by ``analyses/heel_impact_timing.py``.
     """
+    cached = _TIMED_PHASES.get(data)
+    if cached is not None:
+        return cached
     shifts = _step_force_shifts(data)
     at_boundaries = np.append(shifts, shifts[-1])
     frac = np.clip(data.step_fraction, 0.0, 1.0)
     shift = at_boundaries[data.step] * (1.0 - frac) + at_boundaries[data.step + 1] * frac
-    return np.asarray(data.phase_rad - shift, dtype=np.float64)
+    phase = np.asarray(data.phase_rad - shift, dtype=np.float64)
+    phase.flags.writeable = False  # shared by every later call on the record
+    _TIMED_PHASES[data] = phase
+    return phase

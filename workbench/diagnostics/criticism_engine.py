@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -146,60 +148,118 @@ class StepVariation:
 
 
 # -- cross-validation engine --------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class _Piece:
+    """The samples of one walk and the columns that are not zero on them.
+
+    A pooled criticism over a walker's walks (:mod:`workbench.diagnostics.walker`) has a
+    baseline of its own for every walk: its columns are zero outside the walk, so each walk
+    keeps only its own and the shared ones (``columns``, global indices; ``x`` holds them
+    on the walk's samples, already through the step-variation map). One record is one piece
+    holding every column.
+    """
+
+    rows: slice
+    columns: NDArray[np.intp]
+    x: FloatArray
+
+
+def step_blocks(step: NDArray[np.int64], n_steps: int) -> tuple[NDArray[np.int64], int]:
+    """Return the block of :data:`BLOCK_STEPS` steps of each sample (the last takes the rest)."""
+    n_blocks = max(n_steps // BLOCK_STEPS, 1)
+    return np.minimum(step // BLOCK_STEPS, n_blocks - 1), n_blocks
+
+
 class _CV:
-    """Per-fold Gram matrices of all columns, so any column subset is scored cheaply."""
+    """Per-fold Gram matrices of all columns, so any column subset is scored cheaply.
+
+    Parameters
+    ----------
+    layout : object
+        What the scores are counted over: ``step`` (each sample's step), ``n_steps`` and
+        ``step_fraction`` (a :class:`CriticismData`, or a walker's walks laid end to end).
+    widths : dict of str to int
+        Width of every block of columns, in the order of the global columns ("baseline"
+        first).
+    pieces : list of _Piece
+        Samples and their non-zero columns (mapped, not yet scaled).
+    y : ndarray
+        The mapped target on all samples.
+    block : ndarray of int
+        Each sample's block of steps (held out together); ``n_blocks`` of them.
+    folds : int
+    """
 
     def __init__(
         self,
-        data: CriticismData,
-        blocks: dict[str, FloatArray],
+        layout: Any,
+        widths: dict[str, int],
+        pieces: Sequence[_Piece],
+        y: FloatArray,
+        block: NDArray[np.int64],
+        n_blocks: int,
         folds: int,
-        step_variation: StepVariation | None = None,
     ) -> None:
-        self.data = data
-        self.names = list(blocks)
-        mats = [blocks[k] for k in self.names]
-        x = np.column_stack(mats)
-        y = np.asarray(data.target_n, dtype=np.float64)
-        if step_variation is not None:
-            # One pass over the steps for the columns and the target together.
-            mapped = step_variation(np.column_stack([x, y]))
-            x, y = mapped[:, :-1], mapped[:, -1]
-        # RMS, not sd: after the step-variation map the constant column varies a little,
-        # and dividing it by that small sd would make the normal equations ill-conditioned.
-        scale = np.sqrt(np.mean(x**2, axis=0))
-        scale[scale == 0] = 1.0
-        x = x / scale
-        self.x = x
-        self.y = y
+        self.data = layout
+        self.names = list(widths)
         self.slices: dict[str, NDArray[np.intp]] = {}
         start = 0
-        for k, m in zip(self.names, mats, strict=True):
-            self.slices[k] = np.arange(start, start + m.shape[1])
-            start += m.shape[1]
-        n_blocks = max(data.n_steps // BLOCK_STEPS, 1)
+        for k, w in widths.items():
+            self.slices[k] = np.arange(start, start + w)
+            start += w
+        n_cols = start
+        self.y = np.asarray(y, dtype=np.float64)
+        n = self.y.size
+        # RMS, not sd: after the step-variation map the constant column varies a little,
+        # and dividing it by that small sd would make the normal equations ill-conditioned.
+        sumsq = np.zeros(n_cols)
+        for p in pieces:
+            np.add.at(sumsq, p.columns, np.sum(p.x**2, axis=0))
+        scale = np.sqrt(sumsq / n)
+        scale[scale == 0] = 1.0
+        self.scale = scale
+        self.pieces = [_Piece(p.rows, p.columns, p.x / scale[p.columns]) for p in pieces]
         n_folds = int(max(3, min(folds, n_blocks)))
-        block = np.minimum(data.step // BLOCK_STEPS, n_blocks - 1)
         self.fold_of = block % n_folds
         self.block_of = block
         self.n_blocks = n_blocks
         #: Degrees of freedom of the t ratio of :meth:`gain` (one per step, less the mean).
-        self.dof = max(data.n_steps - 1, 1)
+        self.dof = max(layout.n_steps - 1, 1)
         self._step_cache: dict[tuple[str, ...], FloatArray] = {}
         self.n_folds = n_folds
-        self.gram = np.empty((n_folds, x.shape[1], x.shape[1]))
-        self.xty = np.empty((n_folds, x.shape[1]))
-        self.yty = np.empty(n_folds)
-        self.count = np.empty(n_folds)
-        for f in range(n_folds):
-            sel = self.fold_of == f
-            xf, yf = x[sel], self.y[sel]
-            self.gram[f] = xf.T @ xf
-            self.xty[f] = xf.T @ yf
-            self.yty[f] = yf @ yf
-            self.count[f] = sel.sum()
+        self.n_columns = n_cols
+        self.gram = np.zeros((n_folds, n_cols, n_cols))
+        self.xty = np.zeros((n_folds, n_cols))
+        self.yty = np.zeros(n_folds)
+        self.count = np.zeros(n_folds)
+        for p in self.pieces:
+            fold = self.fold_of[p.rows]
+            yp = self.y[p.rows]
+            cols = np.ix_(p.columns, p.columns)
+            for f in range(n_folds):
+                sel = fold == f
+                xf, yf = p.x[sel], yp[sel]
+                self.gram[f][cols] += xf.T @ xf
+                self.xty[f][p.columns] += xf.T @ yf
+                self.yty[f] += yf @ yf
+                self.count[f] += sel.sum()
         self.gram_all = self.gram.sum(axis=0)
         self.xty_all = self.xty.sum(axis=0)
+
+    @property
+    def x(self) -> FloatArray:
+        """All columns on all samples (scaled), zero where a piece lacks a column."""
+        out = np.zeros((self.y.size, self.n_columns))
+        for p in self.pieces:
+            out[p.rows, p.columns] = p.x  # rows is a slice: a view is written
+        return out
+
+    def predict(self, beta: FloatArray) -> FloatArray:
+        """``x @ beta`` on all samples, ``beta`` over all columns (scaled)."""
+        out = np.zeros(self.y.size)
+        for p in self.pieces:
+            out[p.rows] = p.x @ beta[p.columns]
+        return out
 
     def columns(self, groups: Sequence[str]) -> NDArray[np.intp]:
         return np.concatenate([self.slices[g] for g in ("baseline", *groups)])
@@ -232,10 +292,14 @@ class _CV:
         pred = np.empty_like(self.y)
         g_all = self.gram_all[np.ix_(idx, idx)]
         b_all = self.xty_all[idx]
+        beta = np.zeros(self.n_columns)
         for f in range(self.n_folds):
-            sel = self.fold_of == f
-            beta = self._solve(g_all - self.gram[f][np.ix_(idx, idx)], b_all - self.xty[f][idx])
-            pred[sel] = self.x[np.ix_(sel, idx)] @ beta
+            beta[idx] = self._solve(
+                g_all - self.gram[f][np.ix_(idx, idx)], b_all - self.xty[f][idx]
+            )
+            for p in self.pieces:
+                sel = self.fold_of[p.rows] == f
+                pred[p.rows][sel] = p.x[sel] @ beta[p.columns]
         return pred
 
     def separable_fraction(self, group: str, base: Sequence[str]) -> float:
@@ -253,7 +317,10 @@ class _CV:
         coef = self._solve(g_mm, g_mg)
         total = np.diag(g[np.ix_(idx_g, idx_g)]).copy()
         n = self.count.sum()
-        mean = self.x[:, idx_g].mean(axis=0)
+        sums = np.zeros(self.n_columns)
+        for p in self.pieces:
+            np.add.at(sums, p.columns, p.x.sum(axis=0))
+        mean = sums[idx_g] / n
         total_c = total - n * mean**2
         resid = total - np.einsum("ij,ij->j", g_mg, coef)
         keep = total_c > 0
@@ -284,19 +351,26 @@ class _CV:
         false-alarm rate of this test is in docs/validation/criticism.md ("Family-wise
         control").
         """
-        sse_b = self.step_sse(base)
-        sse_e = self.step_sse(extended)
-        scale = max(float(sse_b.mean()), 1e-300)
-        diff = (sse_b - sse_e) / scale
-        pooled = float(diff.mean())
-        dev = diff - pooled
-        n = dev.size
-        var = float(dev @ dev) / n
-        for lag in range(1, min(BLOCK_STEPS, n - 1) + 1):
-            var += 2.0 * (1.0 - lag / (BLOCK_STEPS + 1.0)) * float(dev[lag:] @ dev[:-lag]) / n
-        se = float(np.sqrt(max(var, 0.0) / n))
-        t = pooled / se if se > 0 else (np.inf if pooled > 0 else 0.0)
-        return pooled, se, float(t)
+        return paired_gain(self.step_sse(base), self.step_sse(extended))
+
+
+def paired_gain(sse_base: FloatArray, sse_extended: FloatArray) -> tuple[float, float, float]:
+    """Fraction of held-out SSE removed, its long-run standard error and the t ratio.
+
+    ``sse_base`` and ``sse_extended`` are the held-out squared errors of each step under the
+    two models (see :meth:`_CV.gain`).
+    """
+    scale = max(float(sse_base.mean()), 1e-300)
+    diff = (sse_base - sse_extended) / scale
+    pooled = float(diff.mean())
+    dev = diff - pooled
+    n = dev.size
+    var = float(dev @ dev) / n
+    for lag in range(1, min(BLOCK_STEPS, n - 1) + 1):
+        var += 2.0 * (1.0 - lag / (BLOCK_STEPS + 1.0)) * float(dev[lag:] @ dev[:-lag]) / n
+    se = float(np.sqrt(max(var, 0.0) / n))
+    t = pooled / se if se > 0 else (np.inf if pooled > 0 else 0.0)
+    return pooled, se, float(t)
 
 
 def ljung_box_p(residual: ArrayLikeFloat, lags: int) -> float:
@@ -360,6 +434,51 @@ def _row(cv: _CV, groups: Sequence[str], label: str, base_sse: FloatArray | None
     return ScoreRow(label, rmse, fit, lb, float(lpd), drop, se)
 
 
+def record_blocks(
+    data: CriticismData,
+    effects: Iterable[str | Effect],
+    harmonics: int,
+    step_variation: bool = True,
+    response_modulation: bool = True,
+    follow_pace: bool = True,
+) -> tuple[dict[str, FloatArray], StepVariation | None, list[str]]:
+    """Return the baseline's and the effects' criticism columns on one record, before the map.
+
+    Parameters
+    ----------
+    data : CriticismData
+    effects : iterable of Effect or str
+        Effects (specs are read by :meth:`Effect.from_spec`); their names key the blocks.
+    harmonics : int
+    step_variation, response_modulation, follow_pace : bool, optional
+
+    Returns
+    -------
+    (dict, StepVariation or None, list of str)
+        The blocks ("baseline" first), the record's step-variation map (None when not
+        used) and the names of the effects the record cannot test.
+    """
+    base = baseline_columns(data, harmonics)
+    # The step-variation map needs the plain baseline (its shared shape); the modulation
+    # columns are nuisance columns of the baseline block itself.
+    jitter = StepVariation(data, harmonics, base) if step_variation else None
+    pace = _pace_columns(data, harmonics) if follow_pace else None
+    if pace is not None:
+        base = np.column_stack([base, pace])
+    if response_modulation and RESPONSE_MODULATION_ORDERS:
+        base = np.column_stack([base, _modulation_columns(data)])
+    blocks: dict[str, FloatArray] = {"baseline": base}
+    untestable = []
+    for item in effects:
+        effect = item if isinstance(item, Effect) else Effect.from_spec(item)
+        cols = effect.criticism_columns(data)
+        if cols is None:
+            untestable.append(effect.name)
+        else:
+            blocks[effect.name] = np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
+    return blocks, jitter, untestable
+
+
 def _build_cv(
     data: CriticismData,
     effects: Iterable[str | Effect],
@@ -384,23 +503,14 @@ def _build_cv(
     (_CV, list of str)
         The engine and the names of the effects the record cannot test.
     """
-    base = baseline_columns(data, harmonics)
-    # The step-variation map needs the plain baseline (its shared shape); the modulation
-    # columns are nuisance columns of the baseline block itself.
-    jitter = StepVariation(data, harmonics, base) if step_variation else None
-    pace = _pace_columns(data, harmonics) if follow_pace else None
-    if pace is not None:
-        base = np.column_stack([base, pace])
-    if response_modulation and RESPONSE_MODULATION_ORDERS:
-        base = np.column_stack([base, _modulation_columns(data)])
-    blocks: dict[str, FloatArray] = {"baseline": base}
-    untestable = []
-    for item in effects:
-        effect = item if isinstance(item, Effect) else Effect.from_spec(item)
-        cols = effect.criticism_columns(data)
-        if cols is None:
-            untestable.append(effect.name)
-        else:
-            cols = np.asarray(cols, dtype=np.float64).reshape(data.time_s.size, -1)
-            blocks[effect.name] = cols
-    return _CV(data, blocks, folds, jitter), untestable
+    blocks, jitter, untestable = record_blocks(
+        data, effects, harmonics, step_variation, response_modulation, follow_pace
+    )
+    x = np.column_stack([*blocks.values(), data.target_n])
+    if jitter is not None:
+        # One pass over the steps for the columns and the target together.
+        x = jitter(x)
+    widths = {k: v.shape[1] for k, v in blocks.items()}
+    piece = _Piece(slice(0, x.shape[0]), np.arange(x.shape[1] - 1), x[:, :-1])
+    block, n_blocks = step_blocks(data.step, data.n_steps)
+    return _CV(data, widths, [piece], x[:, -1], block, n_blocks, folds), untestable

@@ -80,6 +80,11 @@ class Effect:
     linear: ClassVar[bool] = True
     #: Plain-words sentence model criticism gives when the effect is significant.
     reason: ClassVar[str] = "the error follows the columns of its term"
+    #: Whether the effect's criticism columns change sign when the left and right feet swap
+    #: labels (terms at odd multiples of half the pacing rate). Criticism over a walker's
+    #: walks (:mod:`workbench.diagnostics.walker`) then shares their coefficients only when
+    #: the walks' feet are known, and otherwise fits them walk by walk.
+    swaps_with_feet: ClassVar[bool] = False
 
     def __init__(self, **values: float) -> None:
         cls = type(self)

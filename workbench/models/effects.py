@@ -297,6 +297,7 @@ class GaitAsymmetry(Effect):
         return np.asarray(columns * ctx.amplitude_at(t_b)[..., None], dtype=np.float64)
 
     reason = "the error repeats every second step: left and right steps differ"
+    swaps_with_feet = True
 
     def criticism_columns(self, data: CriticismRecord) -> FloatArray | None:
         """Stride lines: step-phase harmonics of orders 1/2, 3/2, 5/2 and 7/2."""

@@ -17,7 +17,13 @@ from workbench.synth.decks import (
 )
 from workbench.synth.gait import GaitProfile
 from workbench.synth.ground import surface_motion
-from workbench.synth.hidden import HIDDEN_EFFECT_LEVELS, WALK_KINDS, hidden_effect_walk
+from workbench.synth.hidden import (
+    HIDDEN_EFFECT_LEVELS,
+    WALK_KINDS,
+    WALKER_KINDS,
+    hidden_effect_walk,
+    hidden_effect_walker,
+)
 from workbench.synth.simulate import (
     POPULATION_DAMPING_RATIO,
     POPULATION_NATURAL_FREQUENCY_HZ,
@@ -35,6 +41,7 @@ __all__ = [
     "HIDDEN_EFFECT_LEVELS",
     "POPULATION_DAMPING_RATIO",
     "POPULATION_NATURAL_FREQUENCY_HZ",
+    "WALKER_KINDS",
     "WALK_KINDS",
     "GaitProfile",
     "NarrowBandDeck",
@@ -44,6 +51,7 @@ __all__ = [
     "deck_from_json",
     "deck_walk",
     "hidden_effect_walk",
+    "hidden_effect_walker",
     "population_damping_ratio",
     "population_natural_frequency_hz",
     "seed_numerical_example",

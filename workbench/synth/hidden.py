@@ -29,6 +29,26 @@ variability all drawn from the seed) with effects of the catalogue at the sizes 
 
 The kind's own details are drawn from a generator of their own, so the walk's other
 details are those of the steady walk of the same seed.
+
+A walker's walks (:func:`hidden_effect_walker`) are several passes of one walker, as in the
+seed study, where every participant walked each pacing case two or three times: the walker
+(mass, natural frequency, damping, force shape, step-to-step variability, the hidden
+effects and their sizes, the instrument's sample rate and noise) is drawn once from the
+seed; each pass has its own length, pacing and noise, and the kinds of
+:data:`WALKER_KINDS` say what a pass is:
+
+``overground``
+    From standing to standing, 20-30 walking steps, on a rigid floor (the seed's 40 m track).
+``speed_change``
+    Steady walking that changes pace over four steps (as above), each pass its own change.
+``deck``
+    Overground passes over a vibrating deck (a footbridge crossing): the deck (its RMS
+    acceleration, centre frequency and kind, drawn as above) is the walker's, its phase or
+    realisation the pass's own.
+
+A pass's own details come from a generator of its own (seeded by the walker's seed and the
+pass's number), so the first ``k`` passes of a walker are the same whatever the number of
+passes asked for.
 """
 
 from __future__ import annotations
@@ -44,12 +64,28 @@ from workbench.models.effects import Effect, effect_from_name
 from workbench.synth.decks import NarrowBandDeck, SineDeck
 from workbench.synth.gait import GaitProfile
 from workbench.synth.result import Simulation
-from workbench.synth.simulate import varied_walk, varied_walk_details
+from workbench.synth.simulate import (
+    population_damping_ratio,
+    population_natural_frequency_hz,
+    simulate_walking,
+    varied_walk,
+    varied_walk_details,
+)
 
-__all__ = ["HIDDEN_EFFECT_LEVELS", "WALK_KINDS", "hidden_effect_walk"]
+__all__ = [
+    "HIDDEN_EFFECT_LEVELS",
+    "WALKER_KINDS",
+    "WALK_KINDS",
+    "hidden_effect_walk",
+    "hidden_effect_walker",
+]
 
 #: The kinds of record of a detection study (module docstring).
 WALK_KINDS = ("steady", "overground", "speed_change", "deck")
+#: The kinds of pass of a walker's walks (module docstring).
+WALKER_KINDS = ("overground", "speed_change", "deck")
+#: Range of a pass's pacing over the walker's [-]: passes of one pacing case differ a little.
+PASS_PACING_RANGE = (0.97, 1.03)
 
 #: Three sizes (small, middle, large) of every catalogued effect for detection studies:
 #: realistic, clearly present. Drifts are given as their total change over the record
@@ -140,25 +176,7 @@ def hidden_effect_walk(
     Simulation
         The truth names the kind (``truth["walk_kind"]``) and, on a deck, the deck.
     """
-    wanted = [names] if isinstance(names, str) else list(names)
-    wanted = [n for n in wanted if n != "none"]
-    unknown = [n for n in wanted if n not in HIDDEN_EFFECT_LEVELS]
-    if unknown:
-        raise UsageError(
-            f"no detection level for effect {unknown[0]!r}; choose from "
-            + ", ".join(HIDDEN_EFFECT_LEVELS)
-        )
-    if kind not in WALK_KINDS:
-        raise UsageError(
-            f"hidden_effect_walk: kind must be one of {', '.join(WALK_KINDS)}, got {kind!r}",
-            parameter="kind",
-        )
-    if kind == "deck" and "base_motion" in wanted:
-        raise UsageError(
-            "hidden_effect_walk: a deck walk already moves the surface; hide base_motion in "
-            "another kind of walk",
-            parameter="names",
-        )
+    wanted = _check_names(names, kind, WALK_KINDS, "hidden_effect_walk")
     i = seed % 3 if level is None else int(level)
     if not (math.isfinite(size_factor) and size_factor > 0):
         raise UsageError(
@@ -203,3 +221,132 @@ def hidden_effect_walk(
 def _steady_pacing_hz(seed: int) -> float:
     """Return the pacing :func:`~workbench.synth.simulate.varied_walk` draws for a seed [Hz]."""
     return float(varied_walk_details(seed)["pacing_hz"])
+
+
+def _check_names(
+    names: str | Sequence[str], kind: str, kinds: Sequence[str], where: str
+) -> list[str]:
+    """Return the hidden effects' names, refusing unknown ones, kinds and base motion on decks."""
+    wanted = [names] if isinstance(names, str) else list(names)
+    wanted = [n for n in wanted if n != "none"]
+    unknown = [n for n in wanted if n not in HIDDEN_EFFECT_LEVELS]
+    if unknown:
+        raise UsageError(
+            f"no detection level for effect {unknown[0]!r}; choose from "
+            + ", ".join(HIDDEN_EFFECT_LEVELS)
+        )
+    if kind not in kinds:
+        raise UsageError(
+            f"{where}: kind must be one of {', '.join(kinds)}, got {kind!r}", parameter="kind"
+        )
+    if kind == "deck" and "base_motion" in wanted:
+        raise UsageError(
+            f"{where}: a deck already moves the surface; hide base_motion in another kind of walk",
+            parameter="names",
+        )
+    return wanted
+
+
+def _pass_seed(seed: int, index: int) -> int:
+    return int(np.random.SeedSequence([seed, 0x9A55, index]).generate_state(1)[0])
+
+
+def hidden_effect_walker(
+    names: str | Sequence[str],
+    seed: int,
+    walks: int,
+    level: int | None = None,
+    *,
+    kind: str = "overground",
+    size_factor: float = 1.0,
+) -> list[Simulation]:
+    """Simulate several passes of one walker with catalogued effects hidden (module docstring).
+
+    Parameters
+    ----------
+    names : str or sequence of str
+        Catalogue names of the hidden effects (``"none"`` or empty: none), the walker's.
+    seed : int
+        Seed of the walker.
+    walks : int
+        Number of passes.
+    level : {0, 1, 2}, optional
+        Size from :data:`HIDDEN_EFFECT_LEVELS`; default ``seed % 3``.
+    kind : {"overground", "speed_change", "deck"}, default "overground"
+        What a pass is (:data:`WALKER_KINDS`).
+    size_factor : float, default 1
+        Multiplies the sizes of the hidden effects.
+
+    Returns
+    -------
+    list of Simulation
+        One per pass; each truth names the walker (``truth["walker_seed"]``), the pass
+        (``truth["walk_index"]``) and the kind.
+    """
+    wanted = _check_names(names, kind, WALKER_KINDS, "hidden_effect_walker")
+    if int(walks) != walks or walks < 1:
+        raise UsageError(
+            f"hidden_effect_walker: walks must be a whole number of at least 1, got {walks!r}",
+            parameter="walks",
+        )
+    if not (math.isfinite(size_factor) and size_factor > 0):
+        raise UsageError(
+            f"hidden_effect_walker: size_factor must be positive, got {size_factor!r}",
+            parameter="size_factor",
+        )
+    i = seed % 3 if level is None else int(level)
+    sizes = {n: size_factor * HIDDEN_EFFECT_LEVELS[n][i] for n in wanted}
+    walker = varied_walk_details(seed)
+    base_pacing = float(walker.pop("pacing_hz"))
+    walker.pop("duration_s")
+    # The walker's SMD: the population laws at its usual pacing, the same in every pass.
+    fn = population_natural_frequency_hz(base_pacing)
+    zeta = population_damping_ratio(base_pacing)
+    deck = _kind_details(seed)
+    out = []
+    for index in range(int(walks)):
+        rng = np.random.default_rng([seed, 0x9A55, index])
+        pacing = base_pacing * float(rng.uniform(*PASS_PACING_RANGE))
+        own = _kind_details(_pass_seed(seed, index))
+        if kind == "speed_change":
+            gait = GaitProfile.speed_change(
+                pacing,
+                own["pacing_ratio"],
+                steps_before=own["steps_before"],
+                steps_after=own["steps_after"],
+            )
+        else:
+            gait = GaitProfile.overground(walking_steps=own["walking_steps"])
+        duration = gait.relative_length() / pacing
+        ground: Any = None
+        if "base_motion" in sizes:
+            amp, w = sizes["base_motion"], 2.0 * math.pi * 2.7
+            phase = float(rng.uniform(0.0, 2.0 * math.pi))
+
+            def ground(t: Any, amp: float = amp, w: float = w, phase: float = phase) -> Any:
+                return amp * np.sin(w * np.asarray(t) + phase)
+
+        elif kind == "deck":
+            centre = deck["deck_ratio"] * base_pacing
+            if deck["deck_kind"] == "sine":
+                ground = SineDeck(deck["deck_rms_m_s2"], centre, own["deck_phase_rad"])
+            else:
+                width = deck["deck_bandwidth_fraction"] * centre
+                ground = NarrowBandDeck(deck["deck_rms_m_s2"], centre, width, seed=own["deck_seed"])
+        effects = [_hidden_effect(n, sizes[n], duration) for n in wanted if n != "base_motion"]
+        sim = simulate_walking(
+            **walker,
+            pacing_hz=pacing,
+            duration_s=duration,
+            natural_frequency_hz=fn,
+            damping_ratio=zeta,
+            start="rest" if gait.amplitude_factors[0] == 0.0 else "steady",
+            effects=effects,
+            ground_acc_m_s2=ground,
+            seed=_pass_seed(seed, index),
+            gait=gait,
+        )
+        truth = sim.record.metadata["truth"]
+        truth.update(walk_kind=kind, walker_seed=seed, walk_index=index)
+        out.append(sim)
+    return out
