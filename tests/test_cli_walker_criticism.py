@@ -73,8 +73,9 @@ def test_diagnose_over_several_files_pools_the_walks(walker, run_once):
     assert base["walks"] == WALKS
     assert [w["source"] for w in base["per_walk"]] == [str(p) for p in paths]
     assert all(w["steps"] > 0 for w in base["per_walk"])
+    assert all(w["start_stop_steps_left_out"] == [3, 3] for w in base["per_walk"])
     assert base["walk_heldout_rmse_n"] > 0
-    assert base["asymmetry_labelling"]
+    assert base["asymmetry_labelling"] == "sign-free (per walk)"  # no foot channels
     # The one-step-ahead check is per record: said in the JSON, not run.
     assert base["one_step"] == "not run over several walks"
     assert "posterior_predictive" not in obj

@@ -12,11 +12,14 @@ from workbench.diagnostics.criticism import _RIDGE, diagnose, prepare
 from workbench.diagnostics.walker import (
     Walk,
     _pool,
+    _steady,
     _walk_heldout_step_sse,
     compare_walker,
     diagnose_walker,
     first_foot,
     prepare_walks,
+    start_stop_steps,
+    walk_clustered_gain,
 )
 from workbench.errors import UsageError
 from workbench.models.effects import effect_from_name
@@ -143,10 +146,17 @@ def test_asymmetry_aligned_by_the_feet_transfers_to_held_out_walks() -> None:
     falls; sign-free (no channels), each walk has its own set and a held-out walk gains
     nothing from the others."""
     sims = hidden_effect_walker("gait_asymmetry", 4, 4, level=2)
-    right = prepare_walks([_with_feet(s) for s in sims])
+    right = list(prepare_walks([_with_feet(s) for s in sims]))
+    # The first walk cut to ten steps keeps its start and stop (fewer than twelve steps),
+    # so its first foot is read as given, while the others' flip with the three steps left
+    # out: the alignment must hold across both.
+    short = right[0]
+    right[0] = dataclasses.replace(short, data=short.data.step_range(0, 10))
     wrong = prepare_walks([_with_feet(s, swap=i % 2 == 1) for i, s in enumerate(sims)])
     free = prepare_walks([s.record for s in sims])
     scores = {}
+    board = compare_walker(right, ["gait_asymmetry"], surface="rigid")
+    assert board.coefficients[0].walk_of_coefficient == (None,) * 8
     for label, walks in (("right", right), ("wrong", wrong), ("free", free)):
         diag = diagnose_walker(walks, surface="rigid")
         mine = next(c for c in diag.candidates if c.effect == "gait_asymmetry")
@@ -169,3 +179,69 @@ def test_walker_criticism_refuses_what_it_cannot_pool() -> None:
         compare_walker(walks, ["base_motion"], surface="rigid")
     with pytest.raises(UsageError, match="records, prepared records or Walk"):
         prepare_walks(["not a record"])  # type: ignore[list-item]
+    with pytest.raises(UsageError, match="list of records"):
+        prepare_walks(3.0)  # type: ignore[arg-type]
+    assert len(prepare_walks(walks[0])) == 1  # one walk alone is a list of one
+    with pytest.raises(UsageError, match="harmonics must be a whole number"):
+        diagnose_walker(walks, harmonics=0)
+    with pytest.raises(UsageError, match="folds must be a whole number"):
+        compare_walker(walks, ["heel_impact"], folds=1)
+    with pytest.raises(UsageError, match="keeps 4 whole steps"):
+        diagnose_walker([walks[0], Walk(walks[1].data.step_range(0, 4))])
+    with pytest.raises(UsageError, match="level must be 0, 1 or 2"):
+        hidden_effect_walker("none", 1, 2, level=7)
+    with pytest.raises(UsageError, match="walks must be a whole number"):
+        hidden_effect_walker("none", 1, None)  # type: ignore[arg-type]
+
+
+def test_step_range_cuts_a_record_at_its_steps() -> None:
+    """The steps between keep their samples, phase (0 at the new first footfall), step
+    numbers and boundaries; the start and stop left out are three steps at each end."""
+    data = prepare(hidden_effect_walker("none", 6, 1)[0].record)
+    part = data.step_range(3, data.n_steps - 3)
+    keep = (data.step >= 3) & (data.step < data.n_steps - 3)
+    assert part.n_steps == data.n_steps - 6
+    np.testing.assert_array_equal(part.time_s, data.time_s[keep])
+    np.testing.assert_array_equal(part.step, data.step[keep] - 3)
+    np.testing.assert_array_equal(part.footfall_times_s, data.footfall_times_s[3:-3])
+    np.testing.assert_allclose(part.phase_rad, data.phase_rad[keep] - 6 * np.pi, atol=1e-12)
+    assert np.all(np.floor(part.phase_rad / (2 * np.pi)) == part.step)
+    assert start_stop_steps(data) == (3, 3)
+    assert start_stop_steps(data.step_range(0, 11)) == (0, 0)
+
+
+def test_walk_clustered_gain_is_the_ratio_with_walks_as_clusters() -> None:
+    """Against the linearised cluster-robust error of a ratio computed by hand."""
+    rng = np.random.default_rng(3)
+    walk = np.repeat(np.arange(4), [5, 7, 6, 8])
+    base = rng.uniform(1.0, 2.0, walk.size)
+    ext = base * rng.uniform(0.6, 1.0, walk.size)
+    gain, se = walk_clustered_gain(base, ext, walk)
+    d = np.array([np.sum((base - ext)[walk == w]) for w in range(4)])
+    b = np.array([np.sum(base[walk == w]) for w in range(4)])
+    assert gain == pytest.approx(d.sum() / b.sum(), rel=1e-12)
+    var = 4 / 3 * np.sum((d - gain * b) ** 2) / b.sum() ** 2
+    assert se == pytest.approx(np.sqrt(var), rel=1e-12)
+
+
+def test_per_walk_coefficients_carry_the_walks_jackknife() -> None:
+    """Sign-free asymmetry: each walk its own coefficients, labelled by walk; no
+    per-coefficient errors (too few clusters per walk), the force's error the jackknife over
+    the walks; the surface's columns join each walk's baseline over a deck."""
+    walks = _walks("gait_asymmetry", 8, 3)
+    got = compare_walker(walks, ["gait_asymmetry"], surface="rigid").coefficients[0]
+    assert got.sharing == "per walk"
+    assert got.walk_of_coefficient == (0,) * 8 + (1,) * 8 + (2,) * 8
+    assert all(np.isnan(got.standard_errors))
+    assert got.to_json()["standard_errors"] == [None] * 24
+    assert 0 < got.force_rms_se_n < got.force_rms_n
+    deck = _walks("none", 8, 2, kind="deck")
+    coupled = _pool(_steady(deck, True), [], 6, 10, True, True, True)
+    rigid_frame = [
+        dataclasses.replace(w, data=dataclasses.replace(w.data, ground=None)) for w in deck
+    ]
+    plain = _pool(_steady(rigid_frame, True), [], 6, 10, True, True, True)
+    assert coupled.cv.slices["baseline"].size == plain.cv.slices["baseline"].size
+    framed = [dataclasses.replace(w, data=w.data.coupled_to_surface()) for w in deck]
+    with_surface = _pool(_steady(framed, True), [], 6, 10, True, True, True)
+    assert with_surface.cv.slices["baseline"].size == plain.cv.slices["baseline"].size + 6

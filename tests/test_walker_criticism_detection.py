@@ -5,8 +5,10 @@ sizes in turn). Every row uses the walkers 100-109, fixed before the results wer
 docs' table, ``analyses/walker_criticism_detection.py``, uses walkers 0-9). A row's claim is
 the rate docs/validation/criticism.md states ("Several walks of one walker"); the test's
 floor is the binomial tolerance around it: the fewest successes in ten that a true rate
-equal to the claim reaches with 95 % probability (:func:`binomial_floor`). The rows without
-an effect are in ``tests/test_walker_criticism_calibration.py``.
+equal to the claim reaches with 95 % probability (:func:`binomial_floor`): a claim of 8 in
+10 passes the test from 6 in 10, so the test guards the claim against a real fall, not
+against one unlucky walker. The rows without an effect are in
+``tests/test_walker_criticism_calibration.py``.
 """
 
 from __future__ import annotations

@@ -493,7 +493,8 @@ StepVariation`), but a transient of a few milliseconds locked to the heel strike
     at the step's boundary the step's own shift, linear in the phase up to the next
     boundary's, so the phase stays continuous and increasing.
 
-    What is gained is measured by ``analyses/heel_impact_timing.py``.
+    What is gained is measured by ``analyses/heel_impact_timing.py``. The array is computed
+    once per record and shared by later calls, so it is read-only (copy it to change it).
     """
     cached = _TIMED_PHASES.get(data)
     if cached is not None:

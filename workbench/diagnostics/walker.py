@@ -74,10 +74,13 @@ candidates at the family-wise level, stage by stage. A second score holds out *w
 walks*: the shared coefficients are fitted on the other walks and predict the held-out
 walk, whose own baseline (and any coefficients of its own) comes from the step-blocked
 folds inside it. That is the error on a new pass of the same walker, and the scoreboard
-(:func:`compare_walker`) reports it beside the step-held-out error. The coefficients of the
+(:func:`compare_walker`) reports it beside the step-held-out error; its standard error
+takes the walks as clusters (:func:`walk_clustered_gain`), since every step of a held-out
+walk shares the error of the coefficients learned on the others. The coefficients of the
 effects added are reported at the walker level with cluster-robust standard errors (the
 blocks of steps as clusters), and each effect's force over the walks [N RMS] with its
-standard error by the delta method.
+standard error by the delta method; coefficients fitted walk by walk get none (a walk's
+few blocks are too few clusters) and their force's error is the jackknife over the walks.
 """
 
 from __future__ import annotations
@@ -107,7 +110,6 @@ from workbench.diagnostics.criticism_engine import (
     _CV,
     _Piece,
     _row,
-    paired_gain,
     record_blocks,
     step_blocks,
 )
@@ -131,6 +133,7 @@ __all__ = [
     "first_foot",
     "prepare_walks",
     "start_stop_steps",
+    "walk_clustered_gain",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -143,6 +146,8 @@ FOOT_AGREEMENT_MIN = 0.8
 START_STOP_STEPS = 3
 #: Steps a walk keeps at least when its start and stop are left out.
 MIN_STEADY_STEPS = 6
+#: Fewest whole steps of a walk in a pooled criticism (two blocks of steps).
+MIN_WALK_STEPS = 6
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,6 +270,13 @@ def prepare_walks(
     -------
     tuple of Walk
     """
+    if isinstance(records, Record | CriticismData | Walk):
+        records = [records]
+    if isinstance(records, str | bytes) or not hasattr(records, "__iter__"):
+        raise UsageError(
+            "a walker's walks must be a list of records, prepared records or Walk objects; "
+            f"got {type(records).__name__}"
+        )
     out = []
     for item in records:
         if isinstance(item, Walk):
@@ -285,6 +297,12 @@ def prepare_walks(
             )
     if not out:
         raise UsageError("a walker's criticism needs at least one walk; give one or more records")
+    for i, w in enumerate(out):
+        if w.data.n_steps < MIN_WALK_STEPS:
+            raise UsageError(
+                f"walk {i + 1} ({w.source}) keeps {w.data.n_steps} whole steps; a walk needs "
+                f"at least {MIN_WALK_STEPS} to be criticised: leave it out"
+            )
     return tuple(out)
 
 
@@ -450,6 +468,26 @@ def _walk_heldout_step_sse(pool: _Pool, groups: Sequence[str]) -> FloatArray | N
     return sse
 
 
+def walk_clustered_gain(
+    sse_base: FloatArray, sse_extended: FloatArray, walk_of_step: NDArray[np.int64]
+) -> tuple[float, float]:
+    """Fraction of whole-walk held-out squared error removed, with walks as clusters.
+
+    With whole walks held out, every step of a walk shares the error of the coefficients
+    fitted on the other walks, so the unit of evidence is the walk: the ratio
+    ``sum(base - extended) / sum(base)`` with the cluster-robust (linearised) standard error
+    over the walks, ``W / (W - 1)`` small-sample factor.
+    """
+    diff = np.bincount(walk_of_step, weights=sse_base - sse_extended)
+    base = np.bincount(walk_of_step, weights=sse_base)
+    total = max(float(base.sum()), 1e-300)
+    gain = float(diff.sum()) / total
+    n = diff.size
+    resid = diff - gain * base
+    var = n / max(n - 1, 1) * float(resid @ resid) / total**2
+    return gain, float(np.sqrt(var))
+
+
 def _coefficients(pool: _Pool, groups: Sequence[str], name: str) -> EffectCoefficients:
     """Return an added effect's walker-level coefficients and force, cluster-robust errors."""
     cv = pool.cv
@@ -468,9 +506,9 @@ def _coefficients(pool: _Pool, groups: Sequence[str], name: str) -> EffectCoeffi
         sel = pos[p.columns] >= 0
         contrib = p.x[:, sel] * resid[p.rows, None]
         blk = cv.block_of[p.rows]
-        sums = np.zeros((cv.n_blocks, int(sel.sum())))
-        np.add.at(sums, blk, contrib)
-        meat_rows[:, pos[p.columns[sel]]] += sums
+        by_block = np.zeros((cv.n_blocks, int(sel.sum())))
+        np.add.at(by_block, blk, contrib)
+        meat_rows[:, pos[p.columns[sel]]] += by_block
     n_b = cv.n_blocks
     meat = meat_rows.T @ meat_rows * (n_b / max(n_b - 1, 1))
     cov = bread @ meat @ bread
@@ -480,27 +518,69 @@ def _coefficients(pool: _Pool, groups: Sequence[str], name: str) -> EffectCoeffi
     coef_all = beta / cv.scale
     cov_e = cov[np.ix_(at, at)] / np.outer(cv.scale[mine], cv.scale[mine])
     # The effect's force on the walks, before the step-variation map [N RMS].
-    forces, grads, n = [], np.zeros(mine.size), 0
-    for cols in pool.raw:
+    per_walk = pool.sharing[name] == "per walk"
+    walk_of_coefficient: list[int | None] = [None] * mine.size
+    sums: list[float] = []
+    counts: list[int] = []
+    grads = np.zeros(mine.size)
+    for i, cols in enumerate(pool.raw):
         if name not in cols:
             continue
         c, where = cols[name]
         f = c @ coef_all[where]
-        forces.append(f)
+        sums.append(float(f @ f))
+        counts.append(f.size)
         grads[where - mine[0]] += c.T @ f
-        n += f.size
-    force = np.concatenate(forces) if forces else np.zeros(1)
-    rms = float(np.sqrt(np.mean(force**2)))
-    grad = grads / max(n * rms, 1e-300)
-    rms_se = float(np.sqrt(max(grad @ cov_e @ grad, 0.0)))
+        if per_walk:
+            for k in where - mine[0]:
+                walk_of_coefficient[int(k)] = i
+    total, n = float(np.sum(sums)), max(int(np.sum(counts)), 1)
+    rms = float(np.sqrt(total / n))
+    ses = np.sqrt(np.clip(np.diag(cov_e), 0.0, None))
+    if per_walk:
+        # A walk's own coefficients are fitted on its few blocks of steps beside its own
+        # baseline: too few clusters for a cluster-robust error, which then comes out too
+        # small. The force's error is the jackknife over the walks instead, and the
+        # coefficients get none.
+        ses = np.full(mine.size, np.nan)
+        rms_se = _jackknife_rms(np.asarray(sums), np.asarray(counts, dtype=np.float64))
+    else:
+        grad = grads / max(n * rms, 1e-300)
+        rms_se = float(np.sqrt(max(grad @ cov_e @ grad, 0.0)))
     return EffectCoefficients(
         effect=name,
         sharing=pool.sharing[name],
         coefficients=tuple(float(v) for v in coef_all[mine]),
-        standard_errors=tuple(float(v) for v in np.sqrt(np.clip(np.diag(cov_e), 0.0, None))),
+        standard_errors=tuple(float(v) for v in ses),
         force_rms_n=rms,
         force_rms_se_n=rms_se,
+        walk_of_coefficient=tuple(walk_of_coefficient),
     )
+
+
+def _jackknife_rms(sums: FloatArray, counts: FloatArray) -> float:
+    """Jackknife standard error over walks of ``sqrt(sum(sums) / sum(counts))`` (NaN below 3)."""
+    w = sums.size
+    if w < 3:
+        return float("nan")
+    leave = np.sqrt((sums.sum() - sums) / (counts.sum() - counts))
+    return float(np.sqrt((w - 1) / w * np.sum((leave - leave.mean()) ** 2)))
+
+
+def _check_settings(harmonics: int | None, folds: int, where: str) -> None:
+    """Refuse harmonics and folds the engine cannot use, in one sentence."""
+    if harmonics is not None and (
+        isinstance(harmonics, bool) or not isinstance(harmonics, int | np.integer) or harmonics < 1
+    ):
+        raise UsageError(
+            f"{where}: harmonics must be a whole number of at least 1, got {harmonics!r}",
+            parameter="harmonics",
+        )
+    if isinstance(folds, bool) or not isinstance(folds, int | np.integer) or folds < 3:
+        raise UsageError(
+            f"{where}: folds must be a whole number of at least 3, got {folds!r}",
+            parameter="folds",
+        )
 
 
 def _walks_in_frame(
@@ -533,8 +613,10 @@ def _on_walks(text: str) -> str:
     """Say "the walker's walks" where the single record's wording says "this record"."""
     for single, pooled in (
         ("on this record", "on these walks"),
+        ("On this record", "On these walks"),
         ("this record could", "these walks could"),
         ("the record cannot show", "the walks cannot show"),
+        ("what the record shows", "what the walks show"),
     ):
         text = text.replace(single, pooled)
     return text
@@ -575,6 +657,7 @@ surface, follow_pace
     -------
     WalkerDiagnosis
     """
+    _check_settings(harmonics, folds, "diagnose")
     walks = _walks_in_frame(_steady(prepare_walks(walks), start_stop), model, surface, "diagnose")
     current_effects, harmonics = _resolve(model, effects, harmonics, "diagnose")
     current = [e.name for e in current_effects]
@@ -623,8 +706,7 @@ surface, follow_pace
         if walk_base is not None and c.testable:
             ext = _walk_heldout_step_sse(pool, [*current, c.effect])
             assert ext is not None
-            score, se, _ = paired_gain(walk_base, ext)
-            walk_scores[c.effect] = (score, se)
+            walk_scores[c.effect] = walk_clustered_gain(walk_base, ext, pool.layout.walk_of_step)
     feet_known = all(w.first_foot is not None for w in walks)
     baseline: dict[str, Any] = {
         "model": "baseline per walk" + "".join(f" + {e}" for e in current),
@@ -704,6 +786,7 @@ follow_pace
     -------
     WalkerComparison
     """
+    _check_settings(harmonics, folds, "compare")
     walks = _steady(prepare_walks(walks), start_stop)
     model, effect_list, harmonics = compared_effects(effects, model, harmonics)
     walks = _walks_in_frame(walks, model, surface, "compare")
@@ -721,16 +804,23 @@ follow_pace
     rows: list[WalkScoreRow] = []
     prev_walk = _walk_heldout_step_sse(pool, [])
     first_row = _row(cv, [], "baseline per walk", None)
-    rows.append(WalkScoreRow.from_row(first_row, prev_walk, None, cv.y.size))
+
+    def walk_rmse(sse: FloatArray | None) -> float | None:
+        return None if sse is None else float(np.sqrt(sse.sum() / cv.y.size))
+
+    rows.append(WalkScoreRow.from_row(first_row, walk_rmse(prev_walk), None))
     coefficients = []
     for i in range(len(names)):
         prev, _ = cv.fold_sse(names[:i])
         label = "baseline per walk + " + " + ".join(names[: i + 1])
         walk_sse = _walk_heldout_step_sse(pool, names[: i + 1])
+        gain = (
+            None
+            if walk_sse is None or prev_walk is None
+            else walk_clustered_gain(prev_walk, walk_sse, pool.layout.walk_of_step)
+        )
         rows.append(
-            WalkScoreRow.from_row(
-                _row(cv, names[: i + 1], label, prev), walk_sse, prev_walk, cv.y.size
-            )
+            WalkScoreRow.from_row(_row(cv, names[: i + 1], label, prev), walk_rmse(walk_sse), gain)
         )
         prev_walk = walk_sse
         coefficients.append(_coefficients(pool, names[: i + 1], names[i]))

@@ -34,9 +34,9 @@ class WalkScoreRow(ScoreRow):
         RMSE with whole walks held out [N] (the shared coefficients from the other walks);
         None with one walk.
     walk_rmse_drop_fraction, walk_rmse_drop_se : float or None
-        Its relative drop from the row before and the drop's standard error (the step-paired
-        long-run error of the squared-error gain, carried to the RMSE); None on the first
-        row or with one walk.
+        Its relative drop from the row before and the drop's standard error (walks as
+        clusters: every step of a held-out walk shares the error of the coefficients
+        learned on the others); None on the first row or with one walk.
     """
 
     walk_heldout_rmse_n: float | None = None
@@ -47,22 +47,21 @@ class WalkScoreRow(ScoreRow):
     def from_row(
         cls,
         row: ScoreRow,
-        walk_sse: FloatArray | None,
-        previous_walk_sse: FloatArray | None,
-        n_samples: int,
+        walk_heldout_rmse_n: float | None,
+        walk_gain: tuple[float, float] | None,
     ) -> WalkScoreRow:
-        """Add the whole-walk scores to a step-held-out row."""
-        from workbench.diagnostics.criticism_engine import paired_gain
+        """Add the whole-walk scores to a step-held-out row.
 
-        rmse = drop = se = None
-        if walk_sse is not None:
-            rmse = float(math.sqrt(walk_sse.sum() / n_samples))
-            if previous_walk_sse is not None:
-                gain, gain_se, _ = paired_gain(previous_walk_sse, walk_sse)
-                drop = 1.0 - math.sqrt(max(1.0 - gain, 0.0))
-                # d(1 - sqrt(1 - g)) / dg = 1 / (2 sqrt(1 - g)).
-                se = gain_se / (2.0 * math.sqrt(max(1.0 - gain, 1e-12)))
-        return cls(**dataclasses.asdict(row), walk_heldout_rmse_n=rmse,
+        ``walk_gain`` is the fraction of the previous row's whole-walk held-out squared
+        error removed and its standard error (walks as clusters), carried here to the RMSE.
+        """
+        drop = se = None
+        if walk_gain is not None:
+            gain, gain_se = walk_gain
+            drop = 1.0 - math.sqrt(max(1.0 - gain, 0.0))
+            # d(1 - sqrt(1 - g)) / dg = 1 / (2 sqrt(1 - g)).
+            se = gain_se / (2.0 * math.sqrt(max(1.0 - gain, 1e-12)))
+        return cls(**dataclasses.asdict(row), walk_heldout_rmse_n=walk_heldout_rmse_n,
                    walk_rmse_drop_fraction=drop, walk_rmse_drop_se=se)  # fmt: skip
 
 
@@ -81,10 +80,16 @@ class EffectCoefficients:
         The coefficients of the effect's criticism columns
         (:meth:`~workbench.models.effect_base.Effect.criticism_columns`; units those of
         ``N`` over the column's) with cluster-robust standard errors (blocks of steps as
-        clusters).
+        clusters). Per walk: no standard errors (NaN; null in JSON): a walk's few blocks
+        are too few clusters.
     force_rms_n, force_rms_se_n : float
-        The effect's force over the walks it was fitted on [N RMS] and its standard error
-        (delta method): the size of the effect, whatever its sharing.
+        The effect's force over the walks it was fitted on [N RMS] and its standard error:
+        the delta method for shared coefficients; per walk, the jackknife over the walks
+        (NaN with fewer than three), and the force then includes the fit's own noise, so
+        it is biased up when the effect is small.
+    walk_of_coefficient : tuple of int or None
+        Per walk: the walk (its index in the walks given) each coefficient belongs to;
+        None for shared coefficients.
     """
 
     effect: str
@@ -93,12 +98,19 @@ class EffectCoefficients:
     standard_errors: tuple[float, ...]
     force_rms_n: float
     force_rms_se_n: float
+    walk_of_coefficient: tuple[int | None, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-able dictionary."""
+        """JSON-able dictionary (NaN as null)."""
+
+        def number(v: float) -> float | None:
+            return None if not math.isfinite(v) else v
+
         out = dataclasses.asdict(self)
         out["coefficients"] = list(self.coefficients)
-        out["standard_errors"] = list(self.standard_errors)
+        out["standard_errors"] = [number(v) for v in self.standard_errors]
+        out["force_rms_se_n"] = number(self.force_rms_se_n)
+        out["walk_of_coefficient"] = list(self.walk_of_coefficient)
         return out
 
     to_dict = to_json
@@ -267,8 +279,8 @@ class WalkerComparison:
         lines = [f"Scoreboard over {len(self.sources)} walks of one walker", *_table(header, rows)]
         lines.append("")
         for c in self.coefficients:
+            se = "" if not math.isfinite(c.force_rms_se_n) else f" +- {c.force_rms_se_n:.2g}"
             lines.append(
-                f"{c.effect} ({c.sharing}): force {c.force_rms_n:.3g} +- "
-                f"{c.force_rms_se_n:.2g} N RMS over the walks"
+                f"{c.effect} ({c.sharing}): force {c.force_rms_n:.3g}{se} N RMS over the walks"
             )
         return "\n".join(lines)

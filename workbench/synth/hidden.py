@@ -284,7 +284,7 @@ def hidden_effect_walker(
         (``truth["walk_index"]``) and the kind.
     """
     wanted = _check_names(names, kind, WALKER_KINDS, "hidden_effect_walker")
-    if int(walks) != walks or walks < 1:
+    if isinstance(walks, bool) or not isinstance(walks, int | np.integer) or walks < 1:
         raise UsageError(
             f"hidden_effect_walker: walks must be a whole number of at least 1, got {walks!r}",
             parameter="walks",
@@ -293,6 +293,11 @@ def hidden_effect_walker(
         raise UsageError(
             f"hidden_effect_walker: size_factor must be positive, got {size_factor!r}",
             parameter="size_factor",
+        )
+    if level is not None and level not in (0, 1, 2):
+        raise UsageError(
+            f"hidden_effect_walker: level must be 0, 1 or 2 (small, middle, large), got {level!r}",
+            parameter="level",
         )
     i = seed % 3 if level is None else int(level)
     sizes = {n: size_factor * HIDDEN_EFFECT_LEVELS[n][i] for n in wanted}
