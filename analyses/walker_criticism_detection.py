@@ -191,9 +191,11 @@ def table(results: list[dict[str, Any]], seeds: list[int]) -> list[str]:
         sep = float(np.median([r["separable_fraction"] for r in recs]))
         force = float(np.median([r["force_n"] for r in recs]))
         force_se = float(np.median([r["force_se_n"] for r in recs]))
+        # No error for coefficients fitted per pass with fewer than three passes.
+        se_text = f"{force_se:.2g}" if np.isfinite(force_se) else "-"
         lines.append(
             f"| {kind} | {hidden} | {k} | {span} | {found}/{n} | {insep}/{n} | {cut}/{n} | {wc} "
-            f"| {wrong}/{n} | {100 * sep:.1f} % | {force:.3g} ({force_se:.2g}) |"
+            f"| {wrong}/{n} | {100 * sep:.1f} % | {force:.3g} ({se_text}) |"
         )
     lines.append("")
     for k, (w, m) in sorted(totals.items()):
