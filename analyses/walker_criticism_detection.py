@@ -6,6 +6,7 @@ Usage::
     python analyses/walker_criticism_detection.py --only overground:heel_impact --walks 6
     python analyses/walker_criticism_detection.py --calibration --seeds 0-49 --walks 6
     python analyses/walker_criticism_detection.py --kinds overground --walks 6 --keep-ends
+    python analyses/walker_criticism_detection.py --only deck:none --no-surface-response
 
 Every row is one kind of pass (``workbench.synth.hidden_effect_walker``: overground passes
 on a rigid floor, passes that change pace, overground passes over a vibrating deck) with
@@ -76,19 +77,21 @@ def rows(kinds: Iterable[str] = WALKER_KINDS) -> list[tuple[str, str]]:
 
 
 #: A job: kind, hidden effect, walker seed, numbers of passes, whether each pass's first
-#: and last steps are left out (the default of ``diagnose_walker``).
-Job = tuple[str, str, int, tuple[int, ...], bool]
+#: and last steps are left out and whether a coupled surface's motion joins each pass's
+#: baseline (both the defaults of ``diagnose_walker``).
+Job = tuple[str, str, int, tuple[int, ...], bool, bool]
 
 
 def one_walker(job: Job) -> list[dict[str, Any]]:
     """Diagnose one walker's first k passes for every k; return what the table counts."""
-    kind, hidden, seed, counts, start_stop = job
+    kind, hidden, seed, counts, start_stop, surface_response = job
+    settings = {"start_stop": start_stop, "surface_response": surface_response}
     sims = hidden_effect_walker(hidden, seed, max(counts), kind=kind)
     walks = [Walk(prepare_record(s.record)) for s in sims]
     surface = "coupled" if kind == "deck" else "rigid"
     out = []
     for k in counts:
-        diag = diagnose_walker(walks[:k], surface=surface, start_stop=start_stop)
+        diag = diagnose_walker(walks[:k], surface=surface, **settings)
         cands = {c.effect: c for c in diag.candidates}
         top = diag.candidates[0]
         n_test = sum(c.testable for c in diag.candidates)
@@ -122,7 +125,7 @@ def one_walker(job: Job) -> list[dict[str, Any]]:
             )
             res["inseparable"] = (not mine.significant) and "cannot be separated" in (mine.evidence)
             res["separable_fraction"] = mine.separable_fraction
-            board = compare_walker(walks[:k], [hidden], surface=surface, start_stop=start_stop)
+            board = compare_walker(walks[:k], [hidden], surface=surface, **settings)
             row = board[1]
             res["cut"] = bool(row.rmse_drop_fraction > row.rmse_drop_se)
             res["walk_cut"] = (
@@ -248,6 +251,11 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="keep each pass's first and last steps (start_stop=False)",
     )
+    ap.add_argument(
+        "--no-surface-response",
+        action="store_true",
+        help="leave a coupled deck's motion out of each pass's baseline (surface_response=False)",
+    )
     ap.add_argument("--markdown", type=Path, help="also write the table to this file")
     args = ap.parse_args(argv)
     seeds = _seeds(args.seeds)
@@ -259,7 +267,11 @@ def main(argv: list[str] | None = None) -> int:
     elif args.only:
         wanted = {tuple(item.split(":", 1)) for item in args.only.split(",")}
         chosen = [r for r in chosen if r in wanted]
-    jobs = [(k, h, s, counts, not args.keep_ends) for k, h in chosen for s in seeds]
+    jobs = [
+        (k, h, s, counts, not args.keep_ends, not args.no_surface_response)
+        for k, h in chosen
+        for s in seeds
+    ]
     results = run(jobs, args.workers)
     lines = calibration(results) if args.calibration else table(results, seeds)
     print("\n".join(lines))

@@ -62,7 +62,8 @@ the pacing a few frequency bins away in a 10 s pass) took it up: on walkers with
 effect over a deck, six passes called an asymmetry on 5 of 10 and twelve on 9 of 10. So
 each pass's baseline also carries the measured surface motion (displacement, velocity,
 acceleration) with free coefficients: for a deck moving at one frequency that is exactly
-the pass's own response to it, whatever ``K`` and ``C``.
+the pass's own response to it, whatever ``K`` and ``C`` (``surface_response=False`` leaves
+them out, kept to measure what they change).
 
 Scores
 ------
@@ -340,13 +341,14 @@ def _pool(
     step_variation: bool,
     response_modulation: bool,
     follow_pace: bool,
+    surface_response: bool = True,
 ) -> _Pool:
     built = [
         record_blocks(w.data, effects, harmonics, step_variation, response_modulation, follow_pace)
         for w in walks
     ]
     for walk, (b, _, _) in zip(walks, built, strict=True):
-        if walk.data.surface_coupled and walk.data.ground is not None:
+        if surface_response and walk.data.surface_coupled and walk.data.ground is not None:
             # The walk's own response to the surface (module docstring, "Surfaces").
             b["baseline"] = np.column_stack([b["baseline"], *walk.data.ground])
     feet_known = all(w.first_foot is not None for w in walks)
@@ -635,6 +637,7 @@ def diagnose_walker(
     surface: str | None = None,
     follow_pace: bool = True,
     start_stop: bool = True,
+    surface_response: bool = True,
 ) -> WalkerDiagnosis:
     """Rank candidate effects by the held-out error they remove over a walker's walks.
 
@@ -652,6 +655,10 @@ surface, follow_pace
     start_stop : bool, default True
         Leave the first and last steps of each walk out (:func:`start_stop_steps`; module
         docstring, "Starts and stops"); False keeps every step.
+    surface_response : bool, default True
+        With the surface coupled, give each walk's baseline the measured surface motion
+        (module docstring, "Surfaces"); False leaves it out, kept to measure what it
+        changes.
 
     Returns
     -------
@@ -670,6 +677,7 @@ surface, follow_pace
         step_variation,
         response_modulation,
         follow_pace,
+        surface_response,
     )
     cv = pool.cv
     base_row = _row(cv, current, "baseline", None)
@@ -727,6 +735,7 @@ surface, follow_pace
         "response_modulation": bool(response_modulation),
         "follow_pace": bool(follow_pace),
         "start_stop": bool(start_stop),
+        "surface_response": bool(surface_response),
         "per_walk": [
             {
                 "source": w.source,
@@ -766,6 +775,7 @@ def compare_walker(
     surface: str | None = None,
     follow_pace: bool = True,
     start_stop: bool = True,
+    surface_response: bool = True,
 ) -> WalkerComparison:
     """Scoreboard over a walker's walks: the baseline, then each effect added in turn.
 
@@ -779,7 +789,7 @@ def compare_walker(
     effects, model, harmonics, folds, step_variation, response_modulation, surface, \
 follow_pace
         As in :func:`~workbench.diagnostics.criticism.compare`.
-    start_stop : bool, default True
+    start_stop, surface_response : bool, default True
         As in :func:`diagnose_walker`.
 
     Returns
@@ -793,7 +803,16 @@ follow_pace
     added = list(effect_list)
     names = [e.name for e in added]
     _candidates(walks, names, [], "compare")
-    pool = _pool(walks, added, harmonics, folds, step_variation, response_modulation, follow_pace)
+    pool = _pool(
+        walks,
+        added,
+        harmonics,
+        folds,
+        step_variation,
+        response_modulation,
+        follow_pace,
+        surface_response,
+    )
     if pool.untestable:
         raise UsageError(
             f"compare: effect '{pool.untestable[0]}' cannot be tested on any of the walks (for "
