@@ -232,17 +232,28 @@ class _CV:
         self.xty = np.zeros((n_folds, n_cols))
         self.yty = np.zeros(n_folds)
         self.count = np.zeros(n_folds)
+        #: Each piece's Gram matrix and ``x' y`` over all its samples, on its own columns
+        #: (a pooled criticism refits without one piece at a time).
+        self.piece_gram: list[FloatArray] = []
+        self.piece_xty: list[FloatArray] = []
         for p in self.pieces:
             fold = self.fold_of[p.rows]
             yp = self.y[p.rows]
             cols = np.ix_(p.columns, p.columns)
+            g_piece = np.zeros((p.columns.size, p.columns.size))
+            b_piece = np.zeros(p.columns.size)
             for f in range(n_folds):
                 sel = fold == f
                 xf, yf = p.x[sel], yp[sel]
-                self.gram[f][cols] += xf.T @ xf
-                self.xty[f][p.columns] += xf.T @ yf
+                g_fold, b_fold = xf.T @ xf, xf.T @ yf
+                self.gram[f][cols] += g_fold
+                self.xty[f][p.columns] += b_fold
+                g_piece += g_fold
+                b_piece += b_fold
                 self.yty[f] += yf @ yf
                 self.count[f] += sel.sum()
+            self.piece_gram.append(g_piece)
+            self.piece_xty.append(b_piece)
         self.gram_all = self.gram.sum(axis=0)
         self.xty_all = self.xty.sum(axis=0)
 

@@ -361,8 +361,7 @@ def _pool(
         else:
             sharing[e.name] = "per walk"
     names = [e.name for e in effects]
-    present = {n: [n in blocks for blocks, _, _ in built] for n in names}
-    untestable = [n for n in names if not any(present[n])]
+    untestable = [n for n in names if not any(n in b for b, _, _ in built)]
     # Global column layout: every walk's baseline, then each testable effect's columns
     # (shared: the widest walk's; per walk: every walk's in turn).
     widths: dict[str, int] = {"baseline": sum(b["baseline"].shape[1] for b, _, _ in built)}
@@ -442,8 +441,6 @@ def _walk_heldout_step_sse(pool: _Pool, groups: Sequence[str]) -> FloatArray | N
     idx = cv.columns(groups)
     in_model = np.zeros(cv.n_columns, dtype=bool)
     in_model[idx] = True
-    piece_gram = [p.x.T @ p.x for p in cv.pieces]
-    piece_xty = [p.x.T @ cv.y[p.rows] for p in cv.pieces]
     sse = np.zeros(cv.data.n_steps)
     for i, p in enumerate(cv.pieces):
         mine = np.zeros(cv.n_columns, dtype=bool)
@@ -451,8 +448,8 @@ def _walk_heldout_step_sse(pool: _Pool, groups: Sequence[str]) -> FloatArray | N
         other = np.flatnonzero(in_model & ~mine)
         g = cv.gram_all.copy()
         b = cv.xty_all.copy()
-        g[np.ix_(p.columns, p.columns)] -= piece_gram[i]
-        b[p.columns] -= piece_xty[i]
+        g[np.ix_(p.columns, p.columns)] -= cv.piece_gram[i]
+        b[p.columns] -= cv.piece_xty[i]
         beta = np.zeros(cv.n_columns)
         beta[other] = cv._solve(g[np.ix_(other, other)], b[other])
         y = cv.y[p.rows] - p.x @ beta[p.columns]
@@ -686,9 +683,9 @@ surface, follow_pace
 
     def statistic(effect: Effect) -> tuple[float, str] | None:
         values = []
-        for w, r in zip(walks, per_walk_resid, strict=True):
-            if effect.criticism_columns(w.data) is None:
-                continue
+        for w, r, cols in zip(walks, per_walk_resid, pool.raw, strict=True):
+            if effect.name not in cols:
+                continue  # the walk cannot test it
             stat = effect.statistic(w.data, r)
             if stat is not None:
                 values.append(stat)
